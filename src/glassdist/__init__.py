@@ -1,0 +1,22 @@
+"""glassdist: see-through optical distortion of architectural glass.
+
+Measure, from a photograph of a printed grid seen through a pane, the apparent
+displacement of the grid and its two optical-power channels (sphere-equivalent
+power phi_eff and cylinder-equivalent astigmatism phi_shear, in millidiopters).
+
+Conventions (used everywhere in the package)
+-------------------------------------------
+* Images are indexed ``(row, col)``; ``x`` runs along columns (left to right),
+  ``y`` along rows (top to bottom).
+* Lengths are in mm, the glass-to-backdrop distance ``L`` in m, optical power in mD.
+* Displacement ``delta(pixel)`` = point where that pixel's line of sight lands on
+  the backdrop with the glass minus where it lands without it, in backdrop mm,
+  components ``[..., 0] = x``, ``[..., 1] = y``.
+* ``phi_eff = tr(eps) / L`` with ``eps = sym(grad delta)`` taken with respect to
+  backdrop mm: a converging lens reads ``phi_eff < 0``.
+"""
+
+from ._version import __version__
+from .errors import AnalysisError, GlassdistError, InputError
+
+__all__ = ["__version__", "GlassdistError", "InputError", "AnalysisError"]

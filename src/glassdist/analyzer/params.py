@@ -1,0 +1,153 @@
+"""Analyzer parameters: a validated, frozen model loaded from JSON.
+
+Defaults are shipped in ``glassdist/data/analyzer_defaults.json`` (the same values
+as the model's defaults); a user JSON file overrides any subset of them. Unknown
+keys are errors, so a misspelt key never falls back silently to a default.
+Every output records the resolved parameters (:meth:`AnalyzerParams.resolved`).
+
+Lengths are in mm; scales expressed relative to the carrier are fractions of the
+carrier period :math:`\\lambda_i^{px}` or of the carrier frequency :math:`|f_i|`.
+"""
+
+from __future__ import annotations
+
+import json
+from importlib import resources
+from pathlib import Path
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from ..errors import InputError
+
+__all__ = ["AnalyzerParams", "load_params", "default_params_path"]
+
+
+class AnalyzerParams(BaseModel):
+    """Algorithmic parameters of the Distortion Analyzer (paper §2.2).
+
+    Physical inputs (pitch, distance L) are not parameters: they are arguments of
+    :func:`glassdist.analyze`. ``sigma_mm`` and ``detrend_degree`` are here so that a
+    specification can fix them in one file; the command line may override them.
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    pattern: Literal["lines", "checkerboard"] = Field(
+        "lines",
+        description="backdrop: 'lines' (crossed line grid, pitch = line spacing) or "
+        "'checkerboard' (pitch = square size; carriers along the diagonals, period pitch*sqrt(2))",
+    )
+    detrend_degree: int = Field(2, ge=0, le=8, description="A2: total degree N of the polynomial detrend")
+    sigma_mm: float | None = Field(
+        None,
+        gt=0,
+        description="A2: metric-anchored smoothing scale on the backdrop, mm; "
+        "None = sigma_periods carrier periods",
+    )
+    sigma_periods: float = Field(
+        2.0, gt=0, description="default smoothing scale in carrier periods, used when sigma_mm is None"
+    )
+    compensate_demodulation_blur: bool = Field(
+        True,
+        description="subtract (in quadrature) the blur Block F already applied from the A2 smoothing, "
+        "so the total low-pass equals sigma_mm",
+    )
+    bandpass_sigma_along: float = Field(
+        0.30, gt=0.05, le=0.6, description="F1: Gaussian bandpass width across the cross-term axis, fraction of |f_i|"
+    )
+    bandpass_sigma_cross: float = Field(
+        0.22, gt=0.05, le=0.6,
+        description="F1: Gaussian bandpass width towards the k1+k2 cross term (narrow axis), fraction of |f_other|",
+    )
+    isotropic_bandpass: bool = Field(False, description="ablation: use an isotropic bandpass of width bandpass_sigma_along")
+    smoothing_periods: float = Field(1.0 / 3.0, gt=0, le=2.0, description="F3: complex smoothing sigma, carrier periods")
+    min_period_px: float = Field(3.0, gt=2.0, description="F1: shortest carrier period accepted, px")
+    modulation_threshold: float = Field(
+        0.3, gt=0, lt=1, description="valid region: local modulation / median modulation must exceed this"
+    )
+    border_periods: float = Field(1.5, ge=0, description="valid region: margin eroded at image and mask borders, carrier periods")
+    min_region_fraction: float = Field(0.01, ge=0, lt=1, description="valid region: drop connected regions smaller than this fraction of the image")
+    ransac_threshold_periods: float = Field(0.1, gt=0, description="I2: RANSAC inlier threshold, carrier periods")
+    ransac_max_trials: int = Field(2000, ge=10)
+    ransac_seed: int = Field(0, description="I2: seed of the RANSAC sampler (results are reproducible)")
+    a1_mode: Literal["projective", "isotropic"] = Field(
+        "projective",
+        description="A1: 'projective' differentiates with respect to backdrop mm through the local "
+        "pixel->backdrop Jacobian; 'isotropic' uses the paper's single mm_per_px",
+    )
+    decimation: int | Literal["auto"] = Field(
+        "auto", description="sampling step of the demodulated signals, px ('auto': about a third of the carrier period)"
+    )
+
+    @field_validator("decimation")
+    @classmethod
+    def _check_decimation(cls, v):
+        if v != "auto" and int(v) < 1:
+            raise ValueError("decimation must be 'auto' or an integer >= 1")
+        return v
+
+    def resolved(self) -> dict:
+        """The parameters as a JSON-serialisable dict (recorded in every output)."""
+        return self.model_dump(mode="json")
+
+
+def default_params_path() -> Path:
+    """Path of the shipped defaults JSON (a template users can copy)."""
+    return Path(str(resources.files("glassdist") / "data" / "analyzer_defaults.json"))
+
+
+def _format_validation_error(exc: ValidationError, source: str) -> str:
+    parts = []
+    for err in exc.errors():
+        loc = ".".join(str(x) for x in err["loc"]) or "(root)"
+        if err["type"] == "extra_forbidden":
+            parts.append(f"unknown key '{loc}'")
+        else:
+            parts.append(f"'{loc}': {err['msg']}")
+    return f"invalid parameters in {source}: " + "; ".join(parts) + (
+        f"; see {default_params_path().name} for the valid keys and defaults"
+    )
+
+
+def load_params(source: str | Path | dict | None = None, **overrides) -> AnalyzerParams:
+    """Load and validate analyzer parameters.
+
+    Parameters
+    ----------
+    source : path, dict or None
+        JSON file (or already-parsed dict) overriding any subset of the defaults.
+    **overrides
+        Values that take precedence over the file (e.g. command-line options);
+        ``None`` values are ignored.
+
+    Returns
+    -------
+    AnalyzerParams
+
+    Raises
+    ------
+    InputError
+        Unreadable file, invalid JSON, unknown key or out-of-range value.
+    """
+    data: dict = {}
+    label = "parameters"
+    if isinstance(source, dict):
+        data = dict(source)
+    elif source is not None:
+        p = Path(source)
+        label = f"'{p}'"
+        if not p.is_file():
+            raise InputError(f"parameter file '{p}' does not exist; check the --params path")
+        try:
+            data = json.loads(p.read_text(encoding="utf-8"))
+        except json.JSONDecodeError as exc:
+            raise InputError(f"parameter file '{p}' is not valid JSON (line {exc.lineno}: {exc.msg})") from None
+        if not isinstance(data, dict):
+            raise InputError(f"parameter file '{p}' must hold a JSON object of key: value pairs")
+        data.pop("$comment", None)
+    data.update({k: v for k, v in overrides.items() if v is not None})
+    try:
+        return AnalyzerParams(**data)
+    except ValidationError as exc:
+        raise InputError(_format_validation_error(exc, label)) from None
