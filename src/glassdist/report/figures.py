@@ -1,0 +1,324 @@
+"""A4 visual metrics: heatmaps, threshold masks and histograms of the power channels.
+
+Every plot function takes arrays (or an analysis result), draws on ``ax`` (a new
+figure when ``ax`` is None) and returns ``(fig, ax)``; nothing is shown on
+screen (figures use the non-interactive Agg canvas). Images are drawn in pixel
+coordinates, ``(row, col)`` with ``x`` along columns and ``y`` down the rows, as
+the photograph was taken. Values are in millidiopters (mD); pixels outside the
+valid analysis region are drawn in light grey and never enter a colour limit.
+
+Colour conventions
+------------------
+* ``phi_eff`` (signed): diverging map ``RdBu_r`` with symmetric limits ``[-V, V]``
+  (blue: ``phi_eff < 0``, converging; red: diverging).
+* ``phi_shear`` (non-negative): sequential map ``viridis`` on ``[0, V]``.
+* astigmatism axis: cyclic map ``twilight`` on ``(-90, 90]`` degrees, drawn only
+  where ``phi_shear`` is large enough for the axis to mean something.
+
+The two channels share the same ``V`` (see :func:`shared_limit`) so that their
+colours compare directly.
+
+References
+----------
+Paper §2.2, A4 (standardised heatmaps, threshold masks, statistical summaries).
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+from matplotlib.colors import Normalize
+from matplotlib.figure import Figure
+
+__all__ = [
+    "CHANNELS",
+    "shared_limit",
+    "plot_channel",
+    "plot_axis",
+    "plot_input",
+    "plot_threshold_mask",
+    "plot_histogram",
+    "save_channel_heatmaps",
+    "save_figure",
+]
+
+logger = logging.getLogger(__name__)
+
+#: channel name -> (result attribute, label, colour map, signed)
+CHANNELS = {
+    "phi_eff": ("phi_eff_mD", r"$\phi_{eff}$ (sphere-equivalent power)", "RdBu_r", True),
+    "phi_shear": ("phi_shear_mD", r"$\phi_{shear}$ (cylinder-equivalent astigmatism)", "viridis", False),
+    "phi_total": ("phi_total_mD", r"$\phi_{total}$ (Frobenius norm)", "magma", False),
+}
+
+_INVALID_RGBA = (0.85, 0.85, 0.85, 1.0)
+
+
+def _new_ax(ax, figsize=(6.4, 5.2)):
+    """Return ``(fig, ax)``: ``ax``'s figure, or a new Agg figure with one axes."""
+    if ax is not None:
+        return ax.figure, ax
+    fig = Figure(figsize=figsize, layout="constrained")
+    return fig, fig.add_subplot()
+
+
+def _masked(field, valid):
+    field = np.asarray(field, dtype=np.float64)
+    ok = np.isfinite(field)
+    if valid is not None:
+        ok &= np.asarray(valid, dtype=bool)
+    return np.ma.masked_where(~ok, field), ok
+
+
+def shared_limit(*fields, valid=None, percentile=99.0):
+    """Colour limit ``V`` (mD) shared by several channels.
+
+    Parameters
+    ----------
+    *fields : ndarray, shape (H, W)
+        Channel fields in mD (NaN where invalid).
+    valid : ndarray of bool, shape (H, W), optional
+        Region the limit is computed on.
+    percentile : float
+        Percentile of ``|field|`` used (robust to a few outlier pixels).
+
+    Returns
+    -------
+    float
+        The largest of the fields' ``percentile`` of ``|value|``, in mD; 1.0 when
+        no field has a finite valid value (so that a blank plot still draws).
+    """
+    best = 0.0
+    for f in fields:
+        _, ok = _masked(f, valid)
+        if ok.any():
+            best = max(best, float(np.percentile(np.abs(np.asarray(f)[ok]), percentile)))
+    return best if best > 0 else 1.0
+
+
+def plot_channel(field, valid=None, *, signed=True, vmax=None, cmap=None, title=None, ax=None, colorbar=True):
+    """Heatmap of one power channel, in mD, over the valid region.
+
+    Parameters
+    ----------
+    field : ndarray, shape (H, W)
+        Channel in mD; NaN where invalid.
+    valid : ndarray of bool, shape (H, W), optional
+        Pixels drawn; the others are light grey.
+    signed : bool
+        True: diverging map, limits ``[-vmax, vmax]``; False: sequential, ``[0, vmax]``.
+    vmax : float, optional
+        Colour limit in mD; default :func:`shared_limit` of this field.
+    cmap : str, optional
+        Matplotlib colour-map name; default ``RdBu_r`` (signed) or ``viridis``.
+    title : str, optional
+    ax : matplotlib Axes, optional
+    colorbar : bool
+        Draw a colour bar labelled in mD.
+
+    Returns
+    -------
+    fig, ax
+    """
+    import matplotlib
+
+    fig, ax = _new_ax(ax)
+    data, _ = _masked(field, valid)
+    if vmax is None:
+        vmax = shared_limit(field, valid=valid)
+    cmap_obj = matplotlib.colormaps[cmap or ("RdBu_r" if signed else "viridis")].with_extremes(bad=_INVALID_RGBA)
+    norm = Normalize(-vmax, vmax) if signed else Normalize(0.0, vmax)
+    im = ax.imshow(data, cmap=cmap_obj, norm=norm, interpolation="nearest")
+    ax.set_xlabel("x (px, columns)")
+    ax.set_ylabel("y (px, rows)")
+    if title:
+        ax.set_title(title)
+    if colorbar:
+        fig.colorbar(im, ax=ax, label="mD", extend="both" if signed else "max", shrink=0.9)
+    return fig, ax
+
+
+def plot_axis(axis_deg, phi_shear, valid=None, *, min_shear_mD=None, title=None, ax=None, colorbar=True):
+    """Principal axis of the astigmatism (direction of largest stretch), degrees.
+
+    Parameters
+    ----------
+    axis_deg : ndarray, shape (H, W)
+        Axis in degrees in (-90, 90], from +x (columns) towards +y (rows, down).
+    phi_shear : ndarray, shape (H, W)
+        Astigmatism in mD; the axis is drawn only where ``phi_shear >= min_shear_mD``.
+    valid : ndarray of bool, shape (H, W), optional
+    min_shear_mD : float, optional
+        Below this the axis is undefined in practice and is drawn grey; default
+        10 % of the 95th percentile of ``phi_shear``.
+    title : str, optional
+    ax : matplotlib Axes, optional
+    colorbar : bool
+
+    Returns
+    -------
+    fig, ax
+    """
+    import matplotlib
+
+    fig, ax = _new_ax(ax)
+    shear, ok = _masked(phi_shear, valid)
+    if min_shear_mD is None:
+        min_shear_mD = 0.1 * float(np.percentile(np.asarray(phi_shear)[ok], 95)) if ok.any() else 0.0
+    show = ok & np.isfinite(axis_deg) & (np.nan_to_num(np.asarray(phi_shear), nan=-1.0) >= min_shear_mD)
+    data = np.ma.masked_where(~show, np.asarray(axis_deg, dtype=np.float64))
+    cmap_obj = matplotlib.colormaps["twilight"].with_extremes(bad=_INVALID_RGBA)
+    im = ax.imshow(data, cmap=cmap_obj, norm=Normalize(-90.0, 90.0), interpolation="nearest")
+    ax.set_xlabel("x (px, columns)")
+    ax.set_ylabel("y (px, rows)")
+    ax.set_title(title or f"astigmatism axis (where $\\phi_{{shear}}$ ≥ {min_shear_mD:.3g} mD)")
+    if colorbar:
+        cb = fig.colorbar(im, ax=ax, label="axis (deg from +x towards +y, down)", shrink=0.9)
+        cb.set_ticks([-90, -45, 0, 45, 90])
+    return fig, ax
+
+
+def plot_input(image, valid=None, *, title=None, ax=None):
+    """The input photograph (grey, its own intensities) with the analysed region outlined.
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W)
+        Grey image in [0, 1].
+    valid : ndarray of bool, shape (H, W), optional
+        Analysed region; its boundary is drawn in orange.
+    title : str, optional
+    ax : matplotlib Axes, optional
+
+    Returns
+    -------
+    fig, ax
+    """
+    fig, ax = _new_ax(ax)
+    ax.imshow(np.asarray(image, dtype=np.float64), cmap="gray", vmin=0.0, vmax=1.0, interpolation="nearest")
+    if valid is not None and np.any(valid):
+        ax.contour(np.asarray(valid, dtype=float), levels=[0.5], colors=["tab:orange"], linewidths=1.5)
+    ax.set_xlabel("x (px, columns)")
+    ax.set_ylabel("y (px, rows)")
+    ax.set_title(title or "input with analysed region (orange)")
+    return fig, ax
+
+
+def plot_threshold_mask(field, valid=None, *, limit_mD, absolute=True, title=None, ax=None):
+    """Pixels over a limit: red over the limit, white under it, grey outside the region.
+
+    Parameters
+    ----------
+    field : ndarray, shape (H, W)
+        Channel in mD.
+    valid : ndarray of bool, shape (H, W), optional
+    limit_mD : float
+        Threshold in mD; a pixel is over when ``|field| > limit_mD`` (``absolute``)
+        or ``field > limit_mD``.
+    absolute : bool
+    title : str, optional
+    ax : matplotlib Axes, optional
+
+    Returns
+    -------
+    fig, ax
+    """
+    from matplotlib.colors import ListedColormap
+
+    fig, ax = _new_ax(ax)
+    data, ok = _masked(field, valid)
+    values = np.abs(np.asarray(field)) if absolute else np.asarray(field)
+    over = ok & (np.nan_to_num(values, nan=-np.inf) > limit_mD)
+    img = np.ma.masked_where(~ok, over.astype(float))
+    cmap_obj = ListedColormap(["white", "tab:red"]).with_extremes(bad=_INVALID_RGBA)
+    ax.imshow(img, cmap=cmap_obj, vmin=0, vmax=1, interpolation="nearest")
+    frac = 100.0 * over.sum() / max(int(ok.sum()), 1)
+    ax.set_xlabel("x (px, columns)")
+    ax.set_ylabel("y (px, rows)")
+    op = "|φ|" if absolute else "φ"
+    ax.set_title(title or f"{op} > {limit_mD:g} mD: {frac:.2f} % of the region")
+    return fig, ax
+
+
+def plot_histogram(field, valid=None, *, signed=True, limits_mD=(), bins=80, title=None, ax=None):
+    """Histogram of a channel over the valid region, with optional limit lines.
+
+    Parameters
+    ----------
+    field : ndarray, shape (H, W)
+        Channel in mD.
+    valid : ndarray of bool, shape (H, W), optional
+    signed : bool
+        Signed channels get mirror lines at ``±limit``.
+    limits_mD : sequence of float
+        Limits drawn as dashed red vertical lines, mD.
+    bins : int
+    title : str, optional
+    ax : matplotlib Axes, optional
+
+    Returns
+    -------
+    fig, ax
+    """
+    fig, ax = _new_ax(ax, figsize=(6.4, 3.6))
+    _, ok = _masked(field, valid)
+    values = np.asarray(field, dtype=np.float64)[ok]
+    if values.size:
+        ax.hist(values, bins=bins, color="tab:blue" if signed else "tab:green", alpha=0.85)
+    for lim in limits_mD:
+        for v in ((-lim, lim) if signed else (lim,)):
+            ax.axvline(v, color="tab:red", linestyle="--", linewidth=1.2)
+    ax.set_xlabel("mD")
+    ax.set_ylabel("pixels")
+    if title:
+        ax.set_title(title)
+    return fig, ax
+
+
+def save_figure(fig, path):
+    """Write ``fig`` as a PNG (100 dpi) and return the path."""
+    path = Path(path)
+    fig.savefig(path, dpi=100)
+    return path
+
+
+def save_channel_heatmaps(result, out_dir, *, vmax=None):
+    """Write the standard heatmaps of an analysis result as PNG files.
+
+    Parameters
+    ----------
+    result : AnalysisResult
+        Needs ``phi_eff_mD``, ``phi_shear_mD``, ``valid``; ``axis_deg`` and
+        ``method`` are used when present.
+    out_dir : path
+        Existing folder; files ``phi_eff.png``, ``phi_shear.png`` and
+        ``axis.png`` are written there.
+    vmax : float, optional
+        Shared colour limit in mD (e.g. fixed across a batch); default
+        :func:`shared_limit` of the two channels.
+
+    Returns
+    -------
+    list of Path
+        The files written.
+    """
+    out_dir = Path(out_dir)
+    valid = np.asarray(result.valid, dtype=bool)
+    if vmax is None:
+        vmax = shared_limit(result.phi_eff_mD, result.phi_shear_mD, valid=valid)
+    method = getattr(result, "method", "")
+    written = []
+    for name in ("phi_eff", "phi_shear"):
+        attr, label, cmap, signed = CHANNELS[name]
+        fig, _ = plot_channel(
+            getattr(result, attr), valid, signed=signed, vmax=vmax, cmap=cmap,
+            title=f"{label}\n{method} method, mD" if method else f"{label}, mD",
+        )
+        written.append(save_figure(fig, out_dir / f"{name}.png"))
+    if getattr(result, "axis_deg", None) is not None:
+        fig, _ = plot_axis(result.axis_deg, result.phi_shear_mD, valid)
+        written.append(save_figure(fig, out_dir / "axis.png"))
+    logger.debug("heatmaps written: %s", ", ".join(p.name for p in written))
+    return written

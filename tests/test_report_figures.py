@@ -1,0 +1,86 @@
+"""A4 figures: heatmaps, masks, histograms are drawn from arrays and return (fig, ax)."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from glassdist.report import figures
+
+
+def fake_result(shape=(96, 128), *, eff_mD=-40.0, shear_mD=12.0, seed=0, method="comparative"):
+    """A stand-in for an AnalysisResult with simple known fields.
+
+    ``phi_eff`` is a Gaussian dip of depth ``eff_mD`` at the centre, ``phi_shear``
+    a constant ``shear_mD`` plus seeded noise, axis 30 degrees; the top 8 rows
+    are invalid (NaN).
+    """
+    rng = np.random.default_rng(seed)
+    h, w = shape
+    y, x = np.mgrid[0:h, 0:w]
+    valid = np.ones(shape, bool)
+    valid[:8] = False
+    eff = eff_mD * np.exp(-((x - w / 2) ** 2 + (y - h / 2) ** 2) / (2 * (h / 6) ** 2))
+    shear = shear_mD + rng.normal(0.0, 0.5, shape).clip(-shear_mD, None)
+    axis = np.full(shape, 30.0)
+    disp = np.stack([x * 1e-3, y * 1e-3], axis=-1).astype(float)
+    for f in (eff, shear, axis):
+        f[~valid] = np.nan
+    disp[~valid] = np.nan
+    return SimpleNamespace(
+        method=method, phi_eff_mD=eff, phi_shear_mD=shear, phi_total_mD=np.hypot(eff, shear),
+        axis_deg=axis, valid=valid, displacement_mm=disp, displacement_detrended_mm=disp,
+        mm_per_px=0.5, sigma_mm=2.0, detrend_degree=2, pitch_mm=5.0, distance_m=1.5,
+        carriers=SimpleNamespace(to_dict=lambda: {"period_px": [9.8, 9.8]}), homography=None,
+        params=SimpleNamespace(resolved=lambda: {"pattern": "checkerboard"}), warnings=(), version="0.1.0",
+    )
+
+
+def test_save_channel_heatmaps_writes_pngs(tmp_path):
+    paths = figures.save_channel_heatmaps(fake_result(), tmp_path)
+    assert [p.name for p in paths] == ["phi_eff.png", "phi_shear.png", "axis.png"]
+    for p in paths:
+        assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_shared_limit_ignores_invalid_and_covers_both_channels():
+    r = fake_result()
+    v = figures.shared_limit(r.phi_eff_mD, r.phi_shear_mD, valid=r.valid, percentile=100)
+    assert v == pytest.approx(max(np.nanmax(np.abs(r.phi_eff_mD)), np.nanmax(r.phi_shear_mD)))
+    assert figures.shared_limit(np.full((4, 4), np.nan)) == 1.0
+
+
+def test_diverging_limits_are_symmetric_and_sequential_start_at_zero():
+    r = fake_result()
+    _, ax = figures.plot_channel(r.phi_eff_mD, r.valid, signed=True, vmax=25.0)
+    assert ax.images[0].get_clim() == (-25.0, 25.0)
+    _, ax = figures.plot_channel(r.phi_shear_mD, r.valid, signed=False, vmax=25.0)
+    assert ax.images[0].get_clim() == (0.0, 25.0)
+    assert ax.figure.axes[-1].get_ylabel() == "mD"
+
+
+def test_plots_accept_an_existing_axes():
+    from matplotlib.figure import Figure
+
+    r = fake_result()
+    fig = Figure()
+    axes = fig.subplots(2, 3)
+    calls = [
+        lambda ax: figures.plot_channel(r.phi_eff_mD, r.valid, ax=ax),
+        lambda ax: figures.plot_axis(r.axis_deg, r.phi_shear_mD, r.valid, ax=ax),
+        lambda ax: figures.plot_input(np.full(r.valid.shape, 0.5), r.valid, ax=ax),
+        lambda ax: figures.plot_threshold_mask(r.phi_eff_mD, r.valid, limit_mD=20.0, ax=ax),
+        lambda ax: figures.plot_histogram(r.phi_eff_mD, r.valid, limits_mD=[20.0], ax=ax),
+    ]
+    for call, ax in zip(calls, axes.flat):
+        f, a = call(ax)
+        assert f is fig and a is ax
+
+
+def test_threshold_mask_title_reports_area_over_limit():
+    field = np.zeros((10, 10))
+    field[:, :3] = 5.0  # 30 % of the pixels over 4 mD
+    _, ax = figures.plot_threshold_mask(field, None, limit_mD=4.0)
+    assert "30.00 %" in ax.get_title()
