@@ -42,6 +42,7 @@ __all__ = [
     "plot_histogram",
     "save_channel_heatmaps",
     "save_figure",
+    "figure_png",
 ]
 
 logger = logging.getLogger(__name__)
@@ -62,6 +63,13 @@ def _new_ax(ax, figsize=(6.4, 5.2)):
         return ax.figure, ax
     fig = Figure(figsize=figsize, layout="constrained")
     return fig, fig.add_subplot()
+
+
+def _label_image_axes(ax, title):
+    ax.set_xlabel("x (px, columns)")
+    ax.set_ylabel("y (px, rows)")
+    if title:
+        ax.set_title(title)
 
 
 def _masked(field, valid):
@@ -131,10 +139,7 @@ def plot_channel(field, valid=None, *, signed=True, vmax=None, cmap=None, title=
     cmap_obj = matplotlib.colormaps[cmap or ("RdBu_r" if signed else "viridis")].with_extremes(bad=_INVALID_RGBA)
     norm = Normalize(-vmax, vmax) if signed else Normalize(0.0, vmax)
     im = ax.imshow(data, cmap=cmap_obj, norm=norm, interpolation="nearest")
-    ax.set_xlabel("x (px, columns)")
-    ax.set_ylabel("y (px, rows)")
-    if title:
-        ax.set_title(title)
+    _label_image_axes(ax, title)
     if colorbar:
         fig.colorbar(im, ax=ax, label="mD", extend="both" if signed else "max", shrink=0.9)
     return fig, ax
@@ -171,9 +176,7 @@ def plot_axis(axis_deg, phi_shear, valid=None, *, min_shear_mD=None, title=None,
     data = np.ma.masked_where(~show, np.asarray(axis_deg, dtype=np.float64))
     cmap_obj = matplotlib.colormaps["twilight"].with_extremes(bad=_INVALID_RGBA)
     im = ax.imshow(data, cmap=cmap_obj, norm=Normalize(-90.0, 90.0), interpolation="nearest")
-    ax.set_xlabel("x (px, columns)")
-    ax.set_ylabel("y (px, rows)")
-    ax.set_title(title or f"astigmatism axis (where $\\phi_{{shear}}$ ≥ {min_shear_mD:.3g} mD)")
+    _label_image_axes(ax, title or f"astigmatism axis (where $\\phi_{{shear}}$ ≥ {min_shear_mD:.3g} mD)")
     if colorbar:
         cb = fig.colorbar(im, ax=ax, label="axis (deg from +x towards +y, down)", shrink=0.9)
         cb.set_ticks([-90, -45, 0, 45, 90])
@@ -200,9 +203,7 @@ def plot_input(image, valid=None, *, title=None, ax=None):
     ax.imshow(np.asarray(image, dtype=np.float64), cmap="gray", vmin=0.0, vmax=1.0, interpolation="nearest")
     if valid is not None and np.any(valid):
         ax.contour(np.asarray(valid, dtype=float), levels=[0.5], colors=["tab:orange"], linewidths=1.5)
-    ax.set_xlabel("x (px, columns)")
-    ax.set_ylabel("y (px, rows)")
-    ax.set_title(title or "input with analysed region (orange)")
+    _label_image_axes(ax, title or "input with analysed region (orange)")
     return fig, ax
 
 
@@ -235,10 +236,8 @@ def plot_threshold_mask(field, valid=None, *, limit_mD, absolute=True, title=Non
     cmap_obj = ListedColormap(["white", "tab:red"]).with_extremes(bad=_INVALID_RGBA)
     ax.imshow(img, cmap=cmap_obj, vmin=0, vmax=1, interpolation="nearest")
     frac = 100.0 * over.sum() / max(int(ok.sum()), 1)
-    ax.set_xlabel("x (px, columns)")
-    ax.set_ylabel("y (px, rows)")
     op = "|φ|" if absolute else "φ"
-    ax.set_title(title or f"{op} > {limit_mD:g} mD: {frac:.2f} % of the region")
+    _label_image_axes(ax, title or f"{op} > {limit_mD:g} mD: {frac:.2f} % of the region")
     return fig, ax
 
 
@@ -282,6 +281,15 @@ def save_figure(fig, path):
     path = Path(path)
     fig.savefig(path, dpi=100)
     return path
+
+
+def figure_png(fig, *, dpi=100):
+    """``fig`` encoded as PNG bytes (for embedding or writing)."""
+    import io
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi)
+    return buf.getvalue()
 
 
 def save_channel_heatmaps(result, out_dir, *, vmax=None):

@@ -1,0 +1,157 @@
+"""Exports for other tools: statistics as CSV, fields as NPZ and 32-bit float TIFF.
+
+Files written into the output folder (each written to a temporary name, then
+renamed, so a reader never sees half a file):
+
+* ``statistics.csv``: one row per channel, columns ``<statistic>_mD`` and
+  ``area_over_<T>_percent`` (see :mod:`glassdist.report.stats`);
+* ``fields.npz``: ``displacement_mm`` (H, W, 2; ``[..., 0] = x``, ``[..., 1] = y``),
+  ``displacement_detrended_mm``, ``phi_eff_mD``, ``phi_shear_mD``, ``phi_total_mD``,
+  ``axis_deg``, ``valid``, plus scalars ``mm_per_px``, ``distance_m``, ``pitch_mm``,
+  ``sigma_mm`` and the string ``version`` (float fields are float32, NaN where invalid);
+* ``tiff/<name>.tif``: the same fields, one float32 TIFF each (displacement split into
+  ``displacement_x_mm`` and ``displacement_y_mm``), ``valid.tif`` as uint8 0/1; the
+  TIFF description holds a JSON object with the unit and the glassdist version.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+import secrets
+from pathlib import Path
+
+import numpy as np
+
+from .stats import STATISTICS
+
+__all__ = ["to_jsonable", "atomic_write_bytes", "atomic_write_text", "write_statistics_csv", "write_fields_npz", "write_fields_tiff"]
+
+_FIELDS = (
+    ("phi_eff_mD", "mD"), ("phi_shear_mD", "mD"), ("phi_total_mD", "mD"), ("axis_deg", "deg"),
+)
+
+
+def to_jsonable(obj):
+    """``obj`` with numpy values turned into Python ones and NaN / inf into ``None`` (strict JSON)."""
+    if isinstance(obj, dict):
+        return {str(k): to_jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [to_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return to_jsonable(obj.tolist())
+    if isinstance(obj, (np.generic,)):
+        obj = obj.item()
+    if isinstance(obj, float):
+        return obj if np.isfinite(obj) else None
+    if obj is None or isinstance(obj, (bool, int, str)):
+        return obj
+    return str(obj)
+
+
+def atomic_write_bytes(path, data):
+    """Write ``data`` to ``path`` through a temporary file in the same folder and a rename.
+
+    A reader sees either the previous file or the complete new one, never a part.
+    The file gets the usual permissions (``0o666`` less the umask).
+    """
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
+
+
+def atomic_write_text(path, text):
+    """:func:`atomic_write_bytes` for UTF-8 text."""
+    return atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def statistics_table(stats):
+    """Rows (list of dicts) of the statistics table, one per channel, values rounded to 6 significant digits."""
+    area_keys = sorted({k for s in stats.values() for k in s if k.startswith("area_over_")},
+                       key=lambda k: float(k.removeprefix("area_over_")))
+    rows = []
+    for channel, s in stats.items():
+        row = {"channel": channel}
+        row.update({f"{k}_mD": _fmt(s.get(k)) for k in STATISTICS})
+        row.update({f"{k}_percent": _fmt(s.get(k)) for k in area_keys})
+        row["n_pixels"] = s.get("n_pixels", "")
+        rows.append(row)
+    return rows
+
+
+def _fmt(v):
+    if v is None:
+        return ""
+    v = float(v)
+    return "" if np.isnan(v) else f"{v:.6g}"
+
+
+def write_statistics_csv(stats, path):
+    """Write :func:`statistics_table` of ``{channel: statistics}`` as CSV; returns the path."""
+    rows = statistics_table(stats)
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=list(rows[0]) if rows else ["channel"], lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    return atomic_write_text(path, buf.getvalue())
+
+
+def _field_arrays(result):
+    arrays = {}
+    for name in ("displacement_mm", "displacement_detrended_mm") + tuple(n for n, _ in _FIELDS):
+        value = getattr(result, name, None)
+        if value is not None:
+            arrays[name] = np.asarray(value, dtype=np.float32)
+    arrays["valid"] = np.asarray(result.valid, dtype=bool)
+    return arrays
+
+
+def write_fields_npz(result, path):
+    """Write the displacement and channel fields (float32) and scalars to a compressed NPZ; returns the path."""
+    arrays = _field_arrays(result)
+    for name in ("mm_per_px", "distance_m", "pitch_mm", "sigma_mm"):
+        value = getattr(result, name, None)
+        if value is not None:
+            arrays[name] = np.float64(value)
+    arrays["version"] = np.str_(getattr(result, "version", ""))
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **arrays)
+    return atomic_write_bytes(path, buf.getvalue())
+
+
+def write_fields_tiff(result, folder):
+    """Write each field as a float32 TIFF in ``folder`` (created); returns the paths written."""
+    import tifffile
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    version = str(getattr(result, "version", ""))
+    arrays = _field_arrays(result)
+    units = dict(_FIELDS)
+    planes = {}
+    for key in ("displacement_mm", "displacement_detrended_mm"):
+        if key in arrays:
+            stem = key.removesuffix("_mm")
+            planes[f"{stem}_x_mm"] = (arrays[key][..., 0], "mm")
+            planes[f"{stem}_y_mm"] = (arrays[key][..., 1], "mm")
+    for key, unit in units.items():
+        if key in arrays:
+            planes[key] = (arrays[key], unit)
+    planes["valid"] = (arrays["valid"].astype(np.uint8), "1 = analysed")
+    written = []
+    for name, (data, unit) in planes.items():
+        buf = io.BytesIO()
+        meta = {"field": name, "unit": unit, "glassdist_version": version, "invalid": "NaN"}
+        tifffile.imwrite(buf, np.ascontiguousarray(data), description=json.dumps(meta), compression="zlib")
+        written.append(atomic_write_bytes(folder / f"{name}.tif", buf.getvalue()))
+    return written

@@ -1,0 +1,215 @@
+"""Self-contained HTML report of one analysis (images embedded, no external resource).
+
+The report is meant to be attached to an acceptance record or a dispute file: it
+states what was measured (input file and its SHA-256, capture geometry, method,
+parameters, glassdist version), what came out (statistics, heatmaps, threshold
+masks, histograms) and, when a specification was given, the verdict per criterion.
+A machine-readable copy of the key facts is embedded as JSON in
+``<script type="application/json" id="glassdist-report-data">``.
+
+References
+----------
+Paper §2.2 (A4), §4.1-4.3.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import math
+from datetime import datetime, timezone
+from html import escape
+
+import numpy as np
+
+from .exports import to_jsonable
+from .stats import STATISTICS
+
+__all__ = ["render_report", "METHOD_TEXT"]
+
+METHOD_TEXT = {
+    "comparative": (
+        "Comparative method: a photograph of the same printed grid without the glass (the reference) "
+        "supplies the carrier phase; the displacement of the grid seen through the pane is measured against "
+        "it by Fourier demodulation and phase unwrapping (paper §2.2, blocks F and A). This is the factory-line "
+        "configuration (§4.1)."
+    ),
+    "direct": (
+        "Direct method: no glass-less reference exists, so the projective view of the grid (homography) is "
+        "inferred from the photograph itself by a robust fit, and a synthetic reference is built from it "
+        "(paper §2.2, block I). This is the in-situ configuration (§4.3); the fit can absorb a small part of "
+        "slow distortion, so values can differ from a Comparative measurement of the same pane by a few "
+        "per cent."
+    ),
+}
+
+_CONVENTIONS = (
+    "Displacement δ: landing point of a line of sight on the grid with the glass minus without it, mm on the grid "
+    "plane; x along image columns, y down the rows. Slow trends are removed by a polynomial of the stated degree "
+    "before differentiation, so the channels describe local distortion (ripples, localised defects), not bulk "
+    "curvature. φ_eff = tr(ε)/L (area change; negative for a converging lens), φ_shear = 2·max shear/L (shape "
+    "change, ≥ 0), with ε = sym(∇δ) and L the glass-to-grid distance; values in millidiopters (mD). The "
+    "astigmatism axis is the direction of largest stretch, degrees from +x towards +y. Statistics are taken over "
+    "the analysed region only; area percentages are of that region."
+)
+
+_CSS = """
+body{font-family:system-ui,-apple-system,'Segoe UI',Roboto,Arial,sans-serif;margin:2em auto;max-width:1100px;
+color:#1d1d1f;line-height:1.4;padding:0 1em}
+h1{font-size:1.6em;margin-bottom:.2em}h2{border-bottom:1px solid #ccc;padding-bottom:.2em;margin-top:1.6em}
+table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #ccc;padding:.25em .6em;text-align:left}
+th{background:#f2f2f2}td.num{text-align:right;font-variant-numeric:tabular-nums}
+.verdict{font-size:1.5em;font-weight:bold;padding:.5em 1em;border-radius:6px;display:inline-block;margin:.5em 0}
+.PASS{background:#d8f3dc;color:#1b5e20}.FAIL{background:#ffd7d5;color:#b71c1c}.NONE{background:#eee;color:#444}
+tr.FAIL td{background:#fff0ef}tr.PASS td{background:#f3fbf4}
+figure{display:inline-block;margin:.5em;vertical-align:top}figure img{max-width:520px;width:100%}
+figcaption{font-size:.9em;color:#555}code,.mono{font-family:ui-monospace,Menlo,Consolas,monospace;font-size:.92em}
+.warn{background:#fff8e1;border-left:4px solid #f9a825;padding:.3em .8em}
+.small{font-size:.9em;color:#555}
+"""
+
+
+def _num(v, digits=4):
+    if v is None:
+        return "—"
+    if isinstance(v, (float, np.floating)):
+        return "—" if math.isnan(v) else f"{float(v):.{digits}g}"
+    return escape(str(v))
+
+
+def _kv_table(rows):
+    body = "".join(f"<tr><th>{escape(k)}</th><td>{v}</td></tr>" for k, v in rows)
+    return f"<table>{body}</table>"
+
+
+def _img(png, alt, caption):
+    data = base64.b64encode(png).decode("ascii")
+    return (f'<figure><img alt="{escape(alt)}" src="data:image/png;base64,{data}">'
+            f"<figcaption>{escape(caption)}</figcaption></figure>")
+
+
+def _stats_table(stats):
+    area_keys = sorted({k for s in stats.values() for k in s if k.startswith("area_over_")},
+                       key=lambda k: float(k.removeprefix("area_over_")))
+    head = "".join(f"<th>{escape(k)} (mD)</th>" for k in STATISTICS)
+    head += "".join(f"<th>|φ| &gt; {escape(k.removeprefix('area_over_'))} mD (% of region)</th>" for k in area_keys)
+    rows = ""
+    for ch, s in stats.items():
+        cells = "".join(f'<td class="num">{_num(s.get(k))}</td>' for k in STATISTICS + tuple(area_keys))
+        rows += f"<tr><th>{escape(ch)}</th>{cells}</tr>"
+    return f'<table id="statistics"><tr><th>channel</th>{head}</tr>{rows}</table>'
+
+
+def _verdict_section(verdict):
+    if verdict is None:
+        return ('<div class="verdict NONE" id="verdict">NO SPECIFICATION</div>'
+                "<p>No acceptance specification was given (<code>--spec</code>); the results are reported without a "
+                "verdict.</p>")
+    rows = ""
+    for c in verdict.checks:
+        label = "PASS" if c.passed else "FAIL"
+        value = _num(c.value) + (f" {escape(c.unit)}" if c.unit and isinstance(c.value, (int, float)) else "")
+        note = f"<br><span class='small'>{escape(c.note)}</span>" if c.note else ""
+        rows += (f'<tr class="{label}"><td>{escape(c.criterion)}</td><td class="num">{value}</td>'
+                 f"<td>{escape(c.comparison)} {_num(c.limit)} {escape(c.unit)}</td><td><b>{label}</b>{note}</td></tr>")
+    n_ok = sum(c.passed for c in verdict.checks)
+    return (f'<div class="verdict {verdict.label}" id="verdict">{verdict.label}</div>'
+            f"<p>Specification <b>{escape(verdict.spec_name)}</b>: {n_ok} of {len(verdict.checks)} criteria passed. "
+            f"Specification file <code>{escape(verdict.spec_path)}</code>, SHA-256 "
+            f"<code>{escape(verdict.spec_sha256)}</code>.</p>"
+            f'<table id="criteria"><tr><th>criterion</th><th>value</th><th>limit</th><th>result</th></tr>{rows}</table>')
+
+
+def _input_rows(label, info):
+    if info is None:
+        return [(label, "none")]
+    return [
+        (label, f"<code>{escape(info['name'])}</code>"),
+        (f"{label} SHA-256", f'<code class="sha256">{escape(info["sha256"])}</code>'),
+        (f"{label} size", escape(info.get("size", ""))),
+    ]
+
+
+def render_report(result, *, stats, figures, inputs, verdict=None, valid_percent=None, generated=None):
+    """HTML text of the report.
+
+    Parameters
+    ----------
+    result : AnalysisResult
+    stats : dict
+        ``{channel: statistics}`` (mD, percent), see :mod:`glassdist.report.stats`.
+    figures : list of (str, str, bytes)
+        ``(id, caption, png bytes)`` in display order.
+    inputs : dict
+        ``{"image": {"name", "sha256", "size"}, "reference": {...} or None}``.
+    verdict : Verdict, optional
+    valid_percent : float, optional
+        Analysed area, percent of the image.
+    generated : datetime, optional
+        Time stamp written in the report (default: now, UTC).
+
+    Returns
+    -------
+    str
+        A complete HTML document with every image embedded as a data URI.
+    """
+    generated = generated or datetime.now(timezone.utc)
+    version = str(getattr(result, "version", ""))
+    method = str(getattr(result, "method", ""))
+    params = result.params.resolved() if getattr(result, "params", None) is not None else {}
+    carriers = result.carriers.to_dict() if getattr(result, "carriers", None) is not None else {}
+    homography = getattr(result, "homography", None)
+    warnings = tuple(getattr(result, "warnings", ()) or ())
+    image_name = inputs["image"]["name"]
+    title = f"Glass distortion report: {image_name}"
+
+    geometry = [
+        ("grid pitch", f"{_num(result.pitch_mm)} mm"),
+        ("glass-to-grid distance L", f"{_num(result.distance_m)} m"),
+        ("grid pattern", escape(str(params.get("pattern", "—")))),
+        ("scale on the grid plane", f"{_num(result.mm_per_px)} mm per px"),
+        ("smoothing scale σ", f"{_num(result.sigma_mm)} mm"),
+        ("detrend degree N", _num(result.detrend_degree)),
+        ("analysed area", f"{_num(valid_percent)} % of the image" if valid_percent is not None else "—"),
+    ]
+    if homography is not None:
+        h = np.asarray(homography, dtype=float)
+        rows = "<br>".join(" ".join(f"{x: .6g}" for x in r) for r in h)
+        geometry.append(("homography (grid → image)", f'<span class="mono">{rows}</span>'))
+    data = {
+        "glassdist_version": version, "method": method, "generated_utc": generated.isoformat(timespec="seconds"),
+        "inputs": inputs, "pitch_mm": result.pitch_mm, "distance_m": result.distance_m,
+        "mm_per_px": result.mm_per_px, "sigma_mm": result.sigma_mm, "detrend_degree": result.detrend_degree,
+        "valid_percent": valid_percent, "verdict": verdict.to_dict() if verdict is not None else None,
+        "statistics": stats, "parameters": params, "warnings": list(warnings),
+    }
+    data_json = json.dumps(to_jsonable(data), allow_nan=False).replace("</", "<\\/")
+    warn_html = "".join(f'<p class="warn">{escape(w)}</p>' for w in warnings) or "<p>None.</p>"
+    fig_html = "".join(_img(png, fid, cap) for fid, cap, png in figures)
+    body = f"""
+<h1>{escape(title)}</h1>
+<p class="small">glassdist {escape(version)} · {escape(method)} method · generated {escape(generated.strftime('%Y-%m-%d %H:%M:%S'))} UTC</p>
+{_verdict_section(verdict)}
+<h2>1. Identification</h2>
+{_kv_table(_input_rows('input image', inputs['image']) + _input_rows('reference image', inputs.get('reference'))
+           + [('glassdist version', f'<code id="version">{escape(version)}</code>'), ('method', escape(method))])}
+<h2>2. Capture geometry</h2>
+{_kv_table(geometry)}
+<details><summary>carriers detected in the photograph</summary><pre>{escape(json.dumps(to_jsonable(carriers), indent=1))}</pre></details>
+<h2>3. Method</h2>
+<p>{escape(METHOD_TEXT.get(method, method))}</p>
+<p class="small">{escape(_CONVENTIONS)}</p>
+<details><summary>all analysis parameters (resolved)</summary><pre>{escape(json.dumps(to_jsonable(params), indent=1))}</pre></details>
+<h2>4. Results</h2>
+{_stats_table(stats)}
+{fig_html}
+<h2>5. Warnings</h2>
+{warn_html}
+<h2>6. Scope</h2>
+<p class="small">φ_eff and φ_shear are candidate industrial metrics (paper §1.3, §4): limits in a specification are
+only meaningful for the capture geometry, smoothing scale and detrend degree they were written for, all recorded
+above.</p>
+<script type="application/json" id="glassdist-report-data">{data_json}</script>
+"""
+    return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>{escape(title)}</title>'
+            f"<style>{_CSS}</style></head><body>{body}</body></html>\n")

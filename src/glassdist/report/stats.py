@@ -1,0 +1,134 @@
+"""A4 statistical summaries of the power channels, in mD.
+
+Statistics are taken over the valid analysis region only (``valid`` and finite):
+
+* ``mean_abs``: mean of ``|phi|``;
+* ``mean``: mean of the signed ``phi``;
+* ``std``: standard deviation of the signed ``phi``;
+* ``p95_abs``: 95th percentile of ``|phi|``;
+* ``max_abs``: maximum of ``|phi|``;
+* ``area_over_<T>``: percentage of the valid region where ``|phi| > T`` mD.
+
+``phi_shear`` and ``phi_total`` are non-negative, so ``|phi|`` is ``phi`` for them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = [
+    "CHANNEL_FIELDS",
+    "STATISTICS",
+    "channel_statistics",
+    "area_over_percent",
+    "result_statistics",
+    "valid_percent",
+    "format_limit",
+]
+
+#: channel name -> attribute of the analysis result holding its field (mD)
+CHANNEL_FIELDS = {"phi_eff": "phi_eff_mD", "phi_shear": "phi_shear_mD", "phi_total": "phi_total_mD"}
+
+#: statistics every channel reports (mD), in table order
+STATISTICS = ("mean_abs", "mean", "std", "p95_abs", "max_abs")
+
+
+def _values(field, valid):
+    field = np.asarray(field, dtype=np.float64)
+    ok = np.isfinite(field)
+    if valid is not None:
+        ok &= np.asarray(valid, dtype=bool)
+    return field[ok]
+
+
+def format_limit(limit_mD):
+    """Name suffix of an area-over statistic: ``area_over_<limit>`` (``12.5`` -> ``12.5``, ``100.0`` -> ``100``)."""
+    return f"area_over_{float(limit_mD):g}"
+
+
+def area_over_percent(field, valid=None, limit_mD=0.0):
+    """Percentage of the valid region where ``|field| > limit_mD``.
+
+    Parameters
+    ----------
+    field : ndarray, shape (H, W)
+        Channel in mD; NaN where invalid.
+    valid : ndarray of bool, shape (H, W), optional
+    limit_mD : float
+        Threshold in mD.
+
+    Returns
+    -------
+    float
+        Percent (0-100) of the valid, finite pixels over the limit; NaN when the
+        region is empty.
+    """
+    v = _values(field, valid)
+    if v.size == 0:
+        return float("nan")
+    return float(100.0 * np.count_nonzero(np.abs(v) > limit_mD) / v.size)
+
+
+def channel_statistics(field, valid=None, *, over_limits_mD=()):
+    """Statistics of one channel over the valid region.
+
+    Parameters
+    ----------
+    field : ndarray, shape (H, W)
+        Channel in mD; NaN where invalid.
+    valid : ndarray of bool, shape (H, W), optional
+    over_limits_mD : sequence of float
+        Thresholds (mD) for which ``area_over_<T>`` (percent) is reported.
+
+    Returns
+    -------
+    dict
+        ``mean_abs``, ``mean``, ``std``, ``p95_abs``, ``max_abs`` (mD),
+        ``area_over_<T>`` (percent) and ``n_pixels``; values are NaN when the
+        region is empty.
+    """
+    v = _values(field, valid)
+    out = {}
+    if v.size:
+        a = np.abs(v)
+        out.update(
+            mean_abs=float(a.mean()), mean=float(v.mean()), std=float(v.std()),
+            p95_abs=float(np.percentile(a, 95.0)), max_abs=float(a.max()),
+        )
+    else:
+        out.update({k: float("nan") for k in STATISTICS})
+    for lim in sorted(set(float(x) for x in over_limits_mD)):
+        out[format_limit(lim)] = area_over_percent(field, valid, lim)
+    out["n_pixels"] = int(v.size)
+    return out
+
+
+def valid_percent(valid):
+    """Percentage of the image inside the valid analysis region."""
+    valid = np.asarray(valid, dtype=bool)
+    return float(100.0 * np.count_nonzero(valid) / max(valid.size, 1))
+
+
+def result_statistics(result, *, over_limits_mD=None):
+    """Statistics of every channel of an analysis result.
+
+    Parameters
+    ----------
+    result : AnalysisResult
+        Needs ``phi_eff_mD``, ``phi_shear_mD``, ``valid``; ``phi_total_mD`` when present.
+    over_limits_mD : dict, optional
+        ``{channel: [T, ...]}`` thresholds (mD) for the area-over statistics.
+
+    Returns
+    -------
+    dict
+        ``{channel: channel_statistics(...)}`` for each channel present.
+    """
+    over_limits_mD = over_limits_mD or {}
+    stats = {}
+    for name, attr in CHANNEL_FIELDS.items():
+        field = getattr(result, attr, None)
+        if field is None:
+            continue
+        stats[name] = channel_statistics(field, result.valid, over_limits_mD=over_limits_mD.get(name, ()))
+    return stats

@@ -1,0 +1,178 @@
+"""finish_analysis: verdict and exit code, summary.json, exports, and the HTML report's content."""
+
+from __future__ import annotations
+
+import base64
+import csv
+import hashlib
+import json
+import shutil
+import subprocess
+import tempfile
+from html.parser import HTMLParser
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from glassdist.report.workflow import EXIT_SPEC_FAIL, finish_analysis
+
+try:
+    from test_report_figures import fake_result
+except ImportError:  # tests collected as a package
+    from tests.test_report_figures import fake_result
+
+PASSING = {"name": "lenient", "criteria": [{"channel": "phi_eff", "statistic": "p95_abs", "max_mD": 1000}]}
+FAILING = {
+    "name": "strict",
+    "criteria": [
+        {"channel": "phi_eff", "statistic": "max_abs", "max_mD": 1000},
+        {"channel": "phi_shear", "statistic": "p95_abs", "max_mD": 5},
+        {"channel": "phi_eff", "statistic": "area_over", "threshold_mD": 20, "max_percent": 1},
+    ],
+}
+
+
+class _Collector(HTMLParser):
+    def __init__(self):
+        super().__init__()
+        self.imgs, self.links, self.ids, self.scripts = [], [], {}, {}
+        self._stack = []
+
+    def handle_starttag(self, tag, attrs):
+        a = dict(attrs)
+        if tag == "img":
+            self.imgs.append(a)
+        for key in ("href", "src"):
+            if key in a and tag != "img":
+                self.links.append(a[key])
+        self._stack.append(a.get("id"))
+
+    def handle_endtag(self, tag):
+        if self._stack:
+            self._stack.pop()
+
+    def handle_data(self, data):
+        if self._stack and self._stack[-1]:
+            self.ids[self._stack[-1]] = self.ids.get(self._stack[-1], "") + data
+
+
+@pytest.fixture(scope="module")
+def analysed(tmp_path_factory):
+    """One fake analysis finished twice: with a failing spec + report + exports, and with a passing spec."""
+    import cv2
+
+    root = tmp_path_factory.mktemp("finish")
+    rng = np.random.default_rng(1)
+    image = root / "pane.png"
+    cv2.imwrite(str(image), (rng.random((96, 128)) * 255).astype(np.uint8))
+    ref = root / "ref.png"
+    cv2.imwrite(str(ref), (rng.random((96, 128)) * 255).astype(np.uint8))
+    (root / "fail.json").write_text(json.dumps(FAILING))
+    (root / "pass.json").write_text(json.dumps(PASSING))
+    out_fail, out_pass = root / "out_fail", root / "out_pass"
+    out_fail.mkdir()
+    out_pass.mkdir()
+    (out_fail / "summary.json").write_text(json.dumps({"method": "comparative", "version": "0.1.0"}))
+    lines = []
+    code_fail = finish_analysis(fake_result(), out_dir=out_fail, image_path=image, reference_path=ref,
+                                spec_path=root / "fail.json", report=True, exports=True, echo=lines.append)
+    code_pass = finish_analysis(fake_result(), out_dir=out_pass, image_path=image, spec_path=root / "pass.json",
+                                echo=lambda s: None)
+    return dict(root=root, image=image, ref=ref, out=out_fail, out_pass=out_pass, lines=lines,
+                code_fail=code_fail, code_pass=code_pass)
+
+
+def test_exit_codes_and_printed_verdict(analysed):
+    assert analysed["code_fail"] == EXIT_SPEC_FAIL == 3
+    assert analysed["code_pass"] == 0
+    lines = analysed["lines"]
+    assert lines[0].startswith("PASS  max |phi_eff| <= 1000 mD")
+    assert lines[1].startswith("FAIL  p95 |phi_shear| <= 5 mD")
+    assert lines[2].startswith("FAIL  area |phi_eff| > 20 mD <= 1 %")
+    assert lines[3] == "VERDICT: FAIL (1/3 criteria passed) spec 'strict'"
+
+
+def test_summary_keeps_existing_keys_and_gains_verdict(analysed):
+    s = json.loads((analysed["out"] / "summary.json").read_text())
+    assert s["method"] == "comparative"  # written by the analyze command, kept
+    assert s["verdict"]["result"] == "FAIL" and [c["passed"] for c in s["verdict"]["checks"]] == [True, False, False]
+    assert s["inputs"]["image"]["sha256"] == hashlib.sha256(analysed["image"].read_bytes()).hexdigest()
+    assert s["inputs"]["reference"]["sha256"] == hashlib.sha256(analysed["ref"].read_bytes()).hexdigest()
+    assert s["a4"]["statistics"]["phi_eff"]["area_over_20"] > 1.0
+    assert json.loads((analysed["out_pass"] / "summary.json").read_text())["verdict"]["result"] == "PASS"
+
+
+def test_statistics_csv_and_a4_pngs(analysed):
+    out = analysed["out"]
+    rows = list(csv.DictReader((out / "statistics.csv").open()))
+    assert [r["channel"] for r in rows] == ["phi_eff", "phi_shear", "phi_total"]
+    assert float(rows[0]["max_abs_mD"]) == pytest.approx(40.0)
+    assert "area_over_20_percent" in rows[0]
+    for name in ("input_region.png", "histograms.png", "mask_phi_eff_20mD.png", "mask_phi_shear_5mD.png"):
+        assert (out / name).read_bytes()[:4] == b"\x89PNG"
+    assert not any(p.name.endswith(".tmp") for p in out.iterdir())
+
+
+def test_exports_npz_and_float32_tiff(analysed):
+    import tifffile
+
+    out = analysed["out"]
+    ref = fake_result()
+    with np.load(out / "fields.npz") as z:
+        assert z["displacement_mm"].shape == (96, 128, 2) and z["phi_eff_mD"].dtype == np.float32
+        np.testing.assert_allclose(z["phi_eff_mD"], ref.phi_eff_mD, rtol=1e-6)
+        assert str(z["version"]) == "0.1.0" and float(z["distance_m"]) == 1.5
+    eff = tifffile.imread(out / "tiff" / "phi_eff_mD.tif")
+    assert eff.dtype == np.float32
+    np.testing.assert_allclose(eff, ref.phi_eff_mD, rtol=1e-6)
+    dx = tifffile.imread(out / "tiff" / "displacement_x_mm.tif")
+    np.testing.assert_allclose(dx, ref.displacement_mm[..., 0], rtol=1e-6)
+    with tifffile.TiffFile(out / "tiff" / "phi_shear_mD.tif") as t:
+        assert json.loads(t.pages[0].description)["unit"] == "mD"
+
+
+def test_report_is_self_contained_with_hash_version_verdict(analysed):
+    html = (analysed["out"] / "report.html").read_text(encoding="utf-8")
+    p = _Collector()
+    p.feed(html)
+    assert p.ids["verdict"].strip() == "FAIL"
+    assert p.ids["version"] == "0.1.0"
+    sha = hashlib.sha256(analysed["image"].read_bytes()).hexdigest()
+    assert sha in html and hashlib.sha256(analysed["ref"].read_bytes()).hexdigest() in html
+    assert not p.links  # nothing external: no stylesheet, script or link to fetch
+    names = {i["alt"] for i in p.imgs}
+    assert {"input_region", "phi_eff", "phi_shear", "axis", "histograms", "mask_phi_eff_20mD"} <= names
+    for img in p.imgs:
+        assert img["src"].startswith("data:image/png;base64,")
+        assert base64.b64decode(img["src"].split(",", 1)[1])[:4] == b"\x89PNG"
+    data = json.loads(p.ids["glassdist-report-data"])
+    assert data["inputs"]["image"]["sha256"] == sha
+    assert data["verdict"]["result"] == "FAIL" and data["glassdist_version"] == "0.1.0"
+    assert data["pitch_mm"] == 5.0 and data["distance_m"] == 1.5
+    for words in ("Capture geometry", "Comparative method", "p95 |phi_shear| &lt;= 5 mD", "strict"):
+        assert words in html
+
+
+def test_report_renders_in_headless_chromium(analysed, tmp_path):
+    exe = shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
+    if exe is None:
+        pytest.skip("headless rendering check needs chromium on PATH (e.g. apt-get install chromium)")
+    shot = tmp_path / "report.png"
+    with tempfile.TemporaryDirectory() as profile:
+        subprocess.run(
+            [exe, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+             "--disable-background-networking", "--disable-component-update", "--disable-sync",
+             f"--user-data-dir={profile}", f"--screenshot={shot}", "--window-size=1200,2000",
+             (analysed["out"] / "report.html").as_uri()],
+            check=True, capture_output=True, timeout=120,
+        )
+    import cv2
+
+    img = cv2.imread(str(shot))
+    assert img is not None and img.shape[:2] == (2000, 1200)
+    # The FAIL banner (light red, #ffd7d5) is drawn near the top of the page.
+    top = img[:400].reshape(-1, 3).astype(int)
+    banner = np.all(np.abs(top - np.array([0xD5, 0xD7, 0xFF])) <= 6, axis=1)  # BGR
+    assert banner.sum() > 2000
+    assert img.std() > 20  # text, tables and figures were drawn, not a blank page

@@ -1,0 +1,145 @@
+"""Acceptance specifications: loading (one-line errors) and verdicts on fields of known statistics."""
+
+from __future__ import annotations
+
+import json
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from glassdist.errors import InputError
+from glassdist.report.spec import evaluate_spec, load_spec, spec_limits
+from glassdist.report.stats import area_over_percent, channel_statistics, result_statistics
+
+
+def _write(tmp_path, data, name="spec.json"):
+    p = tmp_path / name
+    p.write_text(json.dumps(data) if not isinstance(data, str) else data, encoding="utf-8")
+    return p
+
+
+def _known_result(shape=(100, 100)):
+    """phi_eff = -50 mD on 30 % of the pixels, 0 elsewhere; phi_shear = 10 mD on 2 %, 1 mD elsewhere."""
+    eff = np.zeros(shape)
+    eff[:30] = -50.0
+    shear = np.ones(shape)
+    shear[-2:] = 10.0
+    return SimpleNamespace(
+        phi_eff_mD=eff, phi_shear_mD=shear, phi_total_mD=np.hypot(eff, shear), valid=np.ones(shape, bool),
+        method="comparative", sigma_mm=2.0, detrend_degree=2,
+    )
+
+
+SPEC = {
+    "name": "line 2",
+    "criteria": [
+        {"channel": "phi_eff", "statistic": "p95_abs", "max_mD": 60},
+        {"channel": "phi_shear", "statistic": "max_abs", "max_mD": 10},
+        {"channel": "phi_eff", "statistic": "area_over", "threshold_mD": 40, "max_percent": 30},
+    ],
+}
+
+
+def _verdict(tmp_path, spec, result=None):
+    s, sha = load_spec(_write(tmp_path, spec))
+    result = result if result is not None else _known_result()
+    stats = result_statistics(result, over_limits_mD=spec_limits(s))
+    return evaluate_spec(s, stats, result, spec_path="spec.json", spec_sha256=sha)
+
+
+def test_statistics_match_closed_form():
+    r = _known_result()
+    s = channel_statistics(r.phi_eff_mD, r.valid, over_limits_mD=[40, 60])
+    assert s["mean_abs"] == pytest.approx(15.0)
+    assert s["mean"] == pytest.approx(-15.0)
+    assert s["std"] == pytest.approx(np.sqrt(0.3 * 0.7) * 50.0)
+    assert s["p95_abs"] == pytest.approx(50.0)
+    assert s["max_abs"] == pytest.approx(50.0)
+    assert s["area_over_40"] == pytest.approx(30.0)
+    assert s["area_over_60"] == 0.0
+    assert s["n_pixels"] == 10_000
+
+
+def test_statistics_ignore_invalid_and_nan():
+    field = np.full((10, 10), 100.0)
+    valid = np.zeros((10, 10), bool)
+    valid[:5] = True
+    field[:5] = 2.0
+    field[0, 0] = np.nan
+    s = channel_statistics(field, valid)
+    assert s["max_abs"] == 2.0 and s["n_pixels"] == 49
+    assert area_over_percent(field, valid, 1.0) == 100.0
+    assert np.isnan(channel_statistics(field, np.zeros_like(valid))["p95_abs"])
+
+
+def test_limits_are_inclusive_and_verdict_passes(tmp_path):
+    v = _verdict(tmp_path, SPEC)
+    assert [c.passed for c in v.checks] == [True, True, True]
+    assert v.passed and v.label == "PASS"
+    assert v.lines()[-1] == "VERDICT: PASS (3/3 criteria passed) spec 'line 2'"
+
+
+def test_each_criterion_can_fail(tmp_path):
+    spec = dict(SPEC, criteria=[
+        {"channel": "phi_eff", "statistic": "p95_abs", "max_mD": 49.9},
+        {"channel": "phi_shear", "statistic": "max_abs", "max_mD": 9.99},
+        {"channel": "phi_eff", "statistic": "area_over", "threshold_mD": 40, "max_percent": 29.9},
+        {"channel": "phi_shear", "statistic": "mean_abs", "max_mD": 2.0, "label": "mean shear"},
+    ])
+    v = _verdict(tmp_path, spec)
+    assert [c.passed for c in v.checks] == [False, False, False, True]
+    assert not v.passed
+    lines = v.lines()
+    assert lines[0].startswith("FAIL  p95 |phi_eff| <= 49.9 mD")
+    assert lines[3].startswith("PASS  mean shear")
+    assert v.to_dict()["checks"][2]["value"] == pytest.approx(30.0)
+
+
+def test_empty_region_fails_and_coverage_is_checked(tmp_path):
+    r = _known_result()
+    r.valid = np.zeros_like(r.valid)
+    v = _verdict(tmp_path, dict(SPEC, min_valid_percent=10), r)
+    assert not any(c.passed for c in v.checks)
+    assert "no valid pixel" in v.checks[1].note
+    assert v.to_dict()["checks"][1]["value"] is None  # NaN -> null in JSON
+
+
+def test_protocol_mismatch_fails(tmp_path):
+    v = _verdict(tmp_path, dict(SPEC, protocol={"method": "direct", "sigma_mm": 2.0, "detrend_degree": 4}))
+    assert [c.passed for c in v.checks[:3]] == [False, True, False]
+    assert not v.passed
+
+
+@pytest.mark.parametrize(
+    "data, words",
+    [
+        (dict(SPEC, colour="red"), "unknown key 'colour'"),
+        (dict(SPEC, criteria=[{"channel": "phi_eff", "statistic": "area_over", "threshold_mD": 4}]), "max_percent"),
+        (dict(SPEC, criteria=[{"channel": "phi_eff", "statistic": "p95_abs", "max_mD": -1}]), "max_mD"),
+        (dict(SPEC, criteria=[{"channel": "phi_x", "statistic": "p95_abs", "max_mD": 1}]), "channel"),
+        (dict(SPEC, criteria=[]), "criteria"),
+        ({"criteria": SPEC["criteria"]}, "name"),
+        ("{not json", "not valid UTF-8 JSON"),
+        ("[1, 2]", "JSON object"),
+    ],
+)
+def test_bad_specs_give_one_line_errors(tmp_path, data, words):
+    with pytest.raises(InputError) as info:
+        load_spec(_write(tmp_path, data))
+    msg = str(info.value)
+    assert words in msg and "\n" not in msg
+
+
+def test_missing_spec_file(tmp_path):
+    with pytest.raises(InputError, match="does not exist"):
+        load_spec(tmp_path / "nope.json")
+
+
+def test_comment_key_is_allowed_and_hash_is_of_the_file(tmp_path):
+    import hashlib
+
+    p = _write(tmp_path, dict(SPEC, **{"$comment": "example"}))
+    spec, sha = load_spec(p)
+    assert spec.name == "line 2" and sha == hashlib.sha256(p.read_bytes()).hexdigest()
+    assert spec_limits(spec) == {"phi_eff": [40.0, 60.0], "phi_shear": [10.0]}
