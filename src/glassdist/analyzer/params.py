@@ -66,6 +66,9 @@ class AnalyzerParams(BaseModel):
     modulation_threshold: float = Field(
         0.3, gt=0, lt=1, description="valid region: local modulation / median modulation must exceed this"
     )
+    coherence_threshold: float = Field(
+        0.5, ge=0, lt=1, description="valid region: phase coherence |G*z|/G*|z| of the smoothed signal must exceed this"
+    )
     border_periods: float = Field(1.5, ge=0, description="valid region: margin eroded at image and mask borders, carrier periods")
     min_region_fraction: float = Field(0.01, ge=0, lt=1, description="valid region: drop connected regions smaller than this fraction of the image")
     ransac_threshold_periods: float = Field(0.1, gt=0, description="I2: RANSAC inlier threshold, carrier periods")

@@ -1,0 +1,23 @@
+"""The Distortion Analyzer (paper §2.2): Block F (fourier, unwrap), Block I (homography), Block A (metrics)."""
+
+from .fourier import Carrier, CarrierPair
+from .homography import HomographyFit
+from .metrics import Channels, channel_statistics, evaluate_displacement
+from .params import AnalyzerParams, default_params_path, load_params
+from .pipeline import AnalysisResult, ReferenceModel, analyze, prepare_reference
+
+__all__ = [
+    "analyze",
+    "prepare_reference",
+    "AnalysisResult",
+    "ReferenceModel",
+    "AnalyzerParams",
+    "load_params",
+    "default_params_path",
+    "evaluate_displacement",
+    "channel_statistics",
+    "Channels",
+    "Carrier",
+    "CarrierPair",
+    "HomographyFit",
+]

@@ -1,0 +1,403 @@
+"""Block F, stages F1-F3: carriers, bandpass, heterodyne and complex smoothing.
+
+Conventions
+-----------
+* Images are indexed ``(row, col)``; a spatial frequency is written
+  ``f = (fx, fy)`` in cycles/px with ``fx`` along columns and ``fy`` along rows,
+  so the carrier phase at pixel ``r = (x, y)`` is ``2 pi f . r``.
+* The analytic signal of carrier *i* is brought to baseband,
+  ``b_i(r) = a_i(r) exp(-2 pi i f_i . r)``; this *is* the heterodyne against a
+  synthetic flat carrier (Direct Method, pass 1). The Comparative Method then
+  forms ``b_i^dist conj(b_i^ref)``.
+* Because the bandpassed signal is band-limited, it is computed directly on a
+  coarser *sampling grid* (:class:`SamplingGrid`) by inverse-transforming only a
+  patch of the spectrum around the carrier (FFT-domain decimation). Sample
+  ``(j, i)`` of that grid sits at full-resolution pixel
+  ``(j sy + (sy - 1)/2, i sx + (sx - 1)/2)``, the convention of area resampling,
+  so that ``cv2.resize(..., INTER_LINEAR)`` maps it back exactly.
+
+References
+----------
+Takeda, Ina & Kobayashi (1982), JOSA 72, 156: Fourier-transform fringe analysis.
+Jacobsen & Kootsookos (2007), IEEE Signal Proc. Mag. 24(3): fast accurate
+frequency estimators. Paper §2.2, F1-F3.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.fft as sfft
+from scipy import ndimage
+
+from ..errors import InputError
+
+__all__ = [
+    "Carrier",
+    "CarrierPair",
+    "SamplingGrid",
+    "Spectrum",
+    "compute_spectrum",
+    "find_carriers",
+    "sampling_grid",
+    "bandpass_covariance",
+    "baseband",
+    "smooth_complex",
+]
+
+_WORKERS = -1  # scipy.fft: use every core
+
+
+@dataclass(frozen=True)
+class Carrier:
+    """One grid carrier.
+
+    Attributes
+    ----------
+    fx, fy : float
+        Spatial frequency, cycles/px (x along columns, y along rows).
+    strength : float
+        Peak magnitude over the median spectral background (dimensionless).
+    """
+
+    fx: float
+    fy: float
+    strength: float = float("nan")
+
+    @property
+    def f(self) -> np.ndarray:
+        """Frequency vector ``(fx, fy)``, cycles/px."""
+        return np.array([self.fx, self.fy])
+
+    @property
+    def norm(self) -> float:
+        """``|f|``, cycles/px."""
+        return float(np.hypot(self.fx, self.fy))
+
+    @property
+    def period_px(self) -> float:
+        """Carrier wavelength ``lambda = 1/|f|``, px."""
+        return 1.0 / self.norm
+
+    @property
+    def angle_deg(self) -> float:
+        """Direction of ``f`` from +x towards +y (rows, down), degrees."""
+        return float(np.degrees(np.arctan2(self.fy, self.fx)))
+
+    def negated(self) -> "Carrier":
+        return Carrier(-self.fx, -self.fy, self.strength)
+
+    def to_dict(self) -> dict:
+        return {
+            "fx_cycles_per_px": self.fx,
+            "fy_cycles_per_px": self.fy,
+            "period_px": self.period_px,
+            "angle_deg": self.angle_deg,
+            "strength": self.strength,
+        }
+
+
+@dataclass(frozen=True)
+class CarrierPair:
+    """The two grid carriers, oriented so that ``det([f1; f2]) > 0``.
+
+    With that orientation the logical grid frame (U along carrier 1, V along
+    carrier 2) has the handedness of the image frame (x right, y down), so the
+    pixel -> backdrop map is a proper rotation times a stretch.
+    """
+
+    k1: Carrier
+    k2: Carrier
+
+    @property
+    def matrix(self) -> np.ndarray:
+        """Rows ``f1, f2`` (cycles/px): ``(U, V) = F @ (x, y)`` for a flat grid."""
+        return np.array([self.k1.f, self.k2.f])
+
+    def to_dict(self) -> dict:
+        a = abs(self.k1.angle_deg - self.k2.angle_deg) % 180.0
+        return {"k1": self.k1.to_dict(), "k2": self.k2.to_dict(), "angle_between_deg": min(a, 180.0 - a)}
+
+
+@dataclass(frozen=True)
+class SamplingGrid:
+    """A coarse grid on which the band-limited demodulated signals are carried.
+
+    Attributes
+    ----------
+    full_shape : (int, int)
+        ``(H, W)`` of the image, px.
+    shape : (int, int)
+        ``(h, w)`` of the coarse grid.
+    """
+
+    full_shape: tuple[int, int]
+    shape: tuple[int, int]
+
+    @property
+    def step(self) -> tuple[float, float]:
+        """``(sy, sx)``: pixel spacing of the coarse samples along rows and columns."""
+        return (self.full_shape[0] / self.shape[0], self.full_shape[1] / self.shape[1])
+
+    @property
+    def offset(self) -> tuple[float, float]:
+        """Full-resolution position of sample (0, 0), px."""
+        sy, sx = self.step
+        return ((sy - 1.0) / 2.0, (sx - 1.0) / 2.0)
+
+    def coords(self) -> tuple[np.ndarray, np.ndarray]:
+        """Full-resolution pixel coordinates ``(y, x)`` of the samples, each (h, w)."""
+        sy, sx = self.step
+        oy, ox = self.offset
+        y = np.arange(self.shape[0]) * sy + oy
+        x = np.arange(self.shape[1]) * sx + ox
+        return np.meshgrid(y, x, indexing="ij")
+
+    @property
+    def is_full(self) -> bool:
+        return self.shape == self.full_shape
+
+
+@dataclass(frozen=True)
+class Spectrum:
+    """The real FFT of a mean-subtracted image (computed once, reused).
+
+    Attributes
+    ----------
+    rfft : ndarray, complex, shape (H, W//2 + 1)
+    shape : (int, int)
+        ``(H, W)`` of the image.
+    """
+
+    rfft: np.ndarray
+    shape: tuple[int, int]
+
+    def full(self, ky: np.ndarray, kx: np.ndarray) -> np.ndarray:
+        """Full complex spectrum at integer bins ``(ky, kx)`` (any sign), via Hermitian symmetry."""
+        H, W = self.shape
+        ky = np.asarray(ky).astype(np.int64)
+        kx = np.asarray(kx).astype(np.int64)
+        kx_w = np.mod(kx + W // 2, W) - W // 2  # signed, in [-W/2, W/2)
+        neg = kx_w < 0
+        row = np.where(neg, np.mod(-ky, H), np.mod(ky, H))
+        col = np.abs(kx_w)
+        col = np.minimum(col, self.rfft.shape[1] - 1)
+        vals = self.rfft[row, col]
+        return np.where(neg, np.conj(vals), vals)
+
+
+def compute_spectrum(image: np.ndarray) -> Spectrum:
+    """Real 2-D FFT of the image after subtracting its mean (the DC term carries no phase)."""
+    img = np.asarray(image, dtype=np.float32)
+    return Spectrum(sfft.rfft2(img - img.mean(), workers=_WORKERS), img.shape)
+
+
+def _jacobsen(xm: complex, x0: complex, xp: complex) -> float:
+    """Fractional bin offset of a spectral peak from three complex bins (Jacobsen 2007)."""
+    den = 2.0 * x0 - xm - xp
+    if abs(den) == 0:
+        return 0.0
+    d = float(np.real((xm - xp) / den))
+    return float(np.clip(d, -0.5, 0.5))
+
+
+def _angle_between(a: np.ndarray, b: np.ndarray) -> float:
+    """Angle between two lines (directions taken mod 180 deg), degrees in [0, 90]."""
+    c = abs(float(a @ b)) / (np.linalg.norm(a) * np.linalg.norm(b))
+    return float(np.degrees(np.arccos(np.clip(c, 0.0, 1.0))))
+
+
+def find_carriers(spectrum: Spectrum, *, min_period_px: float = 3.0, max_peaks: int = 40) -> CarrierPair:
+    """F1: locate the two grid carriers in the 2-D spectrum, refined to sub-bin precision.
+
+    ``k1`` is the strongest peak away from DC; ``k2`` the strongest peak more than
+    45 deg from ``k1`` that is not a cross-modulation term ``k_a +- k1`` of a
+    lower-frequency peak (paper §2.2 F1).
+
+    Parameters
+    ----------
+    spectrum : Spectrum
+        From :func:`compute_spectrum`.
+    min_period_px : float
+        Shortest carrier period accepted, px (finer peaks are ignored).
+
+    Returns
+    -------
+    CarrierPair
+        Oriented so that ``det([f1; f2]) > 0``.
+
+    Raises
+    ------
+    InputError
+        If no periodic pattern stands out of the spectral background.
+    """
+    H, W = spectrum.shape
+    mag = np.abs(spectrum.rfft)
+    fy = sfft.fftfreq(H)[:, None]
+    fx = sfft.rfftfreq(W)[None, :]
+    fr = np.hypot(fx, fy)
+    # Ignore DC/illumination (fewer than 4 periods across the image) and finer than min_period_px.
+    low = 4.0 / min(H, W)
+    band = (fr > low) & (fr < 1.0 / min_period_px)
+    # Column kx = 0 holds both +f and -f; keep one half-line so a peak is seen once.
+    band[:, 0] &= fy[:, 0] > 0
+    if W % 2 == 0:
+        band[:, -1] &= fy[:, 0] > 0
+    work = np.where(band, mag, 0.0)
+    background = float(np.median(mag[band])) if band.any() else 0.0
+    peak = float(mag[band].max()) if band.any() else 0.0
+    background = max(background, 1e-9 * peak)  # a noise-free synthetic grid has an exactly empty background
+    if background <= 0 or not np.isfinite(background):
+        raise InputError("the image has no periodic pattern (flat spectrum); photograph the grid through the glass")
+    local_max = (work == ndimage.maximum_filter(work, size=5, mode="wrap")) & (work > 0)
+    idx = np.flatnonzero(local_max)
+    if idx.size == 0:
+        raise InputError("no grid pattern found in the image; check the photo shows the printed grid in focus")
+    idx = idx[np.argsort(work.ravel()[idx])[::-1][:max_peaks]]
+    rows, cols = np.unravel_index(idx, work.shape)
+    kys = np.where(rows > H // 2, rows - H, rows).astype(float)
+    kxs = cols.astype(float)
+    strengths = work.ravel()[idx] / background
+    vecs = np.stack([kxs / W, kys / H], axis=1)  # (fx, fy) at integer bins
+
+    if strengths[0] < 8.0:
+        raise InputError(
+            f"no grid pattern found in the image (strongest spectral peak only {strengths[0]:.1f}x the background); "
+            "check the photo shows the printed grid in focus and is not blank or blurred"
+        )
+    i1 = 0
+    cand = [j for j in range(1, len(vecs)) if _angle_between(vecs[j], vecs[i1]) > 45.0]
+    if not cand:
+        raise InputError(
+            "only one family of grid lines found; glassdist needs a crossed line grid or a checkerboard"
+        )
+    i2 = max(cand, key=lambda j: strengths[j])
+    # Reject cross terms q = p +- k1: prefer the lower-frequency peak p if it exists and is >45 deg from k1.
+    for _ in range(2):
+        q = vecs[i2]
+        better = None
+        for s in (+1.0, -1.0):
+            p = q - s * vecs[i1]
+            for j in cand:
+                if j == i2:
+                    continue
+                for sign in (1.0, -1.0):
+                    if np.linalg.norm(sign * vecs[j] - p) < 2.5 / min(H, W) and np.linalg.norm(p) < np.linalg.norm(q):
+                        if strengths[j] > 0.25 * strengths[i2] and (better is None or strengths[j] > strengths[better]):
+                            better = j
+        if better is None:
+            break
+        i2 = better
+    if strengths[i2] < 4.0:
+        raise InputError(
+            "only one family of grid lines is visible; glassdist needs a crossed line grid or a checkerboard"
+        )
+
+    def refine(i: int) -> Carrier:
+        ky, kx = kys[i], kxs[i]
+        s = spectrum.full
+        dx = _jacobsen(s(ky, kx - 1), s(ky, kx), s(ky, kx + 1))
+        dy = _jacobsen(s(ky - 1, kx), s(ky, kx), s(ky + 1, kx))
+        return Carrier((kx + dx) / W, (ky + dy) / H, float(strengths[i]))
+
+    c1, c2 = refine(i1), refine(i2)
+    if np.linalg.det(np.array([c1.f, c2.f])) < 0:
+        c2 = c2.negated()
+    return CarrierPair(c1, c2)
+
+
+def bandpass_covariance(
+    carrier: Carrier, other: Carrier, *, sigma_along: float, sigma_cross: float, isotropic: bool = False
+) -> np.ndarray:
+    """Frequency-domain covariance (cycles/px)^2 of the Gaussian bandpass around ``carrier``.
+
+    The narrow axis points along the other carrier, i.e. towards the cross terms
+    ``f_i +- f_other`` whose leakage would rotate the recovered frame (paper
+    §3.1); the wide axis, perpendicular to it, keeps the distortion sidebands.
+
+    Returns
+    -------
+    ndarray, shape (2, 2)
+        Covariance ``Sigma_f`` in (x, y) order: the bandpass is
+        ``exp(-nu^T Sigma_f^{-1} nu / 2)`` for an offset ``nu`` from the carrier.
+    """
+    wide = sigma_along * carrier.norm
+    if isotropic:
+        return np.eye(2) * wide**2
+    u = other.f / other.norm
+    n = np.array([-u[1], u[0]])
+    narrow = sigma_cross * other.norm
+    return narrow**2 * np.outer(u, u) + wide**2 * np.outer(n, n)
+
+
+def sampling_grid(
+    shape: tuple[int, int], covariances: list[np.ndarray], decimation: int | str = "auto", *, support: float = 4.0
+) -> SamplingGrid:
+    """Choose the coarse grid that carries the bandpassed signals without aliasing.
+
+    ``auto``: the spectral patch spans ``+- support`` standard deviations of the
+    widest bandpass, so the Gaussian tails outside it are below ``exp(-support^2/2)``.
+    """
+    H, W = shape
+    if decimation == "auto":
+        sd = max(float(np.sqrt(np.max(np.linalg.eigvalsh(c)))) for c in covariances)
+        half = support * sd  # cycles/px
+        h = min(H, int(2 * np.ceil(half * H)))
+        w = min(W, int(2 * np.ceil(half * W)))
+    else:
+        d = int(decimation)
+        h, w = int(np.ceil(H / d)), int(np.ceil(W / d))
+    return SamplingGrid((H, W), (max(h, 8), max(w, 8)) if (h < H or w < W) else (H, W))
+
+
+def baseband(spectrum: Spectrum, carrier: Carrier, cov_f: np.ndarray, grid: SamplingGrid) -> np.ndarray:
+    """F1+F2 (flat reference): bandpassed analytic signal of ``carrier`` at baseband on ``grid``.
+
+    Returns ``b(r) = a(r) exp(-2 pi i f . r)`` sampled on ``grid``, where ``a`` is
+    the inverse FFT of the spectrum times the Gaussian bandpass centred on the
+    (sub-bin) carrier frequency.
+
+    Returns
+    -------
+    ndarray, complex128, shape ``grid.shape``
+    """
+    H, W = spectrum.shape
+    h, w = grid.shape
+    ky_c, kx_c = carrier.fy * H, carrier.fx * W
+    ky0, kx0 = int(np.round(ky_c)), int(np.round(kx_c))
+    my = np.arange(-(h // 2), h - h // 2)
+    mx = np.arange(-(w // 2), w - w // 2)
+    KY, KX = np.meshgrid(ky0 + my, kx0 + mx, indexing="ij")
+    patch = spectrum.full(KY, KX)
+    nu = np.stack([(KX - kx_c) / W, (KY - ky_c) / H], axis=-1)
+    inv = np.linalg.inv(cov_f)
+    q = np.einsum("...i,ij,...j->...", nu, inv, nu)
+    patch = patch * np.exp(-0.5 * q)
+    # Sample positions j*sy + oy: shift by the offset, relative to the integer bin.
+    oy, ox = grid.offset
+    patch = patch * np.exp(2j * np.pi * (my[:, None] / H * oy + mx[None, :] / W * ox))
+    b = sfft.ifft2(sfft.ifftshift(patch), workers=_WORKERS) * (h * w) / (H * W)
+    # Remove the fractional-bin remainder of the carrier: b = a * exp(-2 pi i f.r).
+    yy, xx = grid.coords()
+    frac_y, frac_x = (ky_c - ky0) / H, (kx_c - kx0) / W
+    b *= np.exp(-2j * np.pi * (frac_y * yy + frac_x * xx))
+    return b
+
+
+def smooth_complex(z: np.ndarray, sigma_px: float, grid: SamplingGrid) -> np.ndarray:
+    """F3: Gaussian smoothing of the complex signal (real and imaginary parts), sigma in full-res px.
+
+    Smoothing the complex signal rather than the wrapped phase lets weak regions
+    inherit phase from the well-modulated grid lines around them (paper F3).
+    """
+    sy, sx = grid.step
+    return ndimage.gaussian_filter(z, sigma=(sigma_px / sy, sigma_px / sx), mode="nearest", truncate=3.5)
+
+
+def _check_size(shape, period_px: float) -> None:
+    if min(shape) < 6.0 * period_px:
+        raise InputError(
+            f"the image ({shape[1]}x{shape[0]} px) is too small for the grid period ({period_px:.1f} px): "
+            "at least 6 periods must fit across; use a finer grid or a larger crop"
+        )

@@ -1,0 +1,160 @@
+"""Block I: logical-grid recovery (I1) and RANSAC homography (I2), Direct Method.
+
+The homography ``H`` maps logical grid coordinates ``(U, V)`` -- measured in
+carrier periods along carrier 1 and carrier 2 -- to camera pixels ``(x, y)``
+(x along columns, y along rows). Its inverse gives, at every pixel, the grid
+coordinate an undistorted pinhole capture of the flat backdrop would show there:
+the synthetic reference of the Direct Method.
+
+References
+----------
+Fischler & Bolles (1981), Comm. ACM 24, 381 (RANSAC). Hartley & Zisserman (2004),
+Multiple View Geometry, ch. 4 (homography estimation). Paper §2.2, Block I.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import AnalysisError
+
+__all__ = ["HomographyFit", "logical_grid_points", "fit_homography", "apply_inverse", "inverse_jacobian"]
+
+
+@dataclass(frozen=True)
+class HomographyFit:
+    """Result of I2.
+
+    Attributes
+    ----------
+    matrix : ndarray (3, 3)
+        ``H``: homogeneous ``(U, V, 1) -> (x, y, 1)`` (normalised so ``H[2, 2] = 1``).
+    inlier_fraction : float
+    n_points : int
+    rms_inlier_px : float
+        RMS reprojection error of the inliers, px.
+    """
+
+    matrix: np.ndarray
+    inlier_fraction: float
+    n_points: int
+    rms_inlier_px: float
+
+    def to_dict(self) -> dict:
+        return {
+            "matrix": self.matrix.tolist(),
+            "inlier_fraction": self.inlier_fraction,
+            "n_points": self.n_points,
+            "rms_inlier_px": self.rms_inlier_px,
+        }
+
+
+def logical_grid_points(
+    U: np.ndarray, V: np.ndarray, y: np.ndarray, x: np.ndarray, valid: np.ndarray, spacing: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """I1: subsample (logical grid, pixel) pairs at about one point per carrier period.
+
+    Parameters
+    ----------
+    U, V : ndarray (h, w)
+        Logical grid coordinates (carrier periods) at the samples.
+    y, x : ndarray (h, w)
+        Pixel coordinates of the samples.
+    valid : ndarray of bool (h, w)
+    spacing : int
+        Subsampling step on the sample grid (>= 1).
+
+    Returns
+    -------
+    src : ndarray (n, 2)
+        ``(U, V)`` pairs.
+    dst : ndarray (n, 2)
+        ``(x, y)`` pixel positions.
+    """
+    s = max(int(spacing), 1)
+    sl = (slice(s // 2, None, s), slice(s // 2, None, s))
+    m = valid[sl]
+    src = np.stack([U[sl][m], V[sl][m]], axis=1)
+    dst = np.stack([x[sl][m], y[sl][m]], axis=1)
+    return src, dst
+
+
+def fit_homography(
+    src: np.ndarray, dst: np.ndarray, *, threshold_px: float, max_trials: int = 2000, seed: int = 0
+) -> HomographyFit:
+    """I2: RANSAC homography from logical grid ``src`` to pixels ``dst``.
+
+    Parameters
+    ----------
+    src, dst : ndarray (n, 2)
+    threshold_px : float
+        Inlier threshold on the reprojection error, px (a fraction of the carrier
+        period: points displaced by the optical wave fall outside it).
+    max_trials : int
+    seed : int
+        Seed of RANSAC's sampler (OpenCV's estimator, which refines the
+        consensus set by Levenberg-Marquardt).
+
+    Raises
+    ------
+    AnalysisError
+        With fewer than 8 points or when no consensus is found.
+    """
+    if len(src) < 8:
+        raise AnalysisError(
+            f"only {len(src)} reliable grid points for the homography; the valid region is too small - "
+            "photograph more of the grid through the pane or use the Comparative Method (--reference)"
+        )
+    import cv2
+
+    cv2.setRNGSeed(int(seed))
+    H, inl = cv2.findHomography(
+        src.astype(np.float64),
+        dst.astype(np.float64),
+        cv2.RANSAC,
+        ransacReprojThreshold=float(threshold_px),
+        maxIters=int(max_trials),
+        confidence=0.999,
+    )
+    if H is None or inl is None or int(inl.sum()) < 4:
+        raise AnalysisError(
+            "RANSAC found no homography consistent with the grid; the pattern may be too distorted or "
+            "occluded - use the Comparative Method (--reference) or a larger ransac_threshold_periods"
+        )
+    inliers = inl.ravel().astype(bool)
+    H = H / H[2, 2]
+    proj = np.c_[src, np.ones(len(src))] @ H.T
+    proj = proj[:, :2] / proj[:, 2:3]
+    err = np.linalg.norm(proj - dst, axis=1)
+    rms = float(np.sqrt(np.mean(err[inliers] ** 2)))
+    return HomographyFit(H, float(inliers.mean()), int(len(src)), rms)
+
+
+def apply_inverse(H: np.ndarray, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(U, V) = H^{-1}(x, y)``: logical grid coordinates of pixels, carrier periods."""
+    G = np.linalg.inv(H)
+    w = G[2, 0] * x + G[2, 1] * y + G[2, 2]
+    u = (G[0, 0] * x + G[0, 1] * y + G[0, 2]) / w
+    v = (G[1, 0] * x + G[1, 1] * y + G[1, 2]) / w
+    return u, v
+
+
+def inverse_jacobian(H: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Jacobian of ``H^{-1}``: ``J[..., a, b] = d(U, V)_a / d(x, y)_b``, carrier periods per px.
+
+    Returns
+    -------
+    ndarray (..., 2, 2)
+    """
+    G = np.linalg.inv(H)
+    w = G[2, 0] * x + G[2, 1] * y + G[2, 2]
+    u = (G[0, 0] * x + G[0, 1] * y + G[0, 2]) / w
+    v = (G[1, 0] * x + G[1, 1] * y + G[1, 2]) / w
+    J = np.empty(np.shape(x) + (2, 2))
+    J[..., 0, 0] = (G[0, 0] - u * G[2, 0]) / w
+    J[..., 0, 1] = (G[0, 1] - u * G[2, 1]) / w
+    J[..., 1, 0] = (G[1, 0] - v * G[2, 0]) / w
+    J[..., 1, 1] = (G[1, 1] - v * G[2, 1]) / w
+    return J

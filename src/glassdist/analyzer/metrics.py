@@ -1,0 +1,317 @@
+"""Block A, stages A2-A3: detrending, metric-anchored smoothing, strain and power channels.
+
+This is the *evaluation stack* shared by the Analyzer and the analytical model
+(paper §2 and §3.1): both routes hand a displacement field in mm to
+:func:`evaluate_displacement`.
+
+Conventions
+-----------
+* ``displacement_mm[..., 0]`` is delta_x (along columns), ``[..., 1]`` delta_y
+  (along rows), in backdrop mm; delta = landing point with glass minus without.
+* Samples may sit on a coarse grid: ``step_px = (sy, sx)`` is their spacing in
+  image pixels.
+* ``jacobian[..., a, b] = dX_a / dr_b`` maps an image step ``dr = (dx, dy)`` (px)
+  to a backdrop step ``dX`` (mm), in the frame of the displacement components.
+  Without it the isotropic ``mm_per_px`` is used.
+* Channels, with eps = sym(grad delta) taken with respect to backdrop mm and L in m:
+
+  .. math::
+
+     \\phi_{eff} = \\mathrm{tr}(\\varepsilon)/L, \\quad
+     \\phi_{shear} = \\frac{2}{L}\\sqrt{\\left(\\frac{\\varepsilon_{xx}-\\varepsilon_{yy}}{2}\\right)^2
+     + \\varepsilon_{xy}^2}, \\quad \\phi_{total} = \\lVert\\varepsilon\\rVert_F / L,
+
+  reported in mD (x 1000). A converging lens gives phi_eff < 0
+  (P_sph,eq = -phi_eff/2 in the far-background limit).
+* ``axis_deg``: direction of largest stretch of the astigmatism (major
+  eigenvector of the traceless part of eps), degrees in (-90, 90], measured from
+  +x (columns) towards +y (rows, down).
+
+References
+----------
+Paper §2.2.2-2.2.3 (A2, metric-anchored smoothing, A3).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.fft as sfft
+
+__all__ = [
+    "Channels",
+    "polynomial_detrend",
+    "masked_gaussian",
+    "strain_tensor",
+    "channels_from_strain",
+    "evaluate_displacement",
+    "channel_statistics",
+]
+
+
+@dataclass(frozen=True)
+class Channels:
+    """Output of the evaluation stack (arrays on the input sample grid, NaN where invalid).
+
+    Attributes
+    ----------
+    phi_eff_mD, phi_shear_mD, phi_total_mD : ndarray (h, w)
+        Sphere-equivalent power, cylinder-equivalent astigmatism, Frobenius total, mD.
+    axis_deg : ndarray (h, w)
+        Principal axis of the astigmatism, degrees.
+    displacement_detrended_mm : ndarray (h, w, 2)
+        delta_* after detrending and smoothing, mm (the field that is differentiated).
+    strain : ndarray (h, w, 2, 2)
+        eps = sym(grad delta_*), dimensionless.
+    """
+
+    phi_eff_mD: np.ndarray
+    phi_shear_mD: np.ndarray
+    phi_total_mD: np.ndarray
+    axis_deg: np.ndarray
+    displacement_detrended_mm: np.ndarray
+    strain: np.ndarray
+
+
+def _monomials(x: np.ndarray, y: np.ndarray, degree: int) -> np.ndarray:
+    cols = [x**i * y**j for n in range(degree + 1) for i in range(n + 1) for j in [n - i]]
+    return np.stack(cols, axis=-1)
+
+
+def polynomial_detrend(field: np.ndarray, labels: np.ndarray, degree: int, step_px=(1.0, 1.0)) -> np.ndarray:
+    """A2: subtract, per region and per component, the least-squares polynomial of total degree ``degree``.
+
+    Parameters
+    ----------
+    field : ndarray (h, w) or (h, w, c)
+    labels : ndarray of int (h, w)
+        0 = excluded, 1..n = regions detrended independently.
+    degree : int
+        Total degree N (monomials x^i y^j with i + j <= N).
+    step_px : (float, float)
+        Sample spacing (sy, sx), px (only conditions the fit; the result is affine-invariant).
+
+    Returns
+    -------
+    ndarray like ``field``; NaN where ``labels == 0``.
+    """
+    f = np.asarray(field, dtype=float)
+    squeeze = f.ndim == 2
+    if squeeze:
+        f = f[..., None]
+    out = np.full_like(f, np.nan)
+    h, w = labels.shape
+    yy, xx = np.mgrid[0:h, 0:w].astype(float)
+    yy *= step_px[0]
+    xx *= step_px[1]
+    for r in range(1, int(labels.max(initial=0)) + 1):
+        sel = labels == r
+        if not sel.any():
+            continue
+        x, y = xx[sel], yy[sel]
+        cx, cy = x.mean(), y.mean()
+        s = max(np.ptp(x), np.ptp(y), 1.0) / 2.0
+        A = _monomials((x - cx) / s, (y - cy) / s, degree)
+        vals = f[sel]
+        ok = np.all(np.isfinite(vals), axis=1)
+        coef, *_ = np.linalg.lstsq(A[ok], vals[ok], rcond=None)
+        out[sel] = vals - A @ coef
+    return out[..., 0] if squeeze else out
+
+
+def _gaussian_transfer(shape, cov_idx: np.ndarray) -> np.ndarray:
+    fy = sfft.fftfreq(shape[0])[:, None]
+    fx = sfft.rfftfreq(shape[1])[None, :]
+    q = cov_idx[0, 0] * fx**2 + 2 * cov_idx[0, 1] * fx * fy + cov_idx[1, 1] * fy**2
+    return np.exp(-2 * np.pi**2 * q)
+
+
+def masked_gaussian(
+    field: np.ndarray, weight: np.ndarray, cov_px: np.ndarray, step_px=(1.0, 1.0), *, min_weight: float = 0.02
+) -> np.ndarray:
+    """Normalised Gaussian convolution ``G*(w f) / G*w`` with an arbitrary covariance.
+
+    Values outside ``weight`` are extrapolated smoothly from inside (where the
+    normalising weight exceeds ``min_weight``), which gives clean central
+    differences at region borders; elsewhere NaN.
+
+    Parameters
+    ----------
+    field : ndarray (h, w)
+    weight : ndarray (h, w)
+        1 inside the region, 0 outside.
+    cov_px : ndarray (2, 2)
+        Kernel covariance in image px^2, (x, y) order. Zero means no smoothing.
+    step_px : (float, float)
+        Sample spacing (sy, sx), px.
+    """
+    f = np.where(weight > 0, np.nan_to_num(field), 0.0)
+    wgt = weight.astype(float)
+    if not np.any(cov_px):
+        return np.where(weight > 0, field, np.nan)
+    sy, sx = step_px
+    D = np.diag([1.0 / sx, 1.0 / sy])
+    cov_idx = D @ cov_px @ D
+    pad = [int(np.ceil(4.0 * np.sqrt(max(cov_idx[1, 1], 0.0)))) + 1, int(np.ceil(4.0 * np.sqrt(max(cov_idx[0, 0], 0.0)))) + 1]
+    shape = (f.shape[0] + 2 * pad[0], f.shape[1] + 2 * pad[1])
+    shape = (sfft.next_fast_len(shape[0]), sfft.next_fast_len(shape[1], real=True))
+    T = _gaussian_transfer(shape, cov_idx)
+    num = sfft.irfft2(sfft.rfft2(f, s=shape) * T, s=shape)[: f.shape[0], : f.shape[1]]
+    den = sfft.irfft2(sfft.rfft2(wgt, s=shape) * T, s=shape)[: f.shape[0], : f.shape[1]]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = num / den
+    out[den < min_weight] = np.nan
+    return out
+
+
+def strain_tensor(displacement_mm: np.ndarray, step_px=(1.0, 1.0), *, mm_per_px: float | None = None, jacobian=None):
+    """A3: eps = sym(d delta / dX) by centred differences, X in backdrop mm.
+
+    Parameters
+    ----------
+    displacement_mm : ndarray (h, w, 2)
+    step_px : (float, float)
+        Sample spacing (sy, sx), px.
+    mm_per_px : float, optional
+        Isotropic scale (used when ``jacobian`` is None).
+    jacobian : ndarray (h, w, 2, 2), optional
+        ``dX/dr`` (mm per px).
+
+    Returns
+    -------
+    ndarray (h, w, 2, 2)
+    """
+    d = displacement_mm
+    sy, sx = step_px
+    G = np.empty(d.shape[:2] + (2, 2))
+    for c in range(2):  # d delta_c / d(x, y) in px
+        G[..., c, 1], G[..., c, 0] = np.gradient(d[..., c], sy, sx)
+    if jacobian is None:
+        if mm_per_px is None:
+            raise ValueError("strain_tensor needs mm_per_px or jacobian")
+        grad = G / mm_per_px
+    else:
+        grad = G @ np.linalg.inv(jacobian)
+    return 0.5 * (grad + np.swapaxes(grad, -1, -2))
+
+
+def channels_from_strain(eps: np.ndarray, distance_m: float):
+    """A3 channels (mD) and astigmatism axis (deg) from the strain tensor (see module notes)."""
+    exx, eyy, exy = eps[..., 0, 0], eps[..., 1, 1], 0.5 * (eps[..., 0, 1] + eps[..., 1, 0])
+    scale = 1000.0 / distance_m
+    phi_eff = (exx + eyy) * scale
+    phi_shear = 2.0 * np.hypot(0.5 * (exx - eyy), exy) * scale
+    phi_total = np.sqrt(exx**2 + eyy**2 + 2 * exy**2) * scale
+    axis = 0.5 * np.degrees(np.arctan2(2 * exy, exx - eyy))
+    axis = np.where(axis <= -90.0, axis + 180.0, axis)
+    return phi_eff, phi_shear, phi_total, axis
+
+
+def evaluate_displacement(
+    displacement_mm: np.ndarray,
+    valid: np.ndarray,
+    *,
+    distance_m: float,
+    mm_per_px: float,
+    detrend_degree: int,
+    sigma_mm: float,
+    jacobian: np.ndarray | None = None,
+    labels: np.ndarray | None = None,
+    step_px=(1.0, 1.0),
+    component_blur_px2: np.ndarray | None = None,
+    frame_rotation: np.ndarray | None = None,
+) -> Channels:
+    """The shared evaluation stack: A2 detrend, metric-anchored smoothing, A3 channels.
+
+    Parameters
+    ----------
+    displacement_mm : ndarray (h, w, 2)
+        delta in mm (x, y components; see ``frame_rotation``).
+    valid : ndarray of bool (h, w)
+    distance_m : float
+        Glass-to-backdrop distance L, m.
+    mm_per_px : float
+        Isotropic backdrop mm per image px; sets the smoothing
+        ``sigma_px = sigma_mm / mm_per_px`` (and the gradients when ``jacobian`` is None).
+    detrend_degree : int
+        Total degree N of the A2 polynomial.
+    sigma_mm : float
+        Reporting smoothing scale on the backdrop, mm.
+    jacobian : ndarray (h, w, 2, 2), optional
+        ``dX/dr`` in the frame of the components (mm per px) for exact gradients
+        with respect to backdrop mm under perspective.
+    labels : ndarray of int (h, w), optional
+        Regions detrended and smoothed independently (default: one region = ``valid``).
+    step_px : (float, float)
+        Sample spacing (sy, sx), px.
+    component_blur_px2 : ndarray (2, 2, 2), optional
+        Covariance (px^2, (x, y) order) of a blur already applied to each
+        component; it is subtracted from the smoothing so the total equals sigma.
+    frame_rotation : ndarray (2, 2), optional
+        ``R`` with components given in a rotated frame: camera-frame delta = R^T delta.
+        Channels are rotation invariant; the axis and the returned displacement are
+        expressed in the camera frame.
+
+    Returns
+    -------
+    Channels
+    """
+    valid = np.asarray(valid, bool)
+    if labels is None:
+        labels = valid.astype(np.int32)
+    labels = np.where(valid, labels, 0)
+    det = polynomial_detrend(displacement_mm, labels, detrend_degree, step_px)
+    sigma_px = sigma_mm / mm_per_px
+    smooth = np.full(det.shape, np.nan)
+    for c in range(2):
+        cov = sigma_px**2 * np.eye(2)
+        if component_blur_px2 is not None:
+            w, V = np.linalg.eigh(cov - component_blur_px2[c])
+            cov = (V * np.clip(w, 0.0, None)) @ V.T
+        for r in range(1, int(labels.max(initial=0)) + 1):
+            sel = labels == r
+            if not sel.any():
+                continue
+            s = masked_gaussian(det[..., c], sel.astype(float), cov, step_px)
+            take = np.isfinite(s) & (np.isnan(smooth[..., c]) | sel)
+            smooth[..., c][take] = s[take]
+    eps = strain_tensor(smooth, step_px, mm_per_px=mm_per_px, jacobian=jacobian)
+    disp_out = smooth
+    if frame_rotation is not None:
+        R = np.asarray(frame_rotation)
+        eps = R.T @ eps @ R
+        disp_out = smooth @ R  # row-vector form of R^T delta
+    phi_eff, phi_shear, phi_total, axis = channels_from_strain(eps, distance_m)
+    inval = ~valid
+    for a in (phi_eff, phi_shear, phi_total, axis):
+        a[inval] = np.nan
+    disp_out = disp_out.copy()
+    disp_out[inval] = np.nan
+    eps[inval] = np.nan
+    return Channels(phi_eff, phi_shear, phi_total, axis, disp_out, eps)
+
+
+def channel_statistics(field: np.ndarray, valid: np.ndarray | None = None) -> dict:
+    """Summary statistics of a channel over the valid region.
+
+    Returns
+    -------
+    dict
+        ``mean_abs`` (mean |phi|), ``std`` (of signed phi), ``p95_abs``, ``max_abs``
+        (same units as ``field``) and ``n_valid``. NaN values when nothing is valid.
+    """
+    v = np.asarray(field, float)
+    m = np.isfinite(v) if valid is None else (np.asarray(valid, bool) & np.isfinite(v))
+    x = v[m]
+    if x.size == 0:
+        nan = float("nan")
+        return {"mean_abs": nan, "std": nan, "p95_abs": nan, "max_abs": nan, "n_valid": 0}
+    a = np.abs(x)
+    return {
+        "mean_abs": float(a.mean()),
+        "std": float(x.std()),
+        "p95_abs": float(np.percentile(a, 95)),
+        "max_abs": float(a.max()),
+        "n_valid": int(x.size),
+    }

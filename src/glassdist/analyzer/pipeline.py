@@ -1,0 +1,571 @@
+"""The Distortion Analyzer: Comparative and Direct methods (paper §2.2).
+
+Comparative: F1-F4 against the analytic signal of a glass-less photograph, then A.
+Direct: F1-F4 against a synthetic flat carrier (pass 1), Block I fits the
+homography of the logical grid, and the distortion phase is taken against the
+homography-warped carrier (pass 2, reusing pass 1's unwrapped phase), then A.
+
+A1 (projective, default): carrier *i* measures the displacement along backdrop
+grid axis *i* exactly, ``delta_i = p_c phi_i / (2 pi)`` (p_c the carrier period
+on the backdrop), whatever the perspective; gradients are taken with respect to
+backdrop mm through the Jacobian of the fitted homography, and the result is
+rotated into the camera frame (x along columns, y along rows). A1 (isotropic,
+the paper's reporting convention): dual-basis inverse ``(M^T)^{-1}`` and the
+single scale ``mm_per_px = p_c sqrt(|f1||f2|)``.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import ndimage
+
+from .._version import __version__
+from ..errors import AnalysisError, InputError
+from . import fourier as F
+from .homography import HomographyFit, apply_inverse, fit_homography, inverse_jacobian, logical_grid_points
+from .metrics import channel_statistics, evaluate_displacement
+from .params import AnalyzerParams, load_params
+from .unwrap import label_regions, residues, unwrap
+
+__all__ = ["AnalysisResult", "ReferenceModel", "analyze", "prepare_reference"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class AnalysisResult:
+    """Everything the Analyzer measured, on the input image's pixel grid.
+
+    Attributes
+    ----------
+    method : {'comparative', 'direct'}
+    displacement_mm : ndarray (H, W, 2) float32
+        delta (x, y) in backdrop mm, camera frame; NaN where invalid. Direct: relative
+        to the homography baseline. Comparative: relative to the reference photo.
+    displacement_detrended_mm : ndarray (H, W, 2) float32
+        delta_* after A2 detrend and metric smoothing (the field differentiated by A3).
+    phi_eff_mD, phi_shear_mD, phi_total_mD : ndarray (H, W) float32
+        A3 channels, mD; NaN where invalid.
+    axis_deg : ndarray (H, W) float32
+        Astigmatism principal axis, degrees from +x towards +y, in (-90, 90].
+    valid : ndarray (H, W) bool
+    mm_per_px : float
+        Isotropic scale ``p_c sqrt(|f1||f2|)``, backdrop mm per px.
+    sigma_mm, detrend_degree, pitch_mm, distance_m
+        The evaluation settings and the physical inputs.
+    carrier_period_mm : float
+        Carrier period on the backdrop (pitch for lines, pitch*sqrt(2) for checkerboards).
+    carriers : CarrierPair
+    homography : ndarray (3, 3) or None
+        Direct: ``H`` from logical grid (carrier periods) to pixels.
+    homography_fit : HomographyFit or None
+    params : AnalyzerParams
+    warnings : tuple of str
+    version : str
+    sampling_step_px : (float, float)
+        Spacing of the internal demodulation grid.
+    """
+
+    method: str
+    displacement_mm: np.ndarray
+    displacement_detrended_mm: np.ndarray
+    phi_eff_mD: np.ndarray
+    phi_shear_mD: np.ndarray
+    phi_total_mD: np.ndarray
+    axis_deg: np.ndarray
+    valid: np.ndarray
+    mm_per_px: float
+    sigma_mm: float
+    detrend_degree: int
+    pitch_mm: float
+    distance_m: float
+    carrier_period_mm: float
+    carriers: F.CarrierPair
+    homography: np.ndarray | None
+    homography_fit: HomographyFit | None
+    params: AnalyzerParams
+    warnings: tuple[str, ...]
+    version: str = __version__
+    sampling_step_px: tuple[float, float] = (1.0, 1.0)
+    n_regions: int = 1
+
+    @property
+    def valid_fraction(self) -> float:
+        return float(self.valid.mean())
+
+    def statistics(self) -> dict:
+        """Per-channel statistics over the valid region (see :func:`channel_statistics`)."""
+        return {
+            name: channel_statistics(getattr(self, name), self.valid)
+            for name in ("phi_eff_mD", "phi_shear_mD", "phi_total_mD")
+        }
+
+    def summary(self) -> dict:
+        """JSON-serialisable record of the run (written as ``summary.json``)."""
+        return {
+            "glassdist_version": self.version,
+            "method": self.method,
+            "image_shape": list(self.valid.shape),
+            "pitch_mm": self.pitch_mm,
+            "pattern": self.params.pattern,
+            "carrier_period_mm": self.carrier_period_mm,
+            "distance_m": self.distance_m,
+            "mm_per_px": self.mm_per_px,
+            "sigma_mm": self.sigma_mm,
+            "sigma_px": self.sigma_mm / self.mm_per_px,
+            "detrend_degree": self.detrend_degree,
+            "carriers": self.carriers.to_dict(),
+            "homography": None if self.homography_fit is None else self.homography_fit.to_dict(),
+            "valid_fraction": self.valid_fraction,
+            "n_regions": self.n_regions,
+            "sampling_step_px": list(self.sampling_step_px),
+            "statistics": self.statistics(),
+            "parameters": self.params.resolved(),
+            "warnings": list(self.warnings),
+            "conventions": {
+                "displacement": "landing point on the backdrop with glass minus without, mm; [...,0]=x (columns), [...,1]=y (rows)",
+                "phi_eff": "tr(sym grad delta)/L in mD, gradients w.r.t. backdrop mm; converging lens -> phi_eff < 0",
+                "axis_deg": "astigmatism principal axis, degrees from +x towards +y (down)",
+            },
+        }
+
+
+@dataclass(frozen=True)
+class ReferenceModel:
+    """State derived once from a glass-less reference photo and reused for every frame.
+
+    Holds its spectrum-derived carriers, baseband signals and the homography of its
+    (undistorted) grid, so each distorted frame then costs one FFT.
+    """
+
+    shape: tuple[int, int]
+    carriers: F.CarrierPair
+    covariances: tuple[np.ndarray, np.ndarray]
+    grid: F.SamplingGrid
+    baseband: tuple[np.ndarray, np.ndarray]
+    modulation: tuple[np.ndarray, np.ndarray]
+    homography: HomographyFit
+    params: AnalyzerParams = field(repr=False)
+
+
+# --------------------------------------------------------------------------- checks
+
+
+def _check_physical(pitch_mm: float, distance_m: float) -> None:
+    if not np.isfinite(pitch_mm) or pitch_mm <= 0:
+        raise InputError(f"pitch must be a positive length in mm (got {pitch_mm}); pass --pitch-mm with the printed grid pitch")
+    if not np.isfinite(distance_m) or distance_m <= 0:
+        raise InputError(
+            f"distance must be a positive length in m (got {distance_m}); pass --distance-m with the glass-to-grid distance L"
+        )
+
+
+def _check_image(img: np.ndarray, what: str, warn: list[str]) -> np.ndarray:
+    a = np.asarray(img)
+    if a.ndim != 2:
+        raise InputError(f"the {what} must be a 2-D grey image, got an array of shape {a.shape}")
+    a = a.astype(np.float32, copy=False)
+    if not np.all(np.isfinite(a)):
+        raise InputError(f"the {what} contains NaN or infinite values")
+    if min(a.shape) < 32:
+        raise InputError(f"the {what} is only {a.shape[1]}x{a.shape[0]} px; at least 32x32 px are needed")
+    lo, hi = float(a.min()), float(a.max())
+    if hi - lo < 1e-3 or float(a.std()) < 2e-3:
+        raise InputError(f"the {what} is blank (no contrast); check the exposure and that the grid is in view")
+    sat = float(np.mean(a >= 0.999 * max(hi, 1e-12))) if hi >= 0.98 else 0.0
+    dark = float(np.mean(a <= 1e-3))
+    if sat > 0.7 or dark > 0.7:
+        raise InputError(
+            f"the {what} is {'saturated' if sat > 0.7 else 'black'} over {100 * max(sat, dark):.0f}% of its pixels; "
+            "re-expose the photo so the grid lines and the background are both visible"
+        )
+    if sat > 0.02:
+        warn.append(f"{what}: {100 * sat:.1f}% of pixels are saturated; phase near them is less reliable")
+    if hi - lo < 0.08:
+        warn.append(f"{what}: low contrast (intensity range {hi - lo:.3f}); expect a noisier result")
+    return a
+
+
+def _carrier_period_mm(pitch_mm: float, pattern: str) -> float:
+    # Checkerboard fundamentals are the diagonal products of the two square waves: period s*sqrt(2).
+    return pitch_mm * np.sqrt(2.0) if pattern == "checkerboard" else pitch_mm
+
+
+# --------------------------------------------------------------------------- stages
+
+
+def _covariances(carriers: F.CarrierPair, p: AnalyzerParams):
+    kw = dict(sigma_along=p.bandpass_sigma_along, sigma_cross=p.bandpass_sigma_cross, isotropic=p.isotropic_bandpass)
+    return (
+        F.bandpass_covariance(carriers.k1, carriers.k2, **kw),
+        F.bandpass_covariance(carriers.k2, carriers.k1, **kw),
+    )
+
+
+def _demodulation_blur_px2(carriers: F.CarrierPair, covs, p: AnalyzerParams) -> np.ndarray:
+    """Spatial covariance (px^2) of the low-pass Block F applies to each phase map."""
+    out = []
+    for c, cov in zip((carriers.k1, carriers.k2), covs):
+        s3 = p.smoothing_periods * c.period_px
+        out.append(np.linalg.inv(cov) / (4 * np.pi**2) + s3**2 * np.eye(2))
+    return np.array(out)
+
+
+def _basebands(spec: F.Spectrum, carriers: F.CarrierPair, covs, grid: F.SamplingGrid):
+    return tuple(F.baseband(spec, c, cov, grid) for c, cov in zip((carriers.k1, carriers.k2), covs))
+
+
+def _modulation(b: np.ndarray, period_px: float, grid: F.SamplingGrid, p: AnalyzerParams) -> np.ndarray:
+    return np.abs(F.smooth_complex(np.abs(b).astype(complex), p.smoothing_periods * period_px, grid))
+
+
+def _smooth_with_coherence(zs, ks, grid, p: AnalyzerParams):
+    """F3 smoothing of each complex signal and its phase coherence |G*z| / G*|z| in [0, 1]."""
+    out, coh = [], []
+    for z, c in zip(zs, ks):
+        s = p.smoothing_periods * c.period_px
+        zs_ = F.smooth_complex(z, s, grid)
+        a = F.smooth_complex(np.abs(z).astype(complex), s, grid).real
+        out.append(zs_)
+        coh.append(np.abs(zs_) / np.maximum(a, 1e-30))
+    return tuple(out), tuple(coh)
+
+
+def _downsample_mask(mask: np.ndarray, grid: F.SamplingGrid) -> np.ndarray:
+    import cv2
+
+    if grid.is_full:
+        return mask.astype(bool)
+    h, w = grid.shape
+    return cv2.resize(mask.astype(np.float32), (w, h), interpolation=cv2.INTER_AREA) > 0.999
+
+
+def _erode(valid: np.ndarray, margin_px: float, grid: F.SamplingGrid) -> np.ndarray:
+    if margin_px <= 0:
+        return valid
+    padded = np.pad(valid, 1, constant_values=False)
+    dist = ndimage.distance_transform_edt(padded, sampling=grid.step)[1:-1, 1:-1]
+    return dist > margin_px
+
+
+def _quality(zs, coherences, mods, carriers, grid, p: AnalyzerParams, user_mask, warn: list[str]):
+    """Valid region on the sampling grid: modulation, coherence, user mask, border, residues."""
+    valid = np.ones(grid.shape, bool)
+    for m in mods:
+        ref = np.percentile(m, 75)
+        valid &= m > p.modulation_threshold * ref
+    for coh in coherences:
+        valid &= coh > p.coherence_threshold
+    if user_mask is not None:
+        valid &= _downsample_mask(user_mask, grid)
+    period = max(carriers.k1.period_px, carriers.k2.period_px)
+    valid = _erode(valid, p.border_periods * period, grid)
+    bad = np.zeros(grid.shape, bool)
+    for z in zs:
+        bad |= residues(np.angle(z))
+    if bad.any():
+        bad = ndimage.binary_dilation(bad, iterations=1)
+        frac = float((bad & valid).sum()) / max(valid.sum(), 1)
+        if frac > 0.01:
+            warn.append(f"{100 * frac:.1f}% of the region has phase residues (noise, occlusion or too strong distortion) and was excluded")
+    valid &= ~bad
+    min_size = int(p.min_region_fraction * valid.size)
+    labels, n = label_regions(valid, max(min_size, 16))
+    return labels > 0, labels, n
+
+
+def _points_spacing(carriers: F.CarrierPair, grid: F.SamplingGrid) -> int:
+    period = min(carriers.k1.period_px, carriers.k2.period_px)
+    return max(1, int(round(period / min(grid.step))))
+
+
+def _fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParams, warn: list[str]):
+    """I1 + I2 over all regions, aligning each region's free integer grid offset to the largest."""
+    U, V = UV
+    spacing = _points_spacing(carriers, grid)
+    thr = p.ransac_threshold_periods * min(carriers.k1.period_px, carriers.k2.period_px)
+    src, dst = logical_grid_points(U, V, yy, xx, labels == 1, spacing)
+    fit = fit_homography(src, dst, threshold_px=thr, max_trials=p.ransac_max_trials, seed=p.ransac_seed)
+    if n > 1:
+        U = U.copy()
+        V = V.copy()
+        u0, v0 = apply_inverse(fit.matrix, xx, yy)
+        for r in range(2, n + 1):
+            sel = labels == r
+            U[sel] -= np.round(np.median(U[sel] - u0[sel]))
+            V[sel] -= np.round(np.median(V[sel] - v0[sel]))
+        src, dst = logical_grid_points(U, V, yy, xx, labels > 0, spacing)
+        fit = fit_homography(src, dst, threshold_px=thr, max_trials=p.ransac_max_trials, seed=p.ransac_seed)
+    if fit.inlier_fraction < 0.3:
+        warn.append(
+            f"only {100 * fit.inlier_fraction:.0f}% of grid points fit the homography; strong distortion or "
+            "lens distortion may bias the Direct Method's baseline"
+        )
+    return fit, U, V
+
+
+def _polar_rotation(J: np.ndarray) -> np.ndarray:
+    u, _, vt = np.linalg.svd(J)
+    return u @ vt
+
+
+def _upsample(fields: np.ndarray, valid: np.ndarray, grid: F.SamplingGrid, user_mask):
+    """Bilinear upsampling to the image grid, normalised by the valid weight (no NaN bleeding)."""
+    import cv2
+
+    H, W = grid.full_shape
+    v = valid.astype(np.float32)
+    f = np.where(valid[..., None], np.nan_to_num(fields), 0.0).astype(np.float32) * v[..., None]
+    if grid.is_full:
+        up, vu = f, v
+    else:
+        chans = [cv2.resize(np.ascontiguousarray(f[..., i]), (W, H), interpolation=cv2.INTER_LINEAR) for i in range(f.shape[-1])]
+        up = np.stack(chans, axis=-1)
+        vu = cv2.resize(v, (W, H), interpolation=cv2.INTER_LINEAR)
+    valid_full = vu >= 0.5
+    if user_mask is not None:
+        valid_full &= user_mask
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = up / np.maximum(vu, 1e-6)[..., None]
+    out[~valid_full] = np.nan
+    return out.astype(np.float32), valid_full
+
+
+# --------------------------------------------------------------------------- public API
+
+
+def _resolve_params(params, pattern) -> AnalyzerParams:
+    if isinstance(params, AnalyzerParams):
+        return params if pattern is None else params.model_copy(update={"pattern": pattern})
+    return load_params(params, pattern=pattern)
+
+
+def prepare_reference(reference: np.ndarray, *, params: AnalyzerParams | dict | None = None, pattern: str | None = None) -> ReferenceModel:
+    """Derive, once, everything the Comparative Method needs from a glass-less photo.
+
+    Parameters
+    ----------
+    reference : ndarray (H, W)
+        Glass-less photograph of the grid, grey in [0, 1].
+    params : AnalyzerParams or dict, optional
+    pattern : {'lines', 'checkerboard'}, optional
+        Overrides ``params.pattern``.
+    """
+    p = _resolve_params(params, pattern)
+    warn: list[str] = []
+    ref = _check_image(reference, "reference", warn)
+    spec = F.compute_spectrum(ref)
+    carriers = F.find_carriers(spec, min_period_px=p.min_period_px)
+    F._check_size(ref.shape, max(carriers.k1.period_px, carriers.k2.period_px))
+    covs = _covariances(carriers, p)
+    grid = F.sampling_grid(ref.shape, list(covs), p.decimation)
+    bb = _basebands(spec, carriers, covs, grid)
+    mods = tuple(_modulation(b, c.period_px, grid, p) for b, c in zip(bb, (carriers.k1, carriers.k2)))
+    # Homography of the reference's own grid: the pixel -> backdrop Jacobian (A1, projective).
+    zs, cohs = _smooth_with_coherence(bb, (carriers.k1, carriers.k2), grid, p)
+    valid, labels, n = _quality(zs, cohs, mods, carriers, grid, p, None, [])
+    if n == 0:
+        raise InputError("the reference photo shows no usable grid region; check it is in focus and well exposed")
+    yy, xx = grid.coords()
+    psi = [unwrap(np.angle(z), valid, labels, n, seed=p.ransac_seed) for z in zs]
+    U = carriers.k1.fx * xx + carriers.k1.fy * yy + psi[0] / (2 * np.pi)
+    V = carriers.k2.fx * xx + carriers.k2.fy * yy + psi[1] / (2 * np.pi)
+    fit, _, _ = _fit_grid_homography((U, V), yy, xx, labels, n, carriers, grid, p, [])
+    return ReferenceModel(ref.shape, carriers, covs, grid, bb, mods, fit, p)
+
+
+def analyze(
+    image: np.ndarray,
+    *,
+    pitch_mm: float,
+    distance_m: float,
+    reference: np.ndarray | ReferenceModel | None = None,
+    params: AnalyzerParams | dict | None = None,
+    mask: np.ndarray | None = None,
+    pattern: str | None = None,
+) -> AnalysisResult:
+    """Measure the distortion field of a photo of a grid seen through glass.
+
+    Parameters
+    ----------
+    image : ndarray (H, W)
+        Grey photo in [0, 1] (see :func:`glassdist.io.read_image`), indexed (row, col).
+    pitch_mm : float
+        Printed grid pitch, mm (line spacing; square size for a checkerboard).
+    distance_m : float
+        Glass-to-backdrop distance L, m.
+    reference : ndarray (H, W) or ReferenceModel, optional
+        Glass-less photo: Comparative Method. None: Direct Method.
+    params : AnalyzerParams or dict, optional
+        Algorithm parameters (dict = overrides of the shipped defaults).
+    mask : ndarray of bool (H, W), optional
+        User region; False pixels are excluded.
+    pattern : {'lines', 'checkerboard'}, optional
+        Overrides ``params.pattern``.
+
+    Returns
+    -------
+    AnalysisResult
+
+    Raises
+    ------
+    InputError
+        Bad physical inputs or images (blank, saturated, no grid, too small, size mismatch).
+    AnalysisError
+        No reliable region could be analysed.
+
+    Notes
+    -----
+    Carrier *i* of the distorted photo has phase
+    ``Phi_i(r) = 2 pi (e_i . X(r)) / p_c``, X(r) the backdrop point seen at r. The
+    heterodyne against the reference (real or synthesised) leaves
+    ``phi_i = 2 pi (e_i . delta) / p_c`` so that, exactly,
+
+    .. math:: \\delta_i = \\frac{p_c}{2\\pi}\\,\\varphi_i .
+
+    References
+    ----------
+    Paper §2.2; Takeda et al. (1982); Herraez et al. (2002); Fischler & Bolles (1981).
+    """
+    _check_physical(float(pitch_mm), float(distance_m))
+    warn: list[str] = []
+    if isinstance(reference, ReferenceModel):
+        refm = reference
+        p = refm.params if params is None and pattern is None else _resolve_params(params, pattern)
+    elif reference is not None:
+        p = _resolve_params(params, pattern)
+        refm = None
+    else:
+        p = _resolve_params(params, pattern)
+        refm = None
+    img = _check_image(image, "image", warn)
+    if mask is not None:
+        mask = np.asarray(mask, bool)
+        if mask.shape != img.shape:
+            raise InputError(f"the mask is {mask.shape[1]}x{mask.shape[0]} px but the image is {img.shape[1]}x{img.shape[0]} px")
+        if not mask.any():
+            raise InputError("the mask excludes every pixel; non-zero mask pixels mark the region to analyse")
+    if reference is not None and refm is None:
+        ref_arr = np.asarray(reference)
+        if ref_arr.shape != img.shape:
+            raise InputError(
+                f"the reference is {ref_arr.shape[1] if ref_arr.ndim > 1 else '?'}x{ref_arr.shape[0]} px but the image is "
+                f"{img.shape[1]}x{img.shape[0]} px; both photos must come from the same camera position and size"
+            )
+        refm = prepare_reference(ref_arr, params=p)
+    if refm is not None and refm.shape != img.shape:
+        raise InputError(f"the reference is {refm.shape[1]}x{refm.shape[0]} px but the image is {img.shape[1]}x{img.shape[0]} px")
+    p_c = _carrier_period_mm(float(pitch_mm), p.pattern)
+
+    spec = F.compute_spectrum(img)
+    if refm is None:
+        method = "direct"
+        carriers = F.find_carriers(spec, min_period_px=p.min_period_px)
+        F._check_size(img.shape, max(carriers.k1.period_px, carriers.k2.period_px))
+        covs = _covariances(carriers, p)
+        grid = F.sampling_grid(img.shape, list(covs), p.decimation)
+    else:
+        method = "comparative"
+        carriers, covs, grid = refm.carriers, refm.covariances, refm.grid
+        own = F.find_carriers(spec, min_period_px=p.min_period_px)  # raises if the photo shows no grid
+        del own
+    ks = (carriers.k1, carriers.k2)
+    bb = _basebands(spec, carriers, covs, grid)
+    del spec
+    mods = [_modulation(b, c.period_px, grid, p) for b, c in zip(bb, ks)]
+    if refm is not None:
+        zs = tuple(b * np.conj(r) for b, r in zip(bb, refm.baseband))
+        mods += list(refm.modulation)
+    else:
+        zs = bb
+    zs, cohs = _smooth_with_coherence(zs, ks, grid, p)  # F3
+    valid, labels, n = _quality(zs, cohs, mods, carriers, grid, p, mask, warn)
+    if n == 0:
+        raise AnalysisError(
+            "no region of the photo carries a reliable grid signal; check focus, exposure and that the grid fills the view"
+        )
+    psi = [unwrap(np.angle(z), valid, labels, n, seed=p.ransac_seed) for z in zs]  # F4
+    yy, xx = grid.coords()
+
+    fit = None
+    if method == "direct":
+        U = carriers.k1.fx * xx + carriers.k1.fy * yy + psi[0] / (2 * np.pi)
+        V = carriers.k2.fx * xx + carriers.k2.fy * yy + psi[1] / (2 * np.pi)
+        fit, U, V = _fit_grid_homography((U, V), yy, xx, labels, n, carriers, grid, p, warn)  # Block I
+        u0, v0 = apply_inverse(fit.matrix, xx, yy)
+        phases = np.stack([U - u0, V - v0], axis=-1) * (2 * np.pi)  # pass 2: against the warped carrier
+        H_jac = fit.matrix
+    else:
+        phases = np.stack(psi, axis=-1)
+        H_jac = refm.homography.matrix
+    phases[~valid] = np.nan
+
+    blur = _demodulation_blur_px2(carriers, covs, p) if p.compensate_demodulation_blur else None
+    mm_per_px = p_c * float(np.sqrt(carriers.k1.norm * carriers.k2.norm))
+    sigma_mm = p.sigma_mm if p.sigma_mm is not None else p.sigma_periods * p_c
+    if blur is not None:
+        s_px = sigma_mm / mm_per_px
+        worst = max(float(np.max(np.linalg.eigvalsh(b))) for b in blur)
+        if worst > s_px**2:
+            warn.append(
+                f"sigma_mm = {sigma_mm:.3g} mm ({s_px:.1f} px) is finer than the demodulation resolution "
+                f"({np.sqrt(worst):.1f} px); the effective smoothing is coarser than requested"
+            )
+    if p.a1_mode == "projective":
+        delta = phases * (p_c / (2 * np.pi))  # grid-frame components, exact
+        J = p_c * inverse_jacobian(H_jac, xx, yy)
+        hc, wc = grid.shape
+        R = _polar_rotation(J[hc // 2, wc // 2])
+        ch = evaluate_displacement(
+            delta, valid, distance_m=distance_m, mm_per_px=mm_per_px, detrend_degree=p.detrend_degree,
+            sigma_mm=sigma_mm, jacobian=J, labels=labels, step_px=grid.step, component_blur_px2=blur, frame_rotation=R,
+        )
+        delta_cam = delta @ R
+    else:
+        M = np.array([ks[0].f / ks[0].norm, ks[1].f / ks[1].norm]).T  # columns: unit carriers
+        proj_px = phases / (2 * np.pi * np.array([ks[0].norm, ks[1].norm]))
+        d_px = proj_px @ np.linalg.inv(M)  # (M^T)^{-1} p in row-vector form
+        delta_cam = d_px * mm_per_px
+        iso_blur = None if blur is None else np.repeat((np.trace(blur, axis1=1, axis2=2).mean() / 2 * np.eye(2))[None], 2, 0)
+        ch = evaluate_displacement(
+            delta_cam, valid, distance_m=distance_m, mm_per_px=mm_per_px, detrend_degree=p.detrend_degree,
+            sigma_mm=sigma_mm, labels=labels, step_px=grid.step, component_blur_px2=iso_blur,
+        )
+
+    cover = float(valid.mean())
+    if cover < 0.5:
+        warn.append(f"only {100 * cover:.0f}% of the image could be analysed (occlusion, low contrast or blur)")
+    stack = np.concatenate(
+        [delta_cam, ch.displacement_detrended_mm, np.stack([ch.phi_eff_mD, ch.phi_shear_mD, ch.phi_total_mD, ch.axis_deg], -1)],
+        axis=-1,
+    )
+    valid_c = valid & np.all(np.isfinite(stack), axis=-1)
+    full, valid_full = _upsample(stack, valid_c, grid, mask)
+    for w in warn:
+        log.warning(w)
+    return AnalysisResult(
+        method=method,
+        displacement_mm=full[..., 0:2],
+        displacement_detrended_mm=full[..., 2:4],
+        phi_eff_mD=full[..., 4],
+        phi_shear_mD=full[..., 5],
+        phi_total_mD=full[..., 6],
+        axis_deg=full[..., 7],
+        valid=valid_full,
+        mm_per_px=mm_per_px,
+        sigma_mm=float(sigma_mm),
+        detrend_degree=p.detrend_degree,
+        pitch_mm=float(pitch_mm),
+        distance_m=float(distance_m),
+        carrier_period_mm=p_c,
+        carriers=carriers,
+        homography=None if fit is None else fit.matrix,
+        homography_fit=fit,
+        params=p,
+        warnings=tuple(warn),
+        sampling_step_px=grid.step,
+        n_regions=n,
+    )
