@@ -1,0 +1,59 @@
+"""``glassdist batch``: analyse many panes from a manifest CSV or a folder (see :mod:`glassdist.report.batch`)."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+from .batch import pane_defaults, panes_from_folder, read_manifest, run_batch
+
+logger = logging.getLogger(__name__)
+
+_HELP = """Analyse many panes: SOURCE is a manifest CSV (one row per pane: image, reference, pitch_mm,
+distance_m, ... ; relative paths from the manifest's folder) or a folder of photographs sharing the
+options below. Each pane goes to OUT/panes/<id>/; OUT/index.csv and OUT/index.html list every pane.
+Run the same command again to resume: finished panes are kept, failed and missing ones are (re)done.
+Exit status: 0 all panes analysed and passed (or no spec), 3 all analysed but some FAILED their
+specification, 4 some panes could not be analysed (see OUT/failed/), 2 bad input."""
+
+
+def register(subparsers):
+    """Add the ``batch`` sub-command."""
+    p = subparsers.add_parser("batch", help="analyse many panes (manifest CSV or folder), resumable",
+                              description=_HELP)
+    p.add_argument("source", metavar="MANIFEST.csv|FOLDER", help="manifest CSV or folder of images")
+    p.add_argument("--out", required=True, metavar="DIR", help="batch output folder (new, empty, or to resume)")
+    p.add_argument("--spec", metavar="SPEC.json", help="acceptance specification for panes without a 'spec' column")
+    p.add_argument("--report", action="store_true", help="write an HTML report per pane")
+    p.add_argument("--export", action="store_true", help="write NPZ and 32-bit TIFF fields per pane")
+    p.add_argument("--pitch-mm", type=float, help="grid pitch, mm (default for panes without one)")
+    p.add_argument("--distance-m", type=float, help="glass-to-grid distance L, m (default for panes without one)")
+    p.add_argument("--reference", metavar="REF", help="glass-less reference photo (Comparative method) by default")
+    p.add_argument("--pattern", choices=["lines", "checkerboard"], help="grid pattern by default")
+    p.add_argument("--params", metavar="PARAMS.json", help="analyzer parameters file by default")
+    p.add_argument("--sigma-mm", type=float, help="smoothing scale, mm, by default")
+    p.add_argument("--detrend-degree", type=int, help="detrend polynomial degree by default")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+    return p
+
+
+def run(args):
+    """Run the batch; returns the exit status (see :mod:`glassdist.report.batch`)."""
+    from ..errors import InputError
+
+    defaults = pane_defaults(
+        pitch_mm=args.pitch_mm, distance_m=args.distance_m, reference=args.reference, pattern=args.pattern,
+        params=args.params, spec=args.spec, sigma_mm=args.sigma_mm, detrend_degree=args.detrend_degree,
+    )
+    source = Path(args.source)
+    if source.is_dir():
+        panes = panes_from_folder(source, defaults)
+    elif source.suffix.lower() == ".csv":
+        panes = read_manifest(source, defaults)
+    else:
+        raise InputError(f"'{source}' is neither a folder nor a .csv manifest")
+    code = run_batch(panes, args.out, report=args.report, export=args.export, progress=not args.no_progress)
+    out = Path(args.out)
+    print(f"index: {out / 'index.html'} ({out / 'index.csv'})")
+    return code

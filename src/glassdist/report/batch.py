@@ -1,0 +1,521 @@
+"""Batch analysis of many panes: manifest, resumable execution, summary index.
+
+A batch reads panes from a manifest CSV (one row per pane, each with its own
+pitch, distance and reference) or from a folder of photographs sharing the same
+settings, runs ``glassdist analyze`` on each one in its own process, and writes::
+
+    OUT/.glassdist-batch          marks the folder as a batch folder
+    OUT/panes/<id>/               the pane's analyze outputs + pane.json (complete panes only)
+    OUT/failed/<id>.json, .log    panes that could not be analysed (error line, full log)
+    OUT/index.csv, OUT/index.html summary table of every pane (done, failed or pending)
+
+Resuming
+--------
+Each pane is analysed into ``OUT/panes/.tmp-<id>-<pid>/`` and renamed to
+``OUT/panes/<id>/`` only once complete, so an interrupted batch (killed, power
+cut) never leaves a half-written pane. Running the same command again skips every
+pane whose folder exists and whose fingerprint (settings, SHA-256 of the input
+files, output options, glassdist version) is unchanged; failed panes are retried.
+The index is rewritten (atomically) after every pane.
+
+Exit codes of ``glassdist batch``
+---------------------------------
+``0`` every pane analysed and none failed its specification; ``3`` every pane
+analysed, at least one specification FAIL; ``4`` at least one pane could not be
+analysed (the others were; see ``OUT/failed/``); ``2`` bad input (manifest,
+options, output folder).
+
+Manifest columns
+----------------
+``image`` (required), ``id``, ``reference``, ``pitch_mm``, ``distance_m``,
+``pattern``, ``params``, ``mask``, ``spec``, ``sigma_mm``, ``detrend_degree``.
+Empty cells take the value of the matching command-line option. Relative paths
+are relative to the manifest's folder. Rows whose first cell starts with ``#``
+are comments.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+import logging
+import os
+import re
+import shutil
+import subprocess
+import sys
+import time
+from dataclasses import asdict, dataclass, fields
+from datetime import datetime, timezone
+from html import escape
+from pathlib import Path
+
+from ..errors import InputError
+from .exports import atomic_write_text
+from .workflow import EXIT_SPEC_FAIL
+
+__all__ = [
+    "EXIT_PANE_ERRORS",
+    "Pane",
+    "PaneOutcome",
+    "read_manifest",
+    "panes_from_folder",
+    "run_batch",
+    "subprocess_runner",
+    "write_index",
+    "pane_defaults",
+]
+
+logger = logging.getLogger(__name__)
+
+#: exit status of ``glassdist batch`` when at least one pane could not be analysed
+EXIT_PANE_ERRORS = 4
+
+_MARKER = ".glassdist-batch"
+_IMAGE_SUFFIXES = {".png", ".tif", ".tiff", ".bmp", ".jpg", ".jpeg"}
+_ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")
+
+
+@dataclass(frozen=True)
+class Pane:
+    """One pane of a batch: its photograph and analysis settings (lengths mm, L in m)."""
+
+    id: str
+    image: Path
+    pitch_mm: float
+    distance_m: float
+    reference: Path | None = None
+    pattern: str | None = None
+    params: Path | None = None
+    mask: Path | None = None
+    spec: Path | None = None
+    sigma_mm: float | None = None
+    detrend_degree: int | None = None
+
+    def analyze_args(self, out_dir, *, report=False, export=False):
+        """Arguments of ``glassdist analyze`` for this pane, writing into ``out_dir``."""
+        args = ["analyze", str(self.image), "--pitch-mm", repr(self.pitch_mm), "--distance-m", repr(self.distance_m)]
+        for flag, value in (("--reference", self.reference), ("--pattern", self.pattern), ("--params", self.params),
+                            ("--mask", self.mask), ("--spec", self.spec), ("--sigma-mm", self.sigma_mm),
+                            ("--detrend-degree", self.detrend_degree)):
+            if value is not None:
+                args += [flag, str(value)]
+        if report:
+            args.append("--report")
+        if export:
+            args.append("--export")
+        return args + ["--out", str(out_dir)]
+
+    def fingerprint(self, *, report=False, export=False):
+        """SHA-256 of the settings, the input files' bytes, the output options and the version."""
+        from .. import __version__
+
+        h = hashlib.sha256()
+        h.update(json.dumps({k: str(v) for k, v in asdict(self).items()}, sort_keys=True).encode())
+        h.update(f"report={report};export={export};version={__version__}".encode())
+        for path in (self.image, self.reference, self.mask, self.spec, self.params):
+            if path is not None and Path(path).is_file():
+                h.update(Path(path).read_bytes())
+        return h.hexdigest()
+
+
+@dataclass(frozen=True)
+class PaneOutcome:
+    """What running one pane gave: ``exit_code`` of analyze (0, 3 = spec FAIL, else error), its log."""
+
+    exit_code: int
+    log: str = ""
+    error: str = ""
+
+
+# ---------------------------------------------------------------- reading panes
+
+_FLOAT_COLS = ("pitch_mm", "distance_m", "sigma_mm")
+_PATH_COLS = ("image", "reference", "params", "mask", "spec")
+_COLUMNS = {f.name for f in fields(Pane)}
+
+
+def _parse_cell(name, text, where):
+    if name in _FLOAT_COLS:
+        try:
+            value = float(text)
+        except ValueError:
+            raise InputError(f"{where}: '{name}' must be a number, got '{text}'") from None
+        if not value > 0:
+            raise InputError(f"{where}: '{name}' must be positive, got {text}")
+        return value
+    if name == "detrend_degree":
+        try:
+            return int(text)
+        except ValueError:
+            raise InputError(f"{where}: 'detrend_degree' must be an integer, got '{text}'") from None
+    return text
+
+
+def _make_pane(values, defaults, base, where):
+    merged = {k: v for k, v in (defaults or {}).items() if v is not None}
+    merged.update({k: v for k, v in values.items() if v is not None})
+    if "image" not in merged:
+        raise InputError(f"{where}: no 'image' given")
+    for name in ("pitch_mm", "distance_m"):
+        if name not in merged:
+            opt = "--" + name.replace("_", "-")
+            raise InputError(f"{where}: no '{name}'; add a '{name}' column or give {opt} for every pane")
+    for name in _PATH_COLS:
+        if merged.get(name) is not None:
+            p = Path(merged[name]).expanduser()
+            merged[name] = p if p.is_absolute() else (base / p)
+    merged.setdefault("id", Path(merged["image"]).stem)
+    if not _ID_RE.match(merged["id"]):
+        raise InputError(f"{where}: pane id '{merged['id']}' must be 1-100 letters, digits, '.', '_' or '-'")
+    return Pane(**merged)
+
+
+def read_manifest(path, defaults=None):
+    """Read a batch manifest CSV.
+
+    Parameters
+    ----------
+    path : path
+        CSV file with a header row; columns as in the module docstring.
+    defaults : dict, optional
+        Values for empty cells or missing columns (from the command line), keyed
+        like :class:`Pane`'s fields.
+
+    Returns
+    -------
+    list of Pane
+
+    Raises
+    ------
+    InputError
+        Unknown column, unparsable or missing value, duplicate pane id.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"manifest '{path}' does not exist; give a CSV file or a folder of images")
+    with path.open(newline="", encoding="utf-8-sig") as fh:
+        reader = csv.DictReader(fh)
+        header = [h.strip() for h in (reader.fieldnames or [])]
+        unknown = sorted(set(header) - _COLUMNS)
+        if unknown:
+            raise InputError(f"manifest '{path}': unknown column(s) {', '.join(unknown)}; "
+                             f"valid columns are {', '.join(sorted(_COLUMNS))}")
+        if "image" not in header:
+            raise InputError(f"manifest '{path}' has no 'image' column (first row must be the header)")
+        panes = []
+        for lineno, row in enumerate(reader, start=2):
+            cells = {(k or "").strip(): (v or "").strip() for k, v in row.items() if k is not None}
+            if not any(cells.values()) or next(iter(cells.values()), "").startswith("#"):
+                continue
+            where = f"manifest '{path.name}' line {lineno}"
+            values = {k: _parse_cell(k, v, where) for k, v in cells.items() if v}
+            panes.append(_make_pane(values, defaults, path.parent, where))
+    return _check_unique(panes, f"manifest '{path}'")
+
+
+def panes_from_folder(folder, defaults=None):
+    """Every image of a folder as a pane (sorted by name), sharing ``defaults``.
+
+    The reference image given in ``defaults`` is not itself a pane.
+    """
+    folder = Path(folder)
+    defaults = dict(defaults or {})
+    ref = Path(defaults["reference"]).resolve() if defaults.get("reference") else None
+    images = sorted(p for p in folder.iterdir() if p.suffix.lower() in _IMAGE_SUFFIXES and p.is_file()
+                    and p.resolve() != ref)
+    if not images:
+        raise InputError(f"folder '{folder}' holds no PNG/TIFF/BMP/JPEG image to analyse")
+    panes = [_make_pane({"image": p}, defaults, Path.cwd(), f"image '{p.name}'") for p in images]
+    return _check_unique(panes, f"folder '{folder}'")
+
+
+def _check_unique(panes, where):
+    seen = set()
+    for p in panes:
+        if p.id in seen:
+            raise InputError(f"{where}: pane id '{p.id}' appears twice; give each pane a distinct 'id'")
+        seen.add(p.id)
+    if not panes:
+        raise InputError(f"{where} lists no pane")
+    return panes
+
+
+# ---------------------------------------------------------------- running panes
+
+def subprocess_runner(pane, out_dir, *, report=False, export=False):
+    """Run ``glassdist analyze`` for ``pane`` in a child process writing into ``out_dir``.
+
+    Returns
+    -------
+    PaneOutcome
+        Exit code, combined output, and the error line (last line of stderr) on failure.
+    """
+    import glassdist
+
+    env = dict(os.environ)
+    src = str(Path(glassdist.__file__).resolve().parent.parent)
+    env["PYTHONPATH"] = src + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    cmd = [sys.executable, "-m", "glassdist", *pane.analyze_args(out_dir, report=report, export=export)]
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    log = f"$ {' '.join(cmd)}\n{proc.stdout}{proc.stderr}"
+    error = ""
+    if proc.returncode not in (0, EXIT_SPEC_FAIL):
+        lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+        error = lines[-1] if lines else f"analyze exited with status {proc.returncode}"
+    return PaneOutcome(proc.returncode, log, error)
+
+
+def _read_json(path):
+    try:
+        return json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError):
+        return None
+
+
+def _prepare_out(out):
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"output path '{out}' is an existing file; give --out a folder path (new or existing)")
+    if out.is_dir() and any(out.iterdir()) and not (out / _MARKER).exists():
+        raise InputError(f"output folder '{out}' is not empty and was not made by 'glassdist batch'; "
+                         "choose a new or empty folder so that no file of yours is replaced")
+    try:
+        (out / "panes").mkdir(parents=True, exist_ok=True)
+        (out / "failed").mkdir(exist_ok=True)
+        (out / _MARKER).touch()
+    except OSError as exc:
+        raise InputError(f"cannot create output folder '{out}': {exc.strerror}; choose a writable location") from None
+    return out
+
+
+def _lock(out):
+    """Hold an exclusive lock on the batch folder (returns the open file), or raise InputError."""
+    fh = open(out / _MARKER, "a+")  # noqa: SIM115 - kept open for the batch's duration
+    try:
+        import fcntl
+
+        fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except ImportError:  # no advisory locks on this platform
+        pass
+    except OSError:
+        fh.close()
+        raise InputError(f"another 'glassdist batch' is writing to '{out}'; wait for it or choose another --out")
+    return fh
+
+
+def _run_one(pane, out, runner, report, export):
+    final = out / "panes" / pane.id
+    tmp = out / "panes" / f".tmp-{pane.id}-{os.getpid()}"
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir()
+    t0 = time.monotonic()
+    try:
+        outcome = runner(pane, tmp, report=report, export=export)
+    except (KeyboardInterrupt, SystemExit):
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    except Exception as exc:  # noqa: BLE001 - a pane that breaks is recorded and the batch goes on
+        outcome = PaneOutcome(1, repr(exc), f"{type(exc).__name__}: {exc}")
+    seconds = time.monotonic() - t0
+    failed_json, failed_log = out / "failed" / f"{pane.id}.json", out / "failed" / f"{pane.id}.log"
+    if outcome.exit_code not in (0, EXIT_SPEC_FAIL):
+        shutil.rmtree(tmp, ignore_errors=True)
+        atomic_write_text(failed_log, outcome.log)
+        record = {"id": pane.id, "status": "error", "exit_code": outcome.exit_code, "error": outcome.error,
+                  "image": str(pane.image), "seconds": round(seconds, 2),
+                  "finished_utc": datetime.now(timezone.utc).isoformat(timespec="seconds")}
+        atomic_write_text(failed_json, json.dumps(record, indent=2) + "\n")
+        return record
+    summary = _read_json(tmp / "summary.json") or {}
+    verdict = (summary.get("verdict") or {}).get("result")
+    record = {
+        "id": pane.id, "status": "done", "verdict": verdict, "exit_code": outcome.exit_code,
+        "fingerprint": pane.fingerprint(report=report, export=export), "seconds": round(seconds, 2),
+        "finished_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "pane": {k: (str(v) if v is not None else None) for k, v in asdict(pane).items()},
+    }
+    (tmp / "analyze.log").write_text(outcome.log, encoding="utf-8")
+    (tmp / "pane.json").write_text(json.dumps(record, indent=2) + "\n", encoding="utf-8")
+    if final.exists():  # stale result of other settings: swap it out, then delete it
+        old = out / "panes" / f".tmp-old-{pane.id}-{os.getpid()}"
+        os.rename(final, old)
+        os.rename(tmp, final)
+        shutil.rmtree(old, ignore_errors=True)
+    else:
+        os.rename(tmp, final)
+    failed_json.unlink(missing_ok=True)
+    failed_log.unlink(missing_ok=True)
+    return record
+
+
+def _done_record(pane, out, report, export):
+    record = _read_json(out / "panes" / pane.id / "pane.json")
+    if record and record.get("fingerprint") == pane.fingerprint(report=report, export=export):
+        return record
+    return None
+
+
+def run_batch(panes, out, *, report=False, export=False, runner=None, progress=True, echo=print):
+    """Analyse every pane not already done, then write the index.
+
+    Parameters
+    ----------
+    panes : list of Pane
+    out : path
+        Batch output folder (new, empty, or a previous batch's folder to resume).
+    report, export : bool
+        Passed to ``glassdist analyze`` as ``--report`` / ``--export``.
+    runner : callable, optional
+        ``runner(pane, out_dir, report=, export=) -> PaneOutcome``; default
+        :func:`subprocess_runner`.
+    progress : bool
+        Show a progress bar (on stderr).
+    echo : callable
+        Receives one line per pane.
+
+    Returns
+    -------
+    int
+        The batch exit code (0, :data:`~glassdist.report.workflow.EXIT_SPEC_FAIL` or
+        :data:`EXIT_PANE_ERRORS`).
+    """
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    runner = runner or subprocess_runner
+    out = _prepare_out(out)
+    lock = _lock(out)
+    records = {}
+    try:
+        for stale in (out / "panes").glob(".tmp-*"):  # left by an interrupted run
+            shutil.rmtree(stale, ignore_errors=True)
+        todo = []
+        for pane in panes:
+            rec = _done_record(pane, out, report, export)
+            if rec is not None:
+                records[pane.id] = rec
+            else:
+                todo.append(pane)
+        if records:
+            echo(f"resuming: {len(records)} pane(s) already done, {len(todo)} to analyse")
+        write_index(panes, out)
+        columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
+        with Progress(*columns, console=Console(stderr=True), disable=not progress, transient=True) as bar:
+            task = bar.add_task("batch", total=len(panes), completed=len(records))
+            for pane in todo:
+                bar.update(task, description=f"analysing {pane.id}")
+                rec = _run_one(pane, out, runner, report, export)
+                records[pane.id] = rec
+                label = rec.get("verdict") or ("analysed" if rec["status"] == "done" else "ERROR")
+                tail = f": {rec['error']}" if rec["status"] == "error" else ""
+                echo(f"[{len(records)}/{len(panes)}] {pane.id}  {label}  ({rec['seconds']:.1f} s){tail}")
+                write_index(panes, out)
+                bar.advance(task)
+    finally:
+        lock.close()
+    n_err = sum(r["status"] == "error" for r in records.values())
+    verdicts = [r.get("verdict") for r in records.values() if r["status"] == "done"]
+    echo(f"{len(panes)} panes: {len(verdicts)} analysed ({verdicts.count('PASS')} PASS, {verdicts.count('FAIL')} FAIL, "
+         f"{verdicts.count(None)} without specification), {n_err} could not be analysed")
+    if n_err:
+        return EXIT_PANE_ERRORS
+    if "FAIL" in verdicts:
+        return EXIT_SPEC_FAIL
+    return 0
+
+
+# ---------------------------------------------------------------- the index
+
+_INDEX_STATS = (("phi_eff", "mean_abs"), ("phi_eff", "p95_abs"), ("phi_eff", "max_abs"),
+                ("phi_shear", "mean_abs"), ("phi_shear", "p95_abs"), ("phi_shear", "max_abs"))
+
+
+def _index_rows(panes, out):
+    rows = []
+    for pane in panes:
+        row = {"id": pane.id, "status": "pending", "verdict": "", "method": "", "image": str(pane.image),
+               "reference": str(pane.reference or ""), "pitch_mm": pane.pitch_mm, "distance_m": pane.distance_m}
+        row.update({f"{c}_{s}_mD": "" for c, s in _INDEX_STATS})
+        row.update({"valid_percent": "", "seconds": "", "report": "", "error": ""})
+        done = _read_json(out / "panes" / pane.id / "pane.json")
+        failed = _read_json(out / "failed" / f"{pane.id}.json")
+        if done:
+            summary = _read_json(out / "panes" / pane.id / "summary.json") or {}
+            a4 = summary.get("a4") or {}
+            stats = a4.get("statistics") or {}
+            row.update(status="done", verdict=done.get("verdict") or "", method=summary.get("method", ""),
+                       seconds=done.get("seconds", ""), valid_percent=_round(a4.get("valid_percent")))
+            row.update({f"{c}_{s}_mD": _round(stats.get(c, {}).get(s)) for c, s in _INDEX_STATS})
+            if (out / "panes" / pane.id / "report.html").is_file():
+                row["report"] = f"panes/{pane.id}/report.html"
+        elif failed:
+            row.update(status="error", error=failed.get("error", ""), seconds=failed.get("seconds", ""))
+        rows.append(row)
+    return rows
+
+
+def _round(v):
+    return "" if v is None else f"{float(v):.4g}"
+
+
+def write_index(panes, out):
+    """Write ``OUT/index.csv`` and ``OUT/index.html`` listing every pane with its status and statistics."""
+    out = Path(out)
+    rows = _index_rows(panes, out)
+    import io
+
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    atomic_write_text(out / "index.csv", buf.getvalue())
+    atomic_write_text(out / "index.html", _index_html(rows, out))
+    return out / "index.csv", out / "index.html"
+
+
+def _index_html(rows, out):
+    from .. import __version__
+
+    counts = {s: sum(r["status"] == s for r in rows) for s in ("done", "error", "pending")}
+    n_fail = sum(r["verdict"] == "FAIL" for r in rows)
+    head = ["pane", "status", "verdict", "method"] + [f"{s.replace('_abs', '')} |{c}| (mD)" for c, s in _INDEX_STATS]
+    head += ["analysed %", "s", "heatmap"]
+    body = ""
+    for r in rows:
+        pid = escape(r["id"])
+        name = f'<a href="{escape(r["report"])}">{pid}</a>' if r["report"] else pid
+        cls = "FAIL" if r["verdict"] == "FAIL" or r["status"] == "error" else r["verdict"] or r["status"]
+        status = escape(r["status"]) + (f"<br><small>{escape(r['error'])}</small>" if r["error"] else "")
+        thumb = ""
+        if r["status"] == "done" and (out / "panes" / r["id"] / "phi_eff.png").is_file():
+            thumb = f'<a href="panes/{pid}/phi_eff.png"><img src="panes/{pid}/phi_eff.png" width="120" alt="phi_eff"></a>'
+        cells = [name, status, escape(r["verdict"]), escape(r["method"])]
+        cells += [escape(str(r[f"{c}_{s}_mD"])) for c, s in _INDEX_STATS]
+        cells += [escape(str(r["valid_percent"])), escape(str(r["seconds"])), thumb]
+        body += f'<tr class="{escape(cls)}" id="pane-{pid}">' + "".join(f"<td>{c}</td>" for c in cells) + "</tr>\n"
+    stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M:%S")
+    return f"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>glassdist batch index</title><style>
+body{{font-family:system-ui,Arial,sans-serif;margin:1.5em}}table{{border-collapse:collapse}}
+td,th{{border:1px solid #ccc;padding:.2em .5em;text-align:left;vertical-align:middle}}th{{background:#f2f2f2}}
+tr.PASS td{{background:#f3fbf4}}tr.FAIL td{{background:#fff0ef}}tr.pending td{{color:#888}}
+</style></head><body>
+<h1>Batch index</h1>
+<p>{len(rows)} panes: {counts['done']} analysed ({n_fail} failed their specification), {counts['error']} could not
+be analysed, {counts['pending']} pending. Updated {stamp} UTC by glassdist {escape(__version__)}.
+Machine-readable copy: <a href="index.csv">index.csv</a>.</p>
+<table><tr>{''.join(f'<th>{escape(h)}</th>' for h in head)}</tr>
+{body}</table></body></html>
+"""
+
+
+def pane_defaults(**values):
+    """Command-line defaults for :func:`read_manifest` / :func:`panes_from_folder`.
+
+    ``None`` values are unset; paths are made absolute (relative to the current
+    folder, where the user typed them), unlike manifest cells.
+    """
+    return {k: (Path(v).expanduser().absolute() if k in _PATH_COLS and v is not None else v)
+            for k, v in values.items()}

@@ -1,0 +1,204 @@
+"""Batch: manifest reading, resume after an interruption, failing panes, exit codes, index."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+
+import pytest
+
+from glassdist.errors import InputError
+from glassdist.report.batch import (
+    EXIT_PANE_ERRORS,
+    Pane,
+    PaneOutcome,
+    pane_defaults,
+    panes_from_folder,
+    read_manifest,
+    run_batch,
+)
+
+
+class FakeRunner:
+    """Stands in for ``glassdist analyze``: writes a summary.json; can fail or be interrupted on chosen panes."""
+
+    def __init__(self, *, interrupt=(), errors=(), verdicts=None):
+        self.calls, self.interrupt, self.errors, self.verdicts = [], set(interrupt), set(errors), verdicts or {}
+
+    def __call__(self, pane, out_dir, *, report=False, export=False):
+        self.calls.append(pane.id)
+        (out_dir / "result.npz").write_bytes(b"partial")
+        if pane.id in self.interrupt:
+            raise KeyboardInterrupt  # the batch is killed while this pane is half written
+        if pane.id in self.errors:
+            return PaneOutcome(2, "log", f"error: image file '{pane.image}' does not exist; check the path")
+        verdict = self.verdicts.get(pane.id)
+        summary = {"method": "comparative", "verdict": {"result": verdict} if verdict else None,
+                   "a4": {"valid_percent": 90.0, "statistics": {"phi_eff": {"p95_abs": 12.5, "max_abs": 20.0}}}}
+        (out_dir / "summary.json").write_text(json.dumps(summary))
+        return PaneOutcome(3 if verdict == "FAIL" else 0, "log")
+
+
+def _panes(tmp_path, ids=("a", "b", "c")):
+    return [Pane(id=i, image=tmp_path / f"{i}.png", pitch_mm=5.0, distance_m=1.5) for i in ids]
+
+
+def _index(out):
+    with (out / "index.csv").open() as fh:
+        return {r["id"]: r for r in csv.DictReader(fh)}
+
+
+def _run(panes, out, runner):
+    return run_batch(panes, out, runner=runner, progress=False, echo=lambda s: None)
+
+
+def test_resume_after_interruption_keeps_finished_panes(tmp_path):
+    out = tmp_path / "out"
+    panes = _panes(tmp_path)
+    first = FakeRunner(interrupt={"b"})
+    with pytest.raises(KeyboardInterrupt):
+        _run(panes, out, first)
+    assert first.calls == ["a", "b"]
+    assert (out / "panes" / "a" / "pane.json").is_file()
+    assert not (out / "panes" / "b").exists()  # no half-written pane under its final name
+    idx = _index(out)
+    assert [idx[i]["status"] for i in "abc"] == ["done", "pending", "pending"]
+    stamp = os.stat(out / "panes" / "a" / "pane.json").st_mtime_ns
+    summary_a = (out / "panes" / "a" / "summary.json").read_bytes()
+
+    second = FakeRunner()
+    assert _run(panes, out, second) == 0
+    assert second.calls == ["b", "c"]  # a is not redone
+    assert os.stat(out / "panes" / "a" / "pane.json").st_mtime_ns == stamp
+    assert (out / "panes" / "a" / "summary.json").read_bytes() == summary_a
+    idx = _index(out)
+    assert sorted(idx) == ["a", "b", "c"] and {r["status"] for r in idx.values()} == {"done"}
+    assert idx["a"]["phi_eff_p95_abs_mD"] == "12.5"
+    assert not [p for p in (out / "panes").iterdir() if p.name.startswith(".tmp")]
+    html = (out / "index.html").read_text()
+    assert all(f'id="pane-{i}"' in html for i in "abc")
+
+    third = FakeRunner()
+    assert _run(panes, out, third) == 0 and third.calls == []
+
+
+def test_stale_temporary_pane_of_a_killed_run_is_cleaned(tmp_path):
+    out = tmp_path / "out"
+    _run(_panes(tmp_path, ["a"]), out, FakeRunner())
+    stale = out / "panes" / ".tmp-b-99999"
+    stale.mkdir()
+    (stale / "result.npz").write_bytes(b"half")
+    runner = FakeRunner()
+    _run(_panes(tmp_path, ["a", "b"]), out, runner)
+    assert runner.calls == ["b"] and not stale.exists()
+
+
+def test_failing_pane_is_reported_and_batch_goes_on(tmp_path):
+    out = tmp_path / "out"
+    panes = _panes(tmp_path)
+    lines = []
+    code = run_batch(panes, out, runner=FakeRunner(errors={"b"}), progress=False, echo=lines.append)
+    assert code == EXIT_PANE_ERRORS == 4
+    idx = _index(out)
+    assert [idx[i]["status"] for i in "abc"] == ["done", "error", "done"]
+    assert "does not exist" in idx["b"]["error"]
+    assert json.loads((out / "failed" / "b.json").read_text())["exit_code"] == 2
+    assert any(line.startswith("[2/3] b  ERROR") for line in lines)
+    assert lines[-1] == "3 panes: 2 analysed (0 PASS, 0 FAIL, 2 without specification), 1 could not be analysed"
+
+    retry = FakeRunner()
+    assert _run(panes, out, retry) == 0
+    assert retry.calls == ["b"]  # failed panes are retried, finished ones kept
+    assert not (out / "failed" / "b.json").exists()
+
+
+def test_a_pane_whose_runner_raises_is_an_error_not_a_crash(tmp_path):
+    def broken(pane, out_dir, **kw):
+        raise RuntimeError("boom")
+
+    out = tmp_path / "out"
+    assert _run(_panes(tmp_path, ["a"]), out, broken) == EXIT_PANE_ERRORS
+    assert _index(out)["a"]["error"] == "RuntimeError: boom"
+
+
+def test_spec_failure_gives_exit_3_and_verdicts_in_index(tmp_path):
+    out = tmp_path / "out"
+    code = _run(_panes(tmp_path), out, FakeRunner(verdicts={"a": "PASS", "b": "FAIL", "c": "PASS"}))
+    assert code == 3
+    assert [_index(out)[i]["verdict"] for i in "abc"] == ["PASS", "FAIL", "PASS"]
+
+
+def test_changed_settings_redo_the_pane(tmp_path):
+    out = tmp_path / "out"
+    _run(_panes(tmp_path, ["a", "b"]), out, FakeRunner())
+    changed = [Pane(id="a", image=tmp_path / "a.png", pitch_mm=6.0, distance_m=1.5),
+               Pane(id="b", image=tmp_path / "b.png", pitch_mm=5.0, distance_m=1.5)]
+    runner = FakeRunner()
+    _run(changed, out, runner)
+    assert runner.calls == ["a"]
+    assert json.loads((out / "panes" / "a" / "pane.json").read_text())["pane"]["pitch_mm"] == "6.0"
+
+
+def test_output_folder_rules(tmp_path):
+    f = tmp_path / "file.txt"
+    f.write_text("mine")
+    with pytest.raises(InputError, match="existing file"):
+        _run(_panes(tmp_path), f, FakeRunner())
+    own = tmp_path / "own"
+    own.mkdir()
+    (own / "notes.csv").write_text("mine")
+    with pytest.raises(InputError, match="not empty"):
+        _run(_panes(tmp_path), own, FakeRunner())
+    assert f.read_text() == "mine" and (own / "notes.csv").read_text() == "mine"
+
+
+def test_manifest_paths_defaults_and_comments(tmp_path):
+    (tmp_path / "m").mkdir()
+    m = tmp_path / "m" / "manifest.csv"
+    m.write_text(
+        "id,image,reference,pitch_mm,distance_m,detrend_degree\n"
+        "p1,img/one.png,ref.png,5,1.5,\n"
+        "# a comment row,,,,,\n"
+        ",two.bmp,,,2.0,4\n"
+    )
+    panes = read_manifest(m, pane_defaults(pitch_mm=7.0, spec="spec.json"))
+    assert [p.id for p in panes] == ["p1", "two"]
+    assert panes[0].image == tmp_path / "m" / "img" / "one.png"
+    assert panes[0].reference == tmp_path / "m" / "ref.png"
+    assert panes[1].pitch_mm == 7.0 and panes[1].distance_m == 2.0 and panes[1].detrend_degree == 4
+    assert panes[1].spec == (tmp_path.cwd() / "spec.json").absolute()  # option paths: from where the user is
+    args = panes[1].analyze_args(tmp_path / "o", report=True)
+    assert args[:2] == ["analyze", str(tmp_path / "m" / "two.bmp")]
+    assert "--detrend-degree" in args and "--report" in args and args[-2:] == ["--out", str(tmp_path / "o")]
+
+
+@pytest.mark.parametrize(
+    "text, words",
+    [
+        ("image,pitch,distance_m\na.png,5,1\n", "unknown column(s) pitch"),
+        ("image,pitch_mm,distance_m\na.png,five,1\n", "line 2: 'pitch_mm' must be a number"),
+        ("image,pitch_mm,distance_m\na.png,-5,1\n", "must be positive"),
+        ("image,distance_m\na.png,1\n", "no 'pitch_mm'"),
+        ("image,pitch_mm,distance_m\na.png,5,1\nsub/a.png,5,1\n", "pane id 'a' appears twice"),
+        ("id,image,pitch_mm,distance_m\nbad id,a.png,5,1\n", "pane id 'bad id'"),
+        ("pitch_mm,distance_m\n5,1\n", "no 'image' column"),
+        ("image,pitch_mm,distance_m\n", "lists no pane"),
+    ],
+)
+def test_bad_manifests(tmp_path, text, words):
+    m = tmp_path / "manifest.csv"
+    m.write_text(text)
+    with pytest.raises(InputError) as info:
+        read_manifest(m)
+    assert words in str(info.value) and "\n" not in str(info.value)
+
+
+def test_folder_source_skips_the_reference(tmp_path):
+    for name in ("reference.png", "b.bmp", "a.png", "notes.txt"):
+        (tmp_path / name).write_bytes(b"")
+    panes = panes_from_folder(tmp_path, pane_defaults(pitch_mm=5.0, distance_m=1.0,
+                                                      reference=tmp_path / "reference.png"))
+    assert [p.id for p in panes] == ["a", "b"]
+    with pytest.raises(InputError, match="no 'distance_m'"):
+        panes_from_folder(tmp_path, pane_defaults(pitch_mm=5.0))
