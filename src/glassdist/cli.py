@@ -1,0 +1,220 @@
+"""Command-line interface: ``glassdist <command> ...`` (also ``python -m glassdist``).
+
+Exit codes: 0 success (and specification PASS), 2 bad input (one-line error,
+no traceback), 3 analysis done but an acceptance specification FAILED,
+1 unexpected internal error (run with ``--debug`` for the traceback).
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import importlib
+import json
+import logging
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from ._version import __version__
+from .errors import GlassdistError, InputError
+
+__all__ = ["main", "build_parser", "write_analysis"]
+
+log = logging.getLogger("glassdist")
+
+EXIT_OK = 0
+EXIT_INTERNAL = 1
+EXIT_BAD_INPUT = 2
+
+# Modules adding sub-commands: each provides register(subparsers) -> sets func=run(args) -> int.
+COMMAND_MODULES = ["glassdist.report._batch_cli"]
+
+
+def _positive(kind: str):
+    def parse(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{kind} must be a number, got '{text}'") from None
+        if not np.isfinite(v) or v <= 0:
+            raise argparse.ArgumentTypeError(f"{kind} must be positive, got {text}")
+        return v
+
+    return parse
+
+
+def _register_analyze(sub) -> None:
+    p = sub.add_parser(
+        "analyze",
+        help="measure the distortion of a pane from a photo of a grid seen through it",
+        description="Comparative Method with --reference (glass-less photo), Direct Method without it. "
+        "Writes result.npz, summary.json and heatmaps to --out.",
+    )
+    p.add_argument("image", type=Path, help="photo of the grid through the glass (PNG/TIFF/BMP/JPEG, 8/16-bit)")
+    p.add_argument("--pitch-mm", type=_positive("--pitch-mm"), required=True, help="grid pitch on the backdrop, mm (line spacing, or square size)")
+    p.add_argument("--distance-m", type=_positive("--distance-m"), required=True, help="glass-to-grid distance L, m")
+    p.add_argument("--reference", type=Path, help="glass-less photo from the same camera position (Comparative Method)")
+    p.add_argument("--pattern", choices=["lines", "checkerboard"], help="backdrop pattern (default: from --params, else lines)")
+    p.add_argument("--detrend-degree", type=int, help="A2 polynomial detrend total degree N (default 2)")
+    p.add_argument("--sigma-mm", type=_positive("--sigma-mm"), help="reporting smoothing scale on the backdrop, mm (default: 2 carrier periods)")
+    p.add_argument("--params", type=Path, help="JSON file of analyzer parameters (unknown keys are errors)")
+    p.add_argument("--mask", type=Path, help="image whose non-zero pixels mark the region to analyse")
+    p.add_argument("--out", type=Path, required=True, help="output folder (created if needed)")
+    p.add_argument("--spec", type=Path, help="acceptance specification JSON: prints PASS/FAIL, exit 3 on FAIL")
+    p.add_argument("--report", action="store_true", help="also write a self-contained HTML report")
+    p.add_argument("--export", action="store_true", help="also export the fields as NPZ and 32-bit TIFF and statistics as CSV")
+    p.set_defaults(func=_run_analyze)
+
+
+def sha256_file(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _atomic_write(path: Path, writer) -> None:
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix="." + path.name, suffix=".tmp")
+    os.close(fd)
+    try:
+        writer(tmp)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+
+def write_analysis(result, out_dir: Path, *, inputs: dict | None = None) -> list[Path]:
+    """Write ``result.npz`` and ``summary.json`` (atomically) for an :class:`AnalysisResult`."""
+    out_dir = Path(out_dir)
+    arrays = {
+        "displacement_mm": result.displacement_mm,
+        "displacement_detrended_mm": result.displacement_detrended_mm,
+        "phi_eff_mD": result.phi_eff_mD,
+        "phi_shear_mD": result.phi_shear_mD,
+        "phi_total_mD": result.phi_total_mD,
+        "axis_deg": result.axis_deg,
+        "valid": result.valid,
+    }
+
+    def save_npz(tmp):
+        with open(tmp, "wb") as f:
+            np.savez(f, **arrays)
+
+    npz = out_dir / "result.npz"
+    _atomic_write(npz, save_npz)
+    summary = result.summary()
+    if inputs:
+        summary["inputs"] = inputs
+    js = out_dir / "summary.json"
+    _atomic_write(js, lambda tmp: Path(tmp).write_text(json.dumps(summary, indent=2, default=_json_default) + "\n"))
+    return [npz, js]
+
+
+def _json_default(o):
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(f"not JSON serialisable: {type(o)}")
+
+
+def _run_analyze(args) -> int:
+    from .analyzer import analyze, load_params, prepare_reference
+    from .io import prepare_output_dir, read_image, read_mask
+
+    # Validate every input before any work or any write.
+    params = load_params(args.params, pattern=args.pattern, detrend_degree=args.detrend_degree, sigma_mm=args.sigma_mm)
+    image = read_image(args.image)
+    reference = read_image(args.reference) if args.reference is not None else None
+    if reference is not None and reference.shape != image.shape:
+        raise InputError(
+            f"the reference '{args.reference}' is {reference.shape[1]}x{reference.shape[0]} px but the image is "
+            f"{image.shape[1]}x{image.shape[0]} px; both photos must come from the same camera, same size"
+        )
+    mask = read_mask(args.mask, image.shape) if args.mask is not None else None
+    if args.spec is not None:
+        from .report.spec import load_spec
+
+        load_spec(args.spec)
+    out = prepare_output_dir(args.out)
+
+    if reference is not None:
+        reference = prepare_reference(reference, params=params)
+    result = analyze(image, pitch_mm=args.pitch_mm, distance_m=args.distance_m, reference=reference, params=params, mask=mask)
+    inputs = {
+        "image": str(args.image),
+        "image_sha256": sha256_file(args.image),
+        "reference": None if args.reference is None else str(args.reference),
+        "reference_sha256": None if args.reference is None else sha256_file(args.reference),
+        "mask": None if args.mask is None else str(args.mask),
+    }
+    written = write_analysis(result, out, inputs=inputs)
+    from .report.figures import save_channel_heatmaps
+
+    written += list(save_channel_heatmaps(result, out))
+    from .report.workflow import finish_analysis
+
+    code = finish_analysis(
+        result, out_dir=out, image_path=args.image, reference_path=args.reference, spec_path=args.spec,
+        report=args.report, exports=args.export,
+    )
+    stats = result.statistics()
+    print(
+        f"{result.method} method: valid {100 * result.valid_fraction:.1f}% of the image, "
+        f"mean |phi_eff| {stats['phi_eff_mD']['mean_abs']:.3g} mD, p95 |phi_eff| {stats['phi_eff_mD']['p95_abs']:.3g} mD, "
+        f"mean phi_shear {stats['phi_shear_mD']['mean_abs']:.3g} mD"
+    )
+    for w in result.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    print(f"results written to {out}")
+    return code
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="glassdist",
+        description="Measure see-through optical distortion of architectural glass (lengths mm, L in m, power mD).",
+    )
+    parser.add_argument("--version", action="version", version=f"glassdist {__version__}")
+    parser.add_argument("--debug", action="store_true", help="show tracebacks and debug logging")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    _register_analyze(sub)
+    for name in COMMAND_MODULES:
+        importlib.import_module(name).register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point; returns the exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.DEBUG if args.debug else logging.ERROR, format="%(levelname)s: %(message)s")
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return EXIT_BAD_INPUT
+    try:
+        return int(args.func(args) or 0)
+    except GlassdistError as exc:
+        if args.debug:
+            raise
+        print(f"glassdist: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("glassdist: interrupted", file=sys.stderr)
+        return 130
+    except MemoryError:
+        print("glassdist: error: out of memory; analyse a smaller crop or set a larger 'decimation'", file=sys.stderr)
+        return EXIT_INTERNAL
+    except Exception as exc:  # noqa: BLE001 - last resort: one line, traceback with --debug
+        if args.debug:
+            raise
+        print(f"glassdist: internal error: {type(exc).__name__}: {exc} (run with --debug for details)", file=sys.stderr)
+        return EXIT_INTERNAL
