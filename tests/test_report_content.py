@@ -97,8 +97,8 @@ def test_summary_keeps_existing_keys_and_gains_verdict(analysed):
     s = json.loads((analysed["out"] / "summary.json").read_text())
     assert s["method"] == "comparative"  # written by the analyze command, kept
     assert s["verdict"]["result"] == "FAIL" and [c["passed"] for c in s["verdict"]["checks"]] == [True, False, False]
-    assert s["inputs"]["image"]["sha256"] == hashlib.sha256(analysed["image"].read_bytes()).hexdigest()
-    assert s["inputs"]["reference"]["sha256"] == hashlib.sha256(analysed["ref"].read_bytes()).hexdigest()
+    assert s["a4"]["inputs"]["image"]["sha256"] == hashlib.sha256(analysed["image"].read_bytes()).hexdigest()
+    assert s["a4"]["inputs"]["reference"]["sha256"] == hashlib.sha256(analysed["ref"].read_bytes()).hexdigest()
     assert s["a4"]["statistics"]["phi_eff"]["area_over_20"] > 1.0
     assert json.loads((analysed["out_pass"] / "summary.json").read_text())["verdict"]["result"] == "PASS"
 

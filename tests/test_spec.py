@@ -58,7 +58,7 @@ def test_statistics_match_closed_form():
     assert s["max_abs"] == pytest.approx(50.0)
     assert s["area_over_40"] == pytest.approx(30.0)
     assert s["area_over_60"] == 0.0
-    assert s["n_pixels"] == 10_000
+    assert s["n_valid"] == 10_000
 
 
 def test_statistics_ignore_invalid_and_nan():
@@ -68,7 +68,7 @@ def test_statistics_ignore_invalid_and_nan():
     field[:5] = 2.0
     field[0, 0] = np.nan
     s = channel_statistics(field, valid)
-    assert s["max_abs"] == 2.0 and s["n_pixels"] == 49
+    assert s["max_abs"] == 2.0 and s["n_valid"] == 49
     assert area_over_percent(field, valid, 1.0) == 100.0
     assert np.isnan(channel_statistics(field, np.zeros_like(valid))["p95_abs"])
 

@@ -84,7 +84,7 @@ def statistics_table(stats):
         row = {"channel": channel}
         row.update({f"{k}_mD": _fmt(s.get(k)) for k in STATISTICS})
         row.update({f"{k}_percent": _fmt(s.get(k)) for k in area_keys})
-        row["n_pixels"] = s.get("n_pixels", "")
+        row["n_valid"] = s.get("n_valid", "")
         rows.append(row)
     return rows
 

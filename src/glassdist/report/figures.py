@@ -207,7 +207,7 @@ def plot_input(image, valid=None, *, title=None, ax=None):
     return fig, ax
 
 
-def plot_threshold_mask(field, valid=None, *, limit_mD, absolute=True, title=None, ax=None):
+def plot_threshold_mask(field, valid=None, *, limit_mD, absolute=True, name="φ", title=None, ax=None):
     """Pixels over a limit: red over the limit, white under it, grey outside the region.
 
     Parameters
@@ -219,6 +219,8 @@ def plot_threshold_mask(field, valid=None, *, limit_mD, absolute=True, title=Non
         Threshold in mD; a pixel is over when ``|field| > limit_mD`` (``absolute``)
         or ``field > limit_mD``.
     absolute : bool
+    name : str
+        Channel name used in the default title.
     title : str, optional
     ax : matplotlib Axes, optional
 
@@ -236,7 +238,7 @@ def plot_threshold_mask(field, valid=None, *, limit_mD, absolute=True, title=Non
     cmap_obj = ListedColormap(["white", "tab:red"]).with_extremes(bad=_INVALID_RGBA)
     ax.imshow(img, cmap=cmap_obj, vmin=0, vmax=1, interpolation="nearest")
     frac = 100.0 * over.sum() / max(int(ok.sum()), 1)
-    op = "|φ|" if absolute else "φ"
+    op = f"|{name}|" if absolute else name
     _label_image_axes(ax, title or f"{op} > {limit_mD:g} mD: {frac:.2f} % of the region")
     return fig, ax
 
@@ -265,7 +267,15 @@ def plot_histogram(field, valid=None, *, signed=True, limits_mD=(), bins=80, tit
     _, ok = _masked(field, valid)
     values = np.asarray(field, dtype=np.float64)[ok]
     if values.size:
-        ax.hist(values, bins=bins, color="tab:blue" if signed else "tab:green", alpha=0.85)
+        # Range: the bulk of the values (99.5th percentile of |phi|) and every limit, so that
+        # a few extreme pixels do not squeeze the histogram into one bar.
+        top = max([1.2 * float(np.percentile(np.abs(values), 99.5))] + [1.1 * float(x) for x in limits_mD]) or 1.0
+        lo = -top if signed else 0.0
+        outside = np.count_nonzero((values < lo) | (values > top))
+        ax.hist(values, bins=bins, range=(lo, top), color="tab:blue" if signed else "tab:green", alpha=0.85)
+        if outside:
+            ax.text(0.99, 0.97, f"{100.0 * outside / values.size:.2g} % of pixels beyond the axis",
+                    transform=ax.transAxes, ha="right", va="top", fontsize="small")
     for lim in limits_mD:
         for v in ((-lim, lim) if signed else (lim,)):
             ax.axvline(v, color="tab:red", linestyle="--", linewidth=1.2)

@@ -62,7 +62,8 @@ th{background:#f2f2f2}td.num{text-align:right;font-variant-numeric:tabular-nums}
 .verdict{font-size:1.5em;font-weight:bold;padding:.5em 1em;border-radius:6px;display:inline-block;margin:.5em 0}
 .PASS{background:#d8f3dc;color:#1b5e20}.FAIL{background:#ffd7d5;color:#b71c1c}.NONE{background:#eee;color:#444}
 tr.FAIL td{background:#fff0ef}tr.PASS td{background:#f3fbf4}
-figure{display:inline-block;margin:.5em;vertical-align:top}figure img{max-width:520px;width:100%}
+.figs{display:grid;grid-template-columns:repeat(auto-fill,minmax(460px,1fr));gap:1em;align-items:start}
+figure{margin:0}figure img{width:100%}figure.wide{grid-column:1/-1}figure.wide img{max-width:1000px}
 figcaption{font-size:.9em;color:#555}code,.mono{font-family:ui-monospace,Menlo,Consolas,monospace;font-size:.92em}
 .warn{background:#fff8e1;border-left:4px solid #f9a825;padding:.3em .8em}
 .small{font-size:.9em;color:#555}
@@ -84,7 +85,8 @@ def _kv_table(rows):
 
 def _img(png, alt, caption):
     data = base64.b64encode(png).decode("ascii")
-    return (f'<figure><img alt="{escape(alt)}" src="data:image/png;base64,{data}">'
+    cls = ' class="wide"' if alt == "histograms" else ""
+    return (f'<figure{cls}><img alt="{escape(alt)}" src="data:image/png;base64,{data}">'
             f"<figcaption>{escape(caption)}</figcaption></figure>")
 
 
@@ -202,7 +204,7 @@ def render_report(result, *, stats, figures, inputs, verdict=None, valid_percent
 <details><summary>all analysis parameters (resolved)</summary><pre>{escape(json.dumps(to_jsonable(params), indent=1))}</pre></details>
 <h2>4. Results</h2>
 {_stats_table(stats)}
-{fig_html}
+<div class="figs">{fig_html}</div>
 <h2>5. Warnings</h2>
 {warn_html}
 <h2>6. Scope</h2>

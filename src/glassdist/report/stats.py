@@ -84,22 +84,17 @@ def channel_statistics(field, valid=None, *, over_limits_mD=()):
     -------
     dict
         ``mean_abs``, ``mean``, ``std``, ``p95_abs``, ``max_abs`` (mD),
-        ``area_over_<T>`` (percent) and ``n_pixels``; values are NaN when the
-        region is empty.
+        ``area_over_<T>`` (percent) and ``n_valid``; values are NaN when the
+        region is empty. The first four and ``n_valid`` are those of
+        :func:`glassdist.analyzer.metrics.channel_statistics`.
     """
+    from ..analyzer.metrics import channel_statistics as base_statistics
+
+    out = base_statistics(field, valid)
     v = _values(field, valid)
-    out = {}
-    if v.size:
-        a = np.abs(v)
-        out.update(
-            mean_abs=float(a.mean()), mean=float(v.mean()), std=float(v.std()),
-            p95_abs=float(np.percentile(a, 95.0)), max_abs=float(a.max()),
-        )
-    else:
-        out.update({k: float("nan") for k in STATISTICS})
+    out["mean"] = float(v.mean()) if v.size else float("nan")
     for lim in sorted(set(float(x) for x in over_limits_mD)):
         out[format_limit(lim)] = area_over_percent(field, valid, lim)
-    out["n_pixels"] = int(v.size)
     return out
 
 

@@ -17,9 +17,9 @@ Files added to the output folder:
   specification (pixels over the limit);
 * ``report.html`` with ``report=True``: self-contained report (:mod:`glassdist.report.html`);
 * ``fields.npz`` and ``tiff/*.tif`` with ``exports=True`` (:mod:`glassdist.report.exports`);
-* ``summary.json`` gains ``verdict`` (``null`` without a specification), ``inputs``
-  (file names and SHA-256) and ``a4`` (statistics with the area-over values,
-  analysed-area percentage, files written).
+* ``summary.json`` gains ``verdict`` (``null`` without a specification) and ``a4``
+  (statistics with the area-over values, analysed-area percentage, files
+  written, input file names and SHA-256).
 """
 
 from __future__ import annotations
@@ -100,7 +100,7 @@ def a4_figures(result, image=None, limits=None):
     for name, lims in limits.items():
         attr = F.CHANNELS[name][0]
         for lim in lims:
-            fig, _ = F.plot_threshold_mask(getattr(result, attr), valid, limit_mD=lim)
+            fig, _ = F.plot_threshold_mask(getattr(result, attr), valid, limit_mD=lim, name=name)
             out.append((f"mask_{name}_{lim:g}mD", f"{name}: pixels with |{name}| > {lim:g} mD in red.",
                         F.figure_png(fig)))
     fig = Figure(figsize=(10, 3.6), layout="constrained")
@@ -184,8 +184,7 @@ def finish_analysis(result, *, out_dir, image_path, reference_path=None, spec_pa
     names = [str(p.relative_to(out_dir)) for p in written]
     _update_summary(out_dir / "summary.json", {
         "verdict": verdict.to_dict() if verdict else None,
-        "inputs": inputs,
-        "a4": {"statistics": stats, "valid_percent": cover, "files": names},
+        "a4": {"statistics": stats, "valid_percent": cover, "files": names, "inputs": inputs},
     })
     if verdict is not None:
         for line in verdict.lines():
