@@ -1,0 +1,155 @@
+"""Scene geometry shared by the renderers and the analytical model.
+
+Camera rays, pane-local frames, the glass-less (straight line) landing points
+on the backdrop and their Jacobian, and the box-filtered backdrop pattern.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._model import Backdrop, Camera, Scene
+
+__all__ = [
+    "pixel_directions",
+    "pixel_grid",
+    "straight_landing",
+    "landing_jacobian",
+    "pattern_coordinates",
+    "pattern_intensity",
+]
+
+
+def pixel_directions(camera: Camera, col, row) -> np.ndarray:
+    """Unit world directions of the lines of sight through image points.
+
+    Parameters
+    ----------
+    camera : Camera
+    col, row : array_like
+        Continuous image coordinates in px; pixel ``(i, j)`` covers
+        ``[j, j+1) x [i, i+1)``, so its centre is ``(j + 0.5, i + 0.5)``.
+
+    Returns
+    -------
+    ndarray, shape ``broadcast(col, row).shape + (3,)``
+        Unit vectors in the world frame.
+
+    Notes
+    -----
+    Pinhole model, principal point at the image centre, square pixels of
+    pitch :math:`p = s_w / W`:
+
+    .. math::
+
+       \\mathbf{d}_{cam} = \\big((c - W/2)\\,p,\\ (r - H/2)\\,p,\\ f\\big), \\qquad
+       \\mathbf{d} = R_{cam}\\,\\mathbf{d}_{cam} / \\lVert\\mathbf{d}_{cam}\\rVert .
+    """
+    H, W = camera.shape
+    p = camera.pixel_pitch_mm
+    col, row = np.broadcast_arrays(np.asarray(col, float), np.asarray(row, float))
+    d = np.stack([(col - W / 2) * p, (row - H / 2) * p, np.full(col.shape, camera.focal_length_mm)], axis=-1)
+    d = d @ camera.rotation.T
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def pixel_grid(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
+    """Pixel-centre coordinates ``(col, row)``, each of shape (H, W), in px."""
+    H, W = camera.shape
+    row, col = np.mgrid[0:H, 0:W].astype(float)
+    return col + 0.5, row + 0.5
+
+
+def straight_landing(scene: Scene, directions: np.ndarray) -> np.ndarray:
+    """Backdrop landing points ``(X, Y)`` in mm of straight rays from the camera (no glass)."""
+    c = np.asarray(scene.camera.position_mm, float)
+    t = (scene.backdrop_z_mm - c[2]) / directions[..., 2]
+    return c[:2] + t[..., None] * directions[..., :2]
+
+
+def landing_jacobian(scene: Scene, col=None, row=None) -> np.ndarray:
+    """Jacobian of the glass-less pixel -> backdrop mapping, mm per px.
+
+    Returns ``J`` of shape ``(..., 2, 2)`` with ``J[..., a, b] = dX_a / dr_b``,
+    ``r = (col, row)``, by central differences of :func:`straight_landing`
+    (exact to rounding for the projective map at a half-pixel step).
+    """
+    if col is None:
+        col, row = pixel_grid(scene.camera)
+    h = 0.5
+    cam = scene.camera
+    dx = straight_landing(scene, pixel_directions(cam, col + h, row)) - straight_landing(
+        scene, pixel_directions(cam, col - h, row)
+    )
+    dy = straight_landing(scene, pixel_directions(cam, col, row + h)) - straight_landing(
+        scene, pixel_directions(cam, col, row - h)
+    )
+    return np.stack([dx, dy], axis=-1) / (2 * h)
+
+
+def pattern_coordinates(backdrop: Backdrop, X, Y):
+    """Pattern coordinates ``p = Rot(-theta) (X - offset)`` (mm) of backdrop points."""
+    t = np.radians(backdrop.rotation_deg)
+    x = X - backdrop.offset_mm[0]
+    y = Y - backdrop.offset_mm[1]
+    return np.cos(t) * x + np.sin(t) * y, -np.sin(t) * x + np.cos(t) * y
+
+
+def _line_cover(x, half, pitch, width):
+    """Mean of the periodic line indicator over ``[x - half, x + half]``."""
+
+    def cum(s):
+        s = s + width / 2
+        return np.floor(s / pitch) * width + np.minimum(np.mod(s, pitch), width)
+
+    wide = half > 1e-12
+    safe = np.where(wide, half, 1.0)
+    box = (cum(x + safe) - cum(x - safe)) / (2 * safe)
+    point = (np.mod(x + width / 2, pitch) < width).astype(float)
+    return np.where(wide, box, point)
+
+
+def _square_wave_mean(x, half, q):
+    """Mean of the +-1 square wave of half-period ``q`` (+1 on [0, q)) over ``[x-half, x+half]``."""
+
+    def cum(s):
+        m = np.mod(s, 2 * q)
+        return np.minimum(m, 2 * q - m)
+
+    wide = half > 1e-12
+    safe = np.where(wide, half, 1.0)
+    box = (cum(x + safe) - cum(x - safe)) / (2 * safe)
+    point = np.where(np.mod(x, 2 * q) < q, 1.0, -1.0)
+    return np.where(wide, box, point)
+
+
+def pattern_intensity(backdrop: Backdrop, X, Y, half_width=(0.0, 0.0)) -> np.ndarray:
+    """Backdrop intensity (linear, in [black, white]) box-filtered over a footprint.
+
+    Parameters
+    ----------
+    backdrop : Backdrop
+    X, Y : ndarray
+        World backdrop coordinates, mm.
+    half_width : (array_like, array_like)
+        Half-widths of an axis-aligned box in *pattern* coordinates (mm) over
+        which the pattern is averaged exactly (0: point sampling).
+
+    Notes
+    -----
+    The line grid is :math:`I = w - (w - b)\\,[1 - (1 - c_x)(1 - c_y)]` with
+    :math:`c_x, c_y` the box-averaged covers of the two line families, the
+    checkerboard :math:`I = (w + b)/2 + (w - b)/2\\,\\bar S_x \\bar S_y` with
+    :math:`\\bar S` the box-averaged square waves; both are exact box integrals
+    (the checkerboard because it is separable).
+    """
+    px, py = pattern_coordinates(backdrop, X, Y)
+    hx, hy = half_width
+    b, w = backdrop.black, backdrop.white
+    if backdrop.pattern == "lines":
+        cx = _line_cover(px, hx, backdrop.pitch_mm, backdrop.line_width_mm)
+        cy = _line_cover(py, hy, backdrop.pitch_mm, backdrop.line_width_mm)
+        return w - (w - b) * (1.0 - (1.0 - cx) * (1.0 - cy))
+    sx = _square_wave_mean(px, hx, backdrop.pitch_mm)
+    sy = _square_wave_mean(py, hy, backdrop.pitch_mm)
+    return 0.5 * (w + b) + 0.5 * (w - b) * sx * sy

@@ -1,0 +1,297 @@
+"""Validated, frozen scene models and the scene file loader."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from ..errors import InputError
+from ._surfaces import FaceShape, Term
+
+__all__ = [
+    "Deformation",
+    "Frame",
+    "Pane",
+    "Backdrop",
+    "Camera",
+    "Noise",
+    "Lighting",
+    "Imaging",
+    "RenderSettings",
+    "Scene",
+    "load_scene",
+    "scene_from_dict",
+]
+
+_FROZEN = ConfigDict(extra="forbid", frozen=True)
+
+
+def rotation_yaw_pitch(yaw_deg: float, pitch_deg: float) -> np.ndarray:
+    """Rotation ``R = R_y(yaw) @ R_x(pitch)`` of the world frame (x right, y down, z forward).
+
+    ``R @ (0, 0, 1)`` is the pointing direction: positive yaw turns it towards +x
+    (right), positive pitch towards -y (up). Columns of ``R`` are the rotated
+    body axes (right, down, forward); no roll.
+    """
+    a, b = math.radians(yaw_deg), math.radians(pitch_deg)
+    ry = np.array([[math.cos(a), 0, math.sin(a)], [0, 1, 0], [-math.sin(a), 0, math.cos(a)]])
+    rx = np.array([[1, 0, 0], [0, math.cos(b), -math.sin(b)], [0, math.sin(b), math.cos(b)]])
+    return ry @ rx
+
+
+class Deformation(BaseModel):
+    """Face deformations: lists of terms added to the front face, back face, or both.
+
+    ``both`` displaces the two faces identically (a conformal bend of the whole
+    sheet, e.g. a roller wave); ``front``/``back`` act on one face (thickness
+    variation: lens caps, wedges, local defects).
+    """
+
+    model_config = _FROZEN
+    both: tuple[Term, ...] = ()
+    front: tuple[Term, ...] = ()
+    back: tuple[Term, ...] = ()
+
+    @property
+    def front_shape(self) -> FaceShape:
+        """Height field of the front face (mm along +w)."""
+        return FaceShape(self.both + self.front)
+
+    @property
+    def back_shape(self) -> FaceShape:
+        """Height field of the back face (mm along +w)."""
+        return FaceShape(self.both + self.back)
+
+
+class Frame(BaseModel):
+    """Opaque frame band along the pane's edges (width in mm, intensity in [0, 1])."""
+
+    model_config = _FROZEN
+    width_mm: float = Field(gt=0)
+    intensity: float = Field(0.05, ge=0, le=1)
+
+
+class Pane(BaseModel):
+    """The glass pane: a slab of thickness ``d`` centred on ``center_mm``.
+
+    Orientation: pane axes ``(u, v, w) = R_y(yaw) R_x(pitch)`` applied to the world
+    axes; ``w`` is the pane normal pointing towards the backdrop.
+    """
+
+    model_config = _FROZEN
+    size_mm: tuple[float, float]
+    thickness_mm: float = Field(gt=0)
+    refractive_index: float = Field(gt=1.0, lt=3.0)
+    center_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    yaw_deg: float = Field(0.0, ge=-80, le=80)
+    pitch_deg: float = Field(0.0, ge=-80, le=80)
+    transmittance: float = Field(1.0, gt=0, le=1)
+    frame: Frame | None = None
+    deformation: Deformation = Deformation()
+
+    @model_validator(mode="after")
+    def _size(self):
+        if min(self.size_mm) <= 0:
+            raise ValueError("size_mm must be positive (width, height in mm)")
+        if self.frame is not None and 2 * self.frame.width_mm >= min(self.size_mm):
+            raise ValueError("frame.width_mm must be less than half the pane size")
+        return self
+
+    @property
+    def rotation(self) -> np.ndarray:
+        """3x3 matrix whose columns are the pane axes u, v, w in world coordinates."""
+        return rotation_yaw_pitch(self.yaw_deg, self.pitch_deg)
+
+
+class Backdrop(BaseModel):
+    """Printed backdrop on the world plane ``z = pane.center_z + 1000 * distance_m``.
+
+    Pattern coordinates ``p = Rot(-rotation) (X - offset)`` with ``X`` the world
+    ``(x, y)`` on the plane. ``lines``: dark lines of ``line_width_mm`` centred on
+    multiples of ``pitch_mm`` along both pattern axes; ``checkerboard``: squares of
+    side ``pitch_mm``, the square touching the origin from +x,+y is white.
+    """
+
+    model_config = _FROZEN
+    pattern: Literal["lines", "checkerboard"]
+    pitch_mm: float = Field(gt=0)
+    line_width_mm: float | None = Field(None, gt=0)
+    rotation_deg: float = 0.0
+    offset_mm: tuple[float, float] = (0.0, 0.0)
+    distance_m: float = Field(gt=0)
+    black: float = Field(0.05, ge=0, le=1)
+    white: float = Field(0.95, ge=0, le=1)
+
+    @model_validator(mode="after")
+    def _lines(self):
+        if self.pattern == "lines":
+            if self.line_width_mm is None:
+                raise ValueError("line_width_mm is required for pattern 'lines'")
+            if self.line_width_mm >= self.pitch_mm:
+                raise ValueError("line_width_mm must be smaller than pitch_mm")
+        if self.black >= self.white:
+            raise ValueError("black must be darker (smaller) than white")
+        return self
+
+
+class Camera(BaseModel):
+    """Pinhole camera: focal length and sensor width in mm, ``pixels = (width, height)``.
+
+    Square pixels of ``sensor_width_mm / width``; principal point at the image
+    centre; pose ``position_mm`` and ``R_y(yaw) R_x(pitch)`` (no roll).
+    """
+
+    model_config = _FROZEN
+    focal_length_mm: float = Field(gt=0)
+    sensor_width_mm: float = Field(gt=0)
+    pixels: tuple[int, int]
+    position_mm: tuple[float, float, float]
+    yaw_deg: float = Field(0.0, ge=-80, le=80)
+    pitch_deg: float = Field(0.0, ge=-80, le=80)
+
+    @model_validator(mode="after")
+    def _pixels(self):
+        if min(self.pixels) < 8:
+            raise ValueError("pixels must be (width, height) with both at least 8")
+        return self
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """Image shape ``(H, W)``."""
+        return int(self.pixels[1]), int(self.pixels[0])
+
+    @property
+    def pixel_pitch_mm(self) -> float:
+        return self.sensor_width_mm / self.pixels[0]
+
+    @property
+    def rotation(self) -> np.ndarray:
+        """3x3 matrix whose columns are the camera axes (right, down, forward) in world."""
+        return rotation_yaw_pitch(self.yaw_deg, self.pitch_deg)
+
+
+class Noise(BaseModel):
+    """Sensor noise: Poisson shot noise at ``full_well_e`` electrons for intensity 1, Gaussian read noise (intensity units)."""
+
+    model_config = _FROZEN
+    full_well_e: float | None = Field(None, gt=0)
+    read_noise: float = Field(0.0, ge=0)
+
+
+class Lighting(BaseModel):
+    """Uneven lighting: gain ``1 + gradient * t`` with ``t`` in [-1, 1] across the image along ``direction_deg`` (from +x towards +y)."""
+
+    model_config = _FROZEN
+    gradient: float = Field(0.0, ge=0, lt=1)
+    direction_deg: float = 0.0
+
+
+class Imaging(BaseModel):
+    """Optional imaging effects, applied in the order lighting, vignetting, blur, noise."""
+
+    model_config = _FROZEN
+    noise: Noise | None = None
+    blur_px: float = Field(0.0, ge=0, le=20)
+    vignetting: float = Field(0.0, ge=0, lt=1, description="relative loss at the image corners (quadratic)")
+    lighting: Lighting | None = None
+
+
+class RenderSettings(BaseModel):
+    """Default sampling for renders (overridable on the command line)."""
+
+    model_config = _FROZEN
+    samples_per_pixel: int = Field(16, ge=1, le=1024)
+    seed: int = Field(0, ge=0)
+
+
+class Scene(BaseModel):
+    """A glass distortion definition (see :mod:`glassdist.scene` for the geometry)."""
+
+    model_config = _FROZEN
+    name: str = "scene"
+    description: str = ""
+    pane: Pane
+    backdrop: Backdrop
+    camera: Camera
+    imaging: Imaging = Imaging()
+    render: RenderSettings = RenderSettings()
+    analysis: dict[str, Any] = Field(
+        default_factory=dict,
+        description="analyzer parameter overrides used by 'glassdist validate' (checked by the analyzer)",
+    )
+
+    @model_validator(mode="after")
+    def _camera_in_front(self):
+        zc = self.camera.position_mm[2]
+        zp = self.pane.center_mm[2]
+        if zc >= zp - self.pane.thickness_mm:
+            raise ValueError("camera.position_mm must lie in front of the pane (z smaller than pane.center_mm z)")
+        return self
+
+    @property
+    def backdrop_z_mm(self) -> float:
+        """World z of the backdrop plane, mm."""
+        return self.pane.center_mm[2] + 1000.0 * self.backdrop.distance_m
+
+    def with_changes(self, **sections) -> "Scene":
+        """Copy with some top-level sections replaced (dicts are merged into the section)."""
+        data = self.model_dump()
+        for key, val in sections.items():
+            if isinstance(val, dict) and isinstance(data.get(key), dict):
+                data[key] = {**data[key], **val}
+            else:
+                data[key] = val
+        return scene_from_dict(data, source=f"scene '{self.name}'")
+
+
+def _format_error(exc: ValidationError, source: str) -> str:
+    parts = []
+    for err in exc.errors()[:3]:
+        loc = ".".join(str(x) for x in err["loc"]) or "(root)"
+        if err["type"] == "extra_forbidden":
+            parts.append(f"unknown key '{loc}'")
+        elif err["type"] == "missing":
+            parts.append(f"missing key '{loc}'")
+        else:
+            parts.append(f"'{loc}': {err['msg']}")
+    return f"invalid scene in {source}: " + "; ".join(parts) + "; see docs/virtual_pipeline.md for the scene format"
+
+
+def scene_from_dict(data: dict, *, source: str = "scene") -> Scene:
+    """Validate a parsed scene mapping; raises :class:`InputError` on any problem."""
+    if not isinstance(data, dict):
+        raise InputError(f"{source} must hold a mapping of sections (pane, backdrop, camera, ...)")
+    try:
+        return Scene(**data)
+    except ValidationError as exc:
+        raise InputError(_format_error(exc, source)) from None
+
+
+def load_scene(path) -> Scene:
+    """Load and validate a scene from a YAML (``.yaml``/``.yml``) or JSON file.
+
+    Raises
+    ------
+    InputError
+        Missing file, unparsable content, unknown key, missing or out-of-range value.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"scene file '{p}' does not exist; check the path (examples are in examples/scenes/)")
+    text = p.read_text(encoding="utf-8")
+    try:
+        if p.suffix.lower() == ".json":
+            data = json.loads(text)
+        else:
+            import yaml
+
+            data = yaml.safe_load(text)
+    except Exception as exc:  # noqa: BLE001 - any parser error is a user file problem
+        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise InputError(f"scene file '{p}' cannot be parsed ({first}); check its YAML/JSON syntax") from None
+    return scene_from_dict(data, source=f"'{p}'")

@@ -1,0 +1,10 @@
+"""Branch 2 of the Virtual Pipeline: the Optical Theoretical Model (paper §3.1).
+
+Pure functions of a :class:`glassdist.scene.Scene`: the first-order Snell
+forward model of the deformed slab evaluated on the camera pixel grid
+(:func:`predict_displacement`), independent of any rendered image.
+"""
+
+from ._model import Prediction, nominal_mm_per_px, predict_displacement, slab_shift
+
+__all__ = ["Prediction", "predict_displacement", "slab_shift", "nominal_mm_per_px"]
