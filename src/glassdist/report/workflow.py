@@ -59,7 +59,7 @@ def _describe_input(path, shape):
     return {"name": path.name, "path": str(path), "sha256": file_sha256(path), "size": f"{shape[1]} x {shape[0]} px"}
 
 
-def a4_figures(result, image=None, limits=None):
+def a4_figures(result, image=None, limits=None, *, heatmaps=True):
     """Render the A4 figures of a result.
 
     Parameters
@@ -70,6 +70,8 @@ def a4_figures(result, image=None, limits=None):
     limits : dict, optional
         ``{channel: [limit_mD, ...]}``: a threshold mask per limit, and limit lines
         on the histograms.
+    heatmaps : bool
+        Include the channel and axis heatmaps (ids ``phi_eff``, ``phi_shear``, ``axis``).
 
     Returns
     -------
@@ -87,13 +89,13 @@ def a4_figures(result, image=None, limits=None):
     if image is not None:
         fig, _ = F.plot_input(image, valid)
         out.append(("input_region", "Input photograph; the analysed region is outlined in orange.", F.figure_png(fig)))
-    for name in ("phi_eff", "phi_shear"):
+    for name in ("phi_eff", "phi_shear") if heatmaps else ():
         attr, label, cmap, signed = F.CHANNELS[name]
         fig, _ = F.plot_channel(getattr(result, attr), valid, signed=signed, vmax=vmax, cmap=cmap, title=f"{label}, mD")
         span = f"[-{vmax:.3g}, {vmax:.3g}]" if signed else f"[0, {vmax:.3g}]"
         out.append((name, f"{name} in mD; colour limits {span} mD shared by both channels; grey: not analysed.",
                     F.figure_png(fig)))
-    if getattr(result, "axis_deg", None) is not None:
+    if heatmaps and getattr(result, "axis_deg", None) is not None:
         fig, _ = F.plot_axis(result.axis_deg, result.phi_shear_mD, valid)
         out.append(("axis", "Astigmatism axis (direction of largest stretch), degrees from +x towards +y (down); "
                             "grey where phi_shear is too small for the axis to be meaningful.", F.figure_png(fig)))
@@ -171,9 +173,11 @@ def finish_analysis(result, *, out_dir, image_path, reference_path=None, spec_pa
     cover = valid_percent(result.valid)
 
     written = [write_statistics_csv(stats, out_dir / "statistics.csv")]
-    figs = a4_figures(result, read_image(image_path), limits)
+    # The heatmap files are the analyze command's own (save_channel_heatmaps); they are
+    # rendered here again only for embedding in the report.
+    figs = a4_figures(result, read_image(image_path), limits, heatmaps=report)
     for stem, _, png in figs:
-        if stem not in ("phi_eff", "phi_shear", "axis"):  # the heatmaps are the analyze command's own files
+        if stem not in ("phi_eff", "phi_shear", "axis"):
             written.append(atomic_write_bytes(out_dir / f"{stem}.png", png))
     if exports:
         written.append(write_fields_npz(result, out_dir / "fields.npz"))

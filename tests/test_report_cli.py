@@ -1,0 +1,130 @@
+"""Through the command line: verdicts and exit codes of analyze --spec, the report, and a killed-then-resumed batch."""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+SRC = str(Path(__file__).resolve().parents[1] / "src")
+
+
+def _env():
+    env = dict(os.environ)
+    env["PYTHONPATH"] = SRC + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    env["MPLBACKEND"] = "Agg"
+    return env
+
+
+def glassdist(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "glassdist", *map(str, args)], capture_output=True, text=True,
+                          env=_env(), cwd=cwd, timeout=300)
+
+
+@pytest.fixture(scope="module")
+def photos(tmp_path_factory):
+    """A small synthetic pane (a converging lens, -100 mD at its centre) and its reference."""
+    from glassdist.io import write_png16
+    from glassdist.synthetic import lens_displacement, synthetic_capture
+
+    root = tmp_path_factory.mktemp("photos")
+    cap = synthetic_capture((160, 160), pitch_mm=2.0, mm_per_px=0.25,
+                            displacement=lens_displacement(0.05, 1.0, radius_mm=7.0), rng=0)
+    write_png16(root / "pane.png", cap.image)
+    write_png16(root / "reference.png", cap.reference)
+    spec = {"criteria": [{"channel": "phi_eff", "statistic": "max_abs", "max_mD": 1000},
+                         {"channel": "phi_shear", "statistic": "p95_abs", "max_mD": 1000}]}
+    (root / "pass.json").write_text(json.dumps(dict(spec, name="lenient")))
+    spec["criteria"].append({"channel": "phi_eff", "statistic": "max_abs", "max_mD": 5})
+    (root / "fail.json").write_text(json.dumps(dict(spec, name="strict")))
+    return root
+
+
+def _analyze(photos, out, *extra):
+    return glassdist("analyze", photos / "pane.png", "--reference", photos / "reference.png", "--pitch-mm", 2,
+                     "--distance-m", 1, "--out", out, *extra)
+
+
+def test_spec_fail_exits_3_with_report(photos, tmp_path):
+    out = tmp_path / "fail"
+    r = _analyze(photos, out, "--spec", photos / "fail.json", "--report", "--export")
+    assert r.returncode == 3, r.stderr
+    lines = r.stdout.splitlines()
+    assert any(ln.startswith("FAIL  max |phi_eff| <= 5 mD") for ln in lines)
+    assert "VERDICT: FAIL (2/3 criteria passed) spec 'strict'" in lines
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["verdict"]["result"] == "FAIL" and summary["method"] == "comparative"
+    # the lens is converging: its centre reads phi_eff < 0, well beyond 5 mD
+    assert summary["a4"]["statistics"]["phi_eff"]["max_abs"] > 20
+    html = (out / "report.html").read_text(encoding="utf-8")
+    assert hashlib.sha256((photos / "pane.png").read_bytes()).hexdigest() in html
+    assert 'id="verdict">FAIL<' in html and html.count("data:image/png;base64,") >= 6
+    for name in ("statistics.csv", "fields.npz", "tiff/phi_eff_mD.tif", "phi_eff.png", "input_region.png"):
+        assert (out / name).is_file(), name
+
+
+def test_spec_pass_exits_0(photos, tmp_path):
+    r = _analyze(photos, tmp_path / "pass", "--spec", photos / "pass.json")
+    assert r.returncode == 0, r.stderr
+    assert "VERDICT: PASS (2/2 criteria passed) spec 'lenient'" in r.stdout
+    assert not (tmp_path / "pass" / "report.html").exists()
+
+
+def test_bad_spec_exits_2_before_any_work(photos, tmp_path):
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"name": "x", "criteria": [{"channel": "phi_eff", "statistic": "p95", "max_mD": 1}]}))
+    r = _analyze(photos, tmp_path / "never", "--spec", bad)
+    assert r.returncode == 2
+    assert r.stderr.startswith("glassdist: error: invalid specification") and r.stderr.count("\n") == 1
+    assert "Traceback" not in r.stderr and not (tmp_path / "never").exists()
+
+
+def _wait_for(path, proc, seconds=240):
+    t0 = time.monotonic()
+    while not path.exists():
+        assert proc.poll() is None, "the batch ended before it could be interrupted"
+        assert time.monotonic() - t0 < seconds, f"{path} never appeared"
+        time.sleep(0.1)
+
+
+def test_batch_killed_then_resumed(photos, tmp_path):
+    manifest = tmp_path / "manifest.csv"
+    manifest.write_text(
+        "id,image,reference,pitch_mm,distance_m\n"
+        f"first,{photos / 'pane.png'},{photos / 'reference.png'},2,1\n"
+        f"second,{photos / 'pane.png'},,2,1\n"
+        "missing,no_such_photo.png,,2,1\n"
+    )
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "glassdist", "batch", str(manifest), "--out", str(out), "--no-progress",
+           "--spec", str(photos / "pass.json")]
+    proc = subprocess.Popen(cmd, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+    try:
+        _wait_for(out / "panes" / "first" / "pane.json", proc)
+        os.killpg(proc.pid, signal.SIGKILL)  # the batch and the analysis it is running, mid-pane
+    finally:
+        proc.wait(timeout=60)
+    idx = {r["id"]: r for r in csv.DictReader((out / "index.csv").open())}
+    assert idx["first"]["status"] == "done" and idx["second"]["status"] == "pending"
+    stamp = os.stat(out / "panes" / "first" / "pane.json").st_mtime_ns
+
+    r = subprocess.run(cmd, env=_env(), capture_output=True, text=True, timeout=300)
+    assert r.returncode == 4, r.stdout + r.stderr  # every pane ran but one could not be analysed
+    assert "resuming: 1 pane(s) already done, 2 to analyse" in r.stdout
+    assert os.stat(out / "panes" / "first" / "pane.json").st_mtime_ns == stamp  # not redone
+    idx = {r["id"]: r for r in csv.DictReader((out / "index.csv").open())}
+    assert [idx[i]["status"] for i in ("first", "second", "missing")] == ["done", "done", "error"]
+    assert idx["first"]["verdict"] == idx["second"]["verdict"] == "PASS"
+    assert idx["first"]["method"] == "comparative" and idx["second"]["method"] == "direct"
+    assert "does not exist" in idx["missing"]["error"]
+    assert not [p for p in (out / "panes").iterdir() if p.name.startswith(".tmp")]
+    html = (out / "index.html").read_text()
+    assert all(f'id="pane-{i}"' in html for i in ("first", "second", "missing"))
