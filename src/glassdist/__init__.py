@@ -17,6 +17,30 @@ Conventions (used everywhere in the package)
 """
 
 from ._version import __version__
+from .analyzer import (
+    AnalysisResult,
+    AnalyzerParams,
+    analyze,
+    channel_statistics,
+    evaluate_displacement,
+    load_params,
+    prepare_reference,
+)
 from .errors import AnalysisError, GlassdistError, InputError
+from .io import read_image, read_mask
 
-__all__ = ["__version__", "GlassdistError", "InputError", "AnalysisError"]
+__all__ = [
+    "__version__",
+    "analyze",
+    "prepare_reference",
+    "AnalysisResult",
+    "AnalyzerParams",
+    "load_params",
+    "evaluate_displacement",
+    "channel_statistics",
+    "read_image",
+    "read_mask",
+    "GlassdistError",
+    "InputError",
+    "AnalysisError",
+]

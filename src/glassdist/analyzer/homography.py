@@ -124,12 +124,27 @@ def fit_homography(
             "occluded - use the Comparative Method (--reference) or a larger ransac_threshold_periods"
         )
     inliers = inl.ravel().astype(bool)
+    # Tighten: least-squares refits on the points closest to the consensus plane, so the
+    # few wave-displaced points that happen to fall inside the threshold weigh less.
+    for frac in (0.5, 0.35):
+        res = _reproj_error(H, src, dst)
+        core = res < frac * threshold_px
+        if core.sum() < max(8, 0.2 * inliers.sum()):
+            break
+        H2, _ = cv2.findHomography(src[core].astype(np.float64), dst[core].astype(np.float64), 0)
+        if H2 is None:
+            break
+        H = H2
     H = H / H[2, 2]
-    proj = np.c_[src, np.ones(len(src))] @ H.T
-    proj = proj[:, :2] / proj[:, 2:3]
-    err = np.linalg.norm(proj - dst, axis=1)
+    err = _reproj_error(H, src, dst)
+    inliers = err < threshold_px
     rms = float(np.sqrt(np.mean(err[inliers] ** 2)))
     return HomographyFit(H, float(inliers.mean()), int(len(src)), rms)
+
+
+def _reproj_error(H: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    p = np.c_[src, np.ones(len(src))] @ H.T
+    return np.linalg.norm(p[:, :2] / p[:, 2:3] - dst, axis=1)
 
 
 def apply_inverse(H: np.ndarray, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

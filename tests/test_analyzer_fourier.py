@@ -1,0 +1,78 @@
+"""F1-F3: carriers, orientation, baseband demodulation."""
+
+import numpy as np
+import pytest
+
+from glassdist.analyzer import fourier as F
+from glassdist.errors import InputError
+from glassdist.synthetic import synthetic_capture
+
+
+def _two_cosines(shape, f1, f2, phase=(0.0, 0.0)):
+    y, x = np.mgrid[0 : shape[0], 0 : shape[1]].astype(float)
+    return (
+        0.5
+        + 0.2 * np.cos(2 * np.pi * (f1[0] * x + f1[1] * y) + phase[0])
+        + 0.2 * np.cos(2 * np.pi * (f2[0] * x + f2[1] * y) + phase[1])
+    )
+
+
+def test_carriers_sub_bin_precision_and_orientation():
+    f1, f2 = (0.0912, 0.0131), (-0.0140, 0.0897)  # off-bin on a 480x640 image
+    c = F.find_carriers(F.compute_spectrum(_two_cosines((480, 640), f1, f2)))
+    found = sorted([tuple(np.round(np.abs(k.f), 6)) for k in (c.k1, c.k2)])
+    expect = sorted([tuple(np.abs(f1)), tuple(np.abs(f2))])
+    # Jacobsen refinement: well below 1e-3 bin (1 bin = 1/640 cycles/px).
+    assert np.allclose(found, expect, atol=1e-3 / 640)
+    assert np.linalg.det(c.matrix) > 0  # same handedness as the image frame
+
+
+@pytest.mark.parametrize("rotation", [0.0, 17.0, 45.0])
+def test_checkerboard_carriers_are_diagonal_with_period_sqrt2_square(rotation):
+    cap = synthetic_capture((256, 256), pitch_mm=6.0, mm_per_px=1.0, pattern="checkerboard", rotation_deg=rotation)
+    c = F.find_carriers(F.compute_spectrum(cap.image))
+    for k in (c.k1, c.k2):
+        assert k.period_px == pytest.approx(6.0 * np.sqrt(2.0), rel=2e-3)
+    ang = abs(c.k1.angle_deg - c.k2.angle_deg) % 180
+    assert min(ang, 180 - ang) == pytest.approx(90.0, abs=0.3)
+    axes = {round((k.angle_deg - rotation - 45.0) % 90.0, 1) % 90.0 for k in (c.k1, c.k2)}
+    assert all(min(a, 90 - a) < 0.5 for a in axes)
+
+
+def test_line_grid_ignores_cross_term():
+    # A crossed line grid has strong k1 + k2 cross terms at 45 deg; the carriers must be the fundamentals.
+    cap = synthetic_capture((256, 320), pitch_mm=8.0, mm_per_px=1.0, pattern="lines", rotation_deg=3.0)
+    c = F.find_carriers(F.compute_spectrum(cap.image))
+    for k in (c.k1, c.k2):
+        assert k.period_px == pytest.approx(8.0, rel=2e-3)
+
+
+def test_noise_image_has_no_grid():
+    rng = np.random.default_rng(1)
+    with pytest.raises(InputError, match="no grid"):
+        F.find_carriers(F.compute_spectrum(rng.random((200, 200))))
+
+
+def test_baseband_phase_measures_a_shift_exactly():
+    # A grid shifted by s px along carrier 1: the heterodyne phase is 2 pi f1 . s.
+    f1, f2 = (0.1, 0.02), (-0.015, 0.11)
+    a = _two_cosines((200, 240), f1, f2)
+    shift = np.array([0.7, -0.3])  # px, (x, y)
+    b = _two_cosines((200, 240), f1, f2, phase=(2 * np.pi * np.dot(f1, shift), 2 * np.pi * np.dot(f2, shift)))
+    sa, sb = F.compute_spectrum(a), F.compute_spectrum(b)
+    c = F.find_carriers(sa)
+    covs = [F.bandpass_covariance(c.k1, c.k2, sigma_along=0.3, sigma_cross=0.22),
+            F.bandpass_covariance(c.k2, c.k1, sigma_along=0.3, sigma_cross=0.22)]
+    grid = F.sampling_grid(a.shape, covs)
+    assert grid.shape[0] < a.shape[0]  # demodulated on a coarser grid
+    for k, cov in zip((c.k1, c.k2), covs):
+        z = F.baseband(sb, k, cov, grid) * np.conj(F.baseband(sa, k, cov, grid))
+        inner = np.angle(z)[5:-5, 5:-5]
+        assert np.allclose(inner, 2 * np.pi * np.dot(k.f, shift), atol=2e-3)
+
+
+def test_sampling_grid_positions_match_area_resampling():
+    g = F.SamplingGrid((100, 120), (25, 30))
+    yy, xx = g.coords()
+    assert g.step == (4.0, 4.0)
+    assert yy[0, 0] == pytest.approx(1.5) and xx[0, 1] == pytest.approx(5.5)

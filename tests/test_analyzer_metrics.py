@@ -1,0 +1,122 @@
+"""A2-A3: closed-form strain fields, detrending, smoothing, conventions."""
+
+import numpy as np
+import pytest
+
+from glassdist.analyzer.metrics import (
+    channel_statistics,
+    evaluate_displacement,
+    masked_gaussian,
+    polynomial_detrend,
+    strain_tensor,
+)
+
+L = 10.0
+
+
+def _grid(h=60, w=80, s=2.0):
+    y, x = np.mgrid[0:h, 0:w].astype(float)
+    return x * s, y * s  # backdrop mm, mm_per_px = s
+
+
+def _eval(dx, dy, s=2.0, **kw):
+    d = np.stack([dx, dy], -1)
+    kw.setdefault("detrend_degree", 0)
+    kw.setdefault("sigma_mm", 1e-6)
+    return evaluate_displacement(d, np.ones(dx.shape, bool), distance_m=L, mm_per_px=s, **kw)
+
+
+def test_uniform_dilation_is_pure_power():
+    X, Y = _grid()
+    a = 1e-3
+    ch = _eval(a * X, a * Y)
+    assert np.allclose(ch.phi_eff_mD, 2 * a / L * 1000)
+    assert np.allclose(ch.phi_shear_mD, 0, atol=1e-9)
+    assert np.allclose(ch.phi_total_mD, np.sqrt(2) * a / L * 1000)
+
+
+def test_pure_shear_is_pure_astigmatism_with_axis():
+    X, Y = _grid()
+    a = 1e-3
+    ch = _eval(a * X, -a * Y)  # stretch along x, compress along y
+    assert np.allclose(ch.phi_eff_mD, 0, atol=1e-9)
+    assert np.allclose(ch.phi_shear_mD, 2 * a / L * 1000)
+    assert np.allclose(ch.axis_deg, 0.0)
+    ch = _eval(a * Y, a * X)  # simple shear: stretch along the diagonal x = y (+x towards +y)
+    assert np.allclose(ch.phi_shear_mD, 2 * a / L * 1000)
+    assert np.allclose(ch.axis_deg, 45.0)
+
+
+def test_rigid_rotation_and_translation_read_zero():
+    X, Y = _grid()
+    t = 2e-3
+    ch = _eval(-t * Y + 3.0, t * X - 1.0)
+    for c in (ch.phi_eff_mD, ch.phi_shear_mD, ch.phi_total_mD):
+        assert np.allclose(c, 0, atol=1e-9)
+
+
+def test_converging_lens_sign_convention():
+    # delta = -P L r (landing points pulled to the axis): phi_eff = -2P.
+    X, Y = _grid()
+    P = 0.004  # D
+    r0 = np.array([X.mean(), Y.mean()])
+    ch = _eval(-P * L * (X - r0[0]), -P * L * (Y - r0[1]))
+    assert np.allclose(ch.phi_eff_mD, -2 * P * 1000)
+    assert np.all(ch.phi_eff_mD < 0)
+
+
+def test_jacobian_path_equals_isotropic_for_a_similarity():
+    X, Y = _grid()
+    d = np.stack([1e-3 * np.sin(X / 20), 2e-3 * np.cos(Y / 15)], -1)
+    J = np.broadcast_to(2.0 * np.eye(2), X.shape + (2, 2))
+    a = strain_tensor(d, mm_per_px=2.0)
+    b = strain_tensor(d, jacobian=J)
+    assert np.allclose(a, b)
+
+
+def test_anisotropic_jacobian_exact_gradients():
+    # Foreshortened view: 3 mm/px along x, 2 mm/px along y.
+    h, w = 40, 50
+    y, x = np.mgrid[0:h, 0:w].astype(float)
+    X, Y = 3.0 * x, 2.0 * y
+    a, b = 1e-3, -2e-3
+    d = np.stack([a * X, b * Y], -1)
+    J = np.broadcast_to(np.diag([3.0, 2.0]), (h, w, 2, 2))
+    eps = strain_tensor(d, jacobian=J)
+    assert np.allclose(eps[..., 0, 0], a) and np.allclose(eps[..., 1, 1], b)
+
+
+@pytest.mark.parametrize("degree", [0, 1, 2, 4])
+def test_detrend_removes_polynomials_of_its_degree_per_region(degree):
+    X, Y = _grid(50, 60, 1.0)
+    rng = np.random.default_rng(3)
+    labels = np.ones(X.shape, int)
+    labels[:, 30:] = 2
+    f = np.zeros(X.shape)
+    for r in (1, 2):
+        c = rng.normal(size=(degree + 1, degree + 1))
+        poly = sum(c[i, j] * (X / 50) ** i * (Y / 50) ** j for i in range(degree + 1) for j in range(degree + 1 - i))
+        f[labels == r] = poly[labels == r]
+    assert np.allclose(polynomial_detrend(f, labels, degree), 0, atol=1e-8)
+    if degree >= 1:
+        assert not np.allclose(polynomial_detrend(f, labels, degree - 1), 0, atol=1e-3)
+
+
+def test_masked_gaussian_keeps_linear_fields_and_matches_sigma():
+    X, Y = _grid(80, 80, 1.0)
+    w = np.ones(X.shape)
+    w[:, :10] = 0
+    lin = 0.3 * X - 0.1 * Y
+    out = masked_gaussian(lin, w, 4.0**2 * np.eye(2))
+    assert np.allclose(out[:, 10:], lin[:, 10:], atol=1e-6)
+    # A sinusoid of wavelength 40 px is attenuated by exp(-2 pi^2 sigma^2 / 40^2).
+    s = np.sin(2 * np.pi * X / 40.0)
+    out = masked_gaussian(s, np.ones(X.shape), 4.0**2 * np.eye(2))
+    expect = np.exp(-2 * np.pi**2 * 16 / 1600)
+    assert np.ptp(out[20:60, 20:60]) / 2 == pytest.approx(expect, rel=2e-3)
+
+
+def test_statistics():
+    f = np.array([[1.0, -2.0], [np.nan, 4.0]])
+    st = channel_statistics(f, np.array([[True, True], [True, False]]))
+    assert st["mean_abs"] == pytest.approx(1.5) and st["max_abs"] == 2.0 and st["n_valid"] == 2

@@ -1,0 +1,104 @@
+"""The command-line contract: outputs, and one-line errors for bad input."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from conftest import DATA
+
+from glassdist.io import write_png16
+from glassdist.synthetic import synthetic_capture, wave_displacement
+
+
+def _cli(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "glassdist", *map(str, args)], capture_output=True, text=True, cwd=cwd)
+
+
+@pytest.fixture(scope="module")
+def photos(tmp_path_factory):
+    d = tmp_path_factory.mktemp("photos")
+    cap = synthetic_capture((240, 300), pitch_mm=8.0, mm_per_px=1.0, displacement=wave_displacement(0.5, 120.0, 20.0))
+    write_png16(d / "img.png", cap.image)
+    write_png16(d / "ref.png", cap.reference)
+    write_png16(d / "small_ref.png", cap.reference[:200, :200])
+    write_png16(d / "blank.png", np.full((200, 200), 0.5))
+    write_png16(d / "white.png", np.ones((200, 200)))
+    write_png16(d / "noise.png", np.random.default_rng(0).random((200, 200)))
+    write_png16(d / "tiny.png", cap.image[:40, :40])
+    (d / "bad_params.json").write_text(json.dumps({"detrend_degre": 3}))
+    (d / "not_json.json").write_text("{detrend_degree: 3")
+    return d
+
+
+def test_analyze_writes_the_contract(photos, tmp_path):
+    out = tmp_path / "out"
+    r = _cli("analyze", photos / "img.png", "--reference", photos / "ref.png", "--pitch-mm", 8, "--distance-m", 10,
+             "--sigma-mm", 16, "--out", out)
+    assert r.returncode == 0, r.stderr
+    with np.load(out / "result.npz") as z:
+        assert z["displacement_mm"].shape == (240, 300, 2)
+        for k in ("phi_eff_mD", "phi_shear_mD", "phi_total_mD", "valid"):
+            assert z[k].shape == (240, 300)
+        assert z["valid"].dtype == bool
+        assert np.all(np.isnan(z["phi_eff_mD"][~z["valid"]]))
+    s = json.loads((out / "summary.json").read_text())
+    assert s["method"] == "comparative"
+    assert s["parameters"]["sigma_mm"] == 16.0 and s["glassdist_version"]
+    for ch in ("phi_eff_mD", "phi_shear_mD", "phi_total_mD"):
+        assert set(s["statistics"][ch]) >= {"mean_abs", "std", "p95_abs", "max_abs"}
+    assert (out / "phi_eff.png").exists() and (out / "phi_shear.png").exists()
+    # Direct method, same options otherwise
+    r = _cli("analyze", photos / "img.png", "--pitch-mm", 8, "--distance-m", 10, "--out", tmp_path / "direct")
+    assert r.returncode == 0, r.stderr
+    s = json.loads((tmp_path / "direct" / "summary.json").read_text())
+    assert s["method"] == "direct" and len(s["homography"]["matrix"]) == 3
+
+
+def test_module_and_console_script_agree(photos):
+    r = _cli("--version")
+    assert r.returncode == 0 and "glassdist" in r.stdout
+
+
+BAD = [
+    (["analyze", "missing.png", "--pitch-mm", 8, "--distance-m", 10], "does not exist"),
+    (["analyze", "{d}/img.png", "--pitch-mm", 0, "--distance-m", 10], "must be positive"),
+    (["analyze", "{d}/img.png", "--pitch-mm", 8, "--distance-m", -2], "must be positive"),
+    (["analyze", "{d}/blank.png", "--pitch-mm", 8, "--distance-m", 10], "blank"),
+    (["analyze", "{d}/white.png", "--pitch-mm", 8, "--distance-m", 10], "blank|saturated"),
+    (["analyze", "{d}/noise.png", "--pitch-mm", 8, "--distance-m", 10], "no grid"),
+    (["analyze", "{d}/tiny.png", "--pitch-mm", 8, "--distance-m", 10], "too small|at least"),
+    (["analyze", "{d}/img.png", "--reference", "{d}/small_ref.png", "--pitch-mm", 8, "--distance-m", 10], "same"),
+    (["analyze", "{d}/img.png", "--params", "{d}/bad_params.json", "--pitch-mm", 8, "--distance-m", 10], "unknown key 'detrend_degre'"),
+    (["analyze", "{d}/img.png", "--params", "{d}/not_json.json", "--pitch-mm", 8, "--distance-m", 10], "not valid JSON"),
+    (["analyze", "{d}/img.png", "--mask", "{d}/tiny.png", "--pitch-mm", 8, "--distance-m", 10], "same size"),
+]
+
+
+@pytest.mark.parametrize("args,message", BAD)
+def test_bad_input_gives_one_line_error(photos, tmp_path, args, message):
+    import re
+
+    out = tmp_path / "out"
+    r = _cli(*[a.format(d=photos) if isinstance(a, str) else a for a in args], "--out", out)
+    assert r.returncode == 2
+    assert "Traceback" not in r.stderr
+    lines = [ln for ln in r.stderr.strip().splitlines() if not ln.startswith(("usage", " "))]
+    assert len(lines) == 1, r.stderr
+    assert re.search(message, lines[0]), lines[0]
+    assert not (out / "result.npz").exists()
+
+
+def test_output_path_that_is_a_file_is_refused_and_untouched(photos, tmp_path):
+    f = tmp_path / "precious.txt"
+    f.write_text("keep me")
+    r = _cli("analyze", photos / "img.png", "--pitch-mm", 8, "--distance-m", 10, "--out", f)
+    assert r.returncode == 2 and "existing file" in r.stderr and "Traceback" not in r.stderr
+    assert f.read_text() == "keep me"
+
+
+def test_bundled_example_runs(tmp_path):
+    r = _cli("analyze", DATA / "distorted_floating_ring.bmp", "--reference", DATA / "reference.png", "--pattern",
+             "checkerboard", "--pitch-mm", 5, "--distance-m", 0.5, "--out", tmp_path / "ring")
+    assert r.returncode == 0, r.stderr

@@ -1,0 +1,44 @@
+"""Real photographs: a checkerboard seen through disturbed water (examples/data, no ground truth).
+
+Nominal geometry (pitch 5 mm, L = 0.5 m): the source records none, so values are checked for
+consistency (carriers, masking, Comparative vs Direct agreement), not for absolute truth.
+"""
+
+import numpy as np
+import pytest
+
+from glassdist import analyze
+from glassdist.analyzer import fourier as F
+
+P = {"pattern": "checkerboard"}
+
+
+def test_carriers_found_on_real_photos(real_data):
+    for name in ("reference", "waves", "ring"):
+        c = F.find_carriers(F.compute_spectrum(real_data[name]))
+        for k in (c.k1, c.k2):
+            assert k.period_px == pytest.approx(9.8, abs=0.15), name
+        assert c.to_dict()["angle_between_deg"] == pytest.approx(90.0, abs=2.0)
+
+
+def test_opaque_ring_is_masked(real_data):
+    res = analyze(real_data["ring"], pitch_mm=5.0, distance_m=0.5, reference=real_data["reference"], params=P)
+    yy, xx = np.mgrid[0:1024, 0:1024]
+    inside = (yy - 358) ** 2 + (xx - 393) ** 2 < 55**2  # the floating ring hides the grid here
+    assert res.valid[inside].mean() < 0.02
+    far = (yy - 358) ** 2 + (xx - 393) ** 2 > 160**2
+    assert res.valid[far].mean() > 0.85
+
+
+def test_comparative_and_direct_agree_on_waves(real_data):
+    # Degree 3 removes the camera's own lens distortion, which the Direct Method cannot
+    # tell from glass (the Comparative Method cancels it against the reference).
+    p = dict(P, detrend_degree=3)
+    c = analyze(real_data["waves"], pitch_mm=5.0, distance_m=0.5, reference=real_data["reference"], params=p)
+    d = analyze(real_data["waves"], pitch_mm=5.0, distance_m=0.5, params=p)
+    v = c.valid & d.valid
+    assert v.mean() > 0.6
+    for ch in ("phi_eff_mD", "phi_shear_mD"):
+        a, b = getattr(c, ch)[v], getattr(d, ch)[v]
+        assert np.corrcoef(a, b)[0, 1] > 0.99, ch
+        assert np.mean(np.abs(b)) / np.mean(np.abs(a)) == pytest.approx(1.0, abs=0.03), ch
