@@ -247,10 +247,45 @@ def _build_glass(bpy, job, arrays, world_to_blender):
     else:
         raise ValueError(f"glass.bsdf must be 'refraction' or 'glass', got {kind!r}")
     bsdf.distribution = "GGX"  # with roughness 0: a perfectly smooth (delta) interface
-    bsdf.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    tau = math.sqrt(float(g.get("transmittance", 1.0)))  # two interfaces: T overall
+    bsdf.inputs["Color"].default_value = (tau, tau, tau, 1.0)
     bsdf.inputs["Roughness"].default_value = 0.0
     bsdf.inputs["IOR"].default_value = float(g["ior"])
     nt.links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
+    obj.data.materials.append(mat)
+    if g.get("frame"):
+        _build_frame(bpy, g["frame"], verts, quads, rot, world_to_blender @ origin)
+    return obj
+
+
+def _build_frame(bpy, frame, verts, quads, rot, origin_b):
+    """Opaque emitting band over the front face outside ``|u| <= hu, |v| <= hv``."""
+    hu, hv = (float(t) for t in frame["inner_half_mm"])
+    nfront = len(verts) // 2
+    front = quads[(quads < nfront).all(axis=1)]
+    centre = verts[front].mean(axis=1)
+    band = front[(np.abs(centre[:, 0]) > hu) | (np.abs(centre[:, 1]) > hv)]
+    if len(band) == 0:
+        return None
+    used, inverse = np.unique(band, return_inverse=True)
+    local = verts[used].copy()
+    local[:, 2] -= float(frame.get("lift_mm", 0.01))  # towards the camera
+    verts_w = MM * (local @ rot.T + origin_b)
+    centre_w = 0.5 * (verts_w.min(axis=0) + verts_w.max(axis=0))
+    mesh = _build_mesh(bpy, "frame", verts_w - centre_w, inverse.reshape(band.shape), None)
+    m = np.eye(4)
+    m[:3, 3] = centre_w
+    obj = _new_object(bpy, "frame", mesh, m)
+    mat = bpy.data.materials.new("frame")
+    mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    emit = nt.nodes.new("ShaderNodeEmission")
+    val = float(frame["intensity"])
+    emit.inputs["Color"].default_value = (val, val, val, 1.0)
+    emit.inputs["Strength"].default_value = 1.0
+    nt.links.new(emit.outputs["Emission"], out.inputs["Surface"])
     obj.data.materials.append(mat)
     return obj
 
