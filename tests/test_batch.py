@@ -202,3 +202,16 @@ def test_folder_source_skips_the_reference(tmp_path):
     assert [p.id for p in panes] == ["a", "b"]
     with pytest.raises(InputError, match="no 'distance_m'"):
         panes_from_folder(tmp_path, pane_defaults(pitch_mm=5.0))
+
+
+def test_two_batches_cannot_share_a_folder(tmp_path):
+    fcntl = pytest.importorskip("fcntl")
+    out = tmp_path / "out"
+    _run(_panes(tmp_path, ["a"]), out, FakeRunner())
+    with open(out / ".glassdist-batch", "a+") as held:
+        fcntl.flock(held, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        with pytest.raises(InputError, match="another 'glassdist batch'"):
+            _run(_panes(tmp_path, ["a", "b"]), out, FakeRunner())
+    runner = FakeRunner()
+    _run(_panes(tmp_path, ["a", "b"]), out, runner)
+    assert runner.calls == ["b"]
