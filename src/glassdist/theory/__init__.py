@@ -2,9 +2,19 @@
 
 Pure functions of a :class:`glassdist.scene.Scene`: the first-order Snell
 forward model of the deformed slab evaluated on the camera pixel grid
-(:func:`predict_displacement`), independent of any rendered image.
+(:func:`predict_displacement`), independent of any rendered image, and its
+passage through the shared evaluation stack (:func:`predict_channels`).
 """
 
+from ._channels import analysis_params, carrier_period_mm, predict_channels
 from ._model import Prediction, nominal_mm_per_px, predict_displacement, slab_shift
 
-__all__ = ["Prediction", "predict_displacement", "slab_shift", "nominal_mm_per_px"]
+__all__ = [
+    "Prediction",
+    "predict_displacement",
+    "predict_channels",
+    "analysis_params",
+    "carrier_period_mm",
+    "slab_shift",
+    "nominal_mm_per_px",
+]

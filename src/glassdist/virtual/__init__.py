@@ -1,0 +1,12 @@
+"""The Virtual Pipeline (paper §2, §3.1): both branches from one scene, compared.
+
+:func:`validate_scene` renders the scene, runs the Distortion Analyzer, evaluates
+the Optical Theoretical Model on the camera pixel grid, passes it through the
+same evaluation stack and reports the paper's Table 2 figures
+(:class:`Validation`).
+"""
+
+from ._figure import validation_figure
+from ._validate import CHANNELS, Validation, compare, procrustes, validate_scene
+
+__all__ = ["validate_scene", "compare", "procrustes", "Validation", "validation_figure", "CHANNELS"]
