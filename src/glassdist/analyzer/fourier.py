@@ -43,6 +43,8 @@ __all__ = [
     "sampling_grid",
     "bandpass_covariance",
     "baseband",
+    "block_grid",
+    "block_mean",
     "smooth_complex",
 ]
 
@@ -332,12 +334,15 @@ def bandpass_covariance(
 
 
 def sampling_grid(
-    shape: tuple[int, int], covariances: list[np.ndarray], decimation: int | str = "auto", *, support: float = 4.0
+    shape: tuple[int, int], covariances: list[np.ndarray], decimation: int | str = "auto", *, support: float = 4.0,
+    multiple: int = 4,
 ) -> SamplingGrid:
     """Choose the coarse grid that carries the bandpassed signals without aliasing.
 
     ``auto``: the spectral patch spans ``+- support`` standard deviations of the
     widest bandpass, so the Gaussian tails outside it are below ``exp(-support^2/2)``.
+    The grid shape is a multiple of ``multiple`` so that it can be block-averaged
+    by 2 or 4 exactly (:func:`block_grid`).
     """
     H, W = shape
     if decimation == "auto":
@@ -348,7 +353,37 @@ def sampling_grid(
     else:
         d = int(decimation)
         h, w = int(np.ceil(H / d)), int(np.ceil(W / d))
-    return SamplingGrid((H, W), (max(h, 8), max(w, 8)) if (h < H or w < W) else (H, W))
+    if (h, w) == (H, W) and H % multiple == 0 and W % multiple == 0:
+        return SamplingGrid((H, W), (H, W))
+
+    def fit(n, N):
+        up = int(np.ceil(max(n, 8) / multiple)) * multiple
+        return up if up <= N else (N // multiple) * multiple
+
+    return SamplingGrid((H, W), (fit(h, H), fit(w, W)))
+
+
+def block_grid(grid: SamplingGrid, m: int) -> SamplingGrid:
+    """The grid of ``m x m`` block averages of ``grid`` (same position convention)."""
+    h, w = grid.shape
+    if h % m or w % m:
+        raise ValueError(f"grid {grid.shape} is not divisible by {m}")
+    return SamplingGrid(grid.full_shape, (h // m, w // m))
+
+
+def block_mean(a: np.ndarray, weight: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted ``m x m`` block means of ``a`` (h, w[, c]) and the block fill fraction of ``weight``."""
+    if m == 1:
+        return a, weight.astype(float)
+    h, w = weight.shape
+    wt = weight.astype(float).reshape(h // m, m, w // m, m)
+    fill = wt.mean(axis=(1, 3))
+    extra = a.shape[2:]
+    av = np.nan_to_num(a).reshape((h // m, m, w // m, m) + extra)
+    wb = wt.reshape(wt.shape + (1,) * len(extra))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = (av * wb).sum(axis=(1, 3)) / (fill.reshape(fill.shape + (1,) * len(extra)) * m * m)
+    return mean, fill
 
 
 def baseband(spectrum: Spectrum, carrier: Carrier, cov_f: np.ndarray, grid: SamplingGrid) -> np.ndarray:

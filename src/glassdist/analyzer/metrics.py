@@ -202,6 +202,24 @@ def masked_gaussian(
     return out
 
 
+def _derivative(f: np.ndarray, axis: int, h: float) -> np.ndarray:
+    """Fourth-order centred difference (second order in the two outermost samples).
+
+    On coarse sampling grids the 2-point centred difference would attenuate a wave of
+    wavelength W by sin(x)/x, x = 2 pi h / W; the 5-point stencil is accurate to
+    about x^4/30 (0.2% at x = 0.5).
+    """
+    g = np.gradient(f, h, axis=axis)
+    n = f.shape[axis]
+    if n >= 5:
+        sl = lambda a, b: tuple(slice(a, b) if i == axis else slice(None) for i in range(f.ndim))  # noqa: E731
+        inner = (-f[sl(4, None)] + 8 * f[sl(3, -1)] - 8 * f[sl(1, -3)] + f[sl(0, -4)]) / (12 * h)
+        # Where the 5-point stencil reaches NaN, keep the 3-point value.
+        g_in = g[sl(2, -2)]
+        g[sl(2, -2)] = np.where(np.isfinite(inner), inner, g_in)
+    return g
+
+
 def strain_tensor(displacement_mm: np.ndarray, step_px=(1.0, 1.0), *, mm_per_px: float | None = None, jacobian=None):
     """A3: eps = sym(d delta / dX) by centred differences, X in backdrop mm.
 
@@ -223,7 +241,8 @@ def strain_tensor(displacement_mm: np.ndarray, step_px=(1.0, 1.0), *, mm_per_px:
     sy, sx = step_px
     G = np.empty(d.shape[:2] + (2, 2))
     for c in range(2):  # d delta_c / d(x, y) in px
-        G[..., c, 1], G[..., c, 0] = np.gradient(d[..., c], sy, sx)
+        G[..., c, 1] = _derivative(d[..., c], 0, sy)
+        G[..., c, 0] = _derivative(d[..., c], 1, sx)
     if jacobian is None:
         if mm_per_px is None:
             raise ValueError("strain_tensor needs mm_per_px or jacobian")
@@ -258,6 +277,7 @@ def evaluate_displacement(
     step_px=(1.0, 1.0),
     component_blur_px2: np.ndarray | None = None,
     frame_rotation: np.ndarray | None = None,
+    report_mask: np.ndarray | None = None,
 ) -> Channels:
     """The shared evaluation stack: A2 detrend, metric-anchored smoothing, A3 channels.
 
@@ -289,6 +309,9 @@ def evaluate_displacement(
         ``R`` with components given in a rotated frame: camera-frame delta = R^T delta.
         Channels are rotation invariant; the axis and the returned displacement are
         expressed in the camera frame.
+    report_mask : ndarray of bool (h, w), optional
+        Where results are reported (default ``valid``); a ring just outside
+        ``valid`` receives the smooth first-order extrapolation of the field.
 
     Returns
     -------
@@ -320,7 +343,7 @@ def evaluate_displacement(
         eps = R.T @ eps @ R
         disp_out = smooth @ R  # row-vector form of R^T delta
     phi_eff, phi_shear, phi_total, axis = channels_from_strain(eps, distance_m)
-    inval = ~valid
+    inval = ~(valid if report_mask is None else np.asarray(report_mask, bool))
     for a in (phi_eff, phi_shear, phi_total, axis):
         a[inval] = np.nan
     disp_out = disp_out.copy()

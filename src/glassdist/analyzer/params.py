@@ -83,6 +83,10 @@ class AnalyzerParams(BaseModel):
         "auto", description="sampling step of the demodulated signals, px ('auto': about a third of the carrier period)"
     )
 
+    analysis_block: Literal["auto", 1, 2, 4] = Field(
+        "auto", description="Block A runs on m x m block means of the demodulation grid ('auto': as coarse as sigma allows)"
+    )
+
     @field_validator("decimation")
     @classmethod
     def _check_decimation(cls, v):

@@ -312,26 +312,50 @@ def _polar_rotation(J: np.ndarray) -> np.ndarray:
     return u @ vt
 
 
-def _upsample(fields: np.ndarray, valid: np.ndarray, grid: F.SamplingGrid, user_mask):
-    """Bilinear upsampling to the image grid, normalised by the valid weight (no NaN bleeding)."""
+def _upsample(fields: list[np.ndarray], valid: np.ndarray, grid: F.SamplingGrid, user_mask):
+    """Bilinear upsampling of coarse fields to the image grid; NaN outside the valid region.
+
+    Invalid coarse samples are first filled with their nearest valid value, so the
+    interpolation never mixes NaN into valid pixels near a border.
+    """
     import cv2
 
     H, W = grid.full_shape
-    v = valid.astype(np.float32)
-    f = np.where(valid[..., None], np.nan_to_num(fields), 0.0).astype(np.float32) * v[..., None]
-    if grid.is_full:
-        up, vu = f, v
+    if not valid.all() and valid.any():
+        idx = ndimage.distance_transform_edt(~valid, return_distances=False, return_indices=True)
     else:
-        chans = [cv2.resize(np.ascontiguousarray(f[..., i]), (W, H), interpolation=cv2.INTER_LINEAR) for i in range(f.shape[-1])]
-        up = np.stack(chans, axis=-1)
-        vu = cv2.resize(v, (W, H), interpolation=cv2.INTER_LINEAR)
-    valid_full = vu >= 0.5
+        idx = None
+    if grid.is_full:
+        valid_full = valid.copy()
+    else:
+        valid_full = cv2.resize(valid.astype(np.float32), (W, H), interpolation=cv2.INTER_LINEAR) >= 0.5
     if user_mask is not None:
         valid_full &= user_mask
-    with np.errstate(invalid="ignore", divide="ignore"):
-        out = up / np.maximum(vu, 1e-6)[..., None]
-    out[~valid_full] = np.nan
-    return out.astype(np.float32), valid_full
+    invalid = ~valid_full
+    out = []
+    for f in fields:
+        f = np.asarray(f, np.float32)
+        if idx is not None:
+            f = f[idx[0], idx[1]]
+        up = f.copy() if grid.is_full else cv2.resize(f, (W, H), interpolation=cv2.INTER_LINEAR)
+        np.copyto(up, np.float32(np.nan), where=invalid)
+        out.append(up)
+    return out, valid_full
+
+
+def _analysis_block(sigma_px: float, blur, grid: F.SamplingGrid, p: AnalyzerParams) -> int:
+    """Block factor (1, 2 or 4) of the Block A grid: its step stays below half the residual smoothing."""
+    if p.analysis_block != "auto":
+        m = int(p.analysis_block)
+        return m if grid.shape[0] % m == 0 and grid.shape[1] % m == 0 else 1
+    worst = 0.0 if blur is None else max(float(np.max(np.linalg.eigvalsh(b))) for b in blur)
+    residual = np.sqrt(max(sigma_px**2 - worst, 0.0))
+    step = max(grid.step)
+    h, w = grid.shape
+    for m in (4, 2):
+        if h % m == 0 and w % m == 0 and m * step <= residual / 2.0 and min(h, w) // m >= 16:
+            return m
+    return 1
 
 
 # --------------------------------------------------------------------------- public API
@@ -514,14 +538,34 @@ def analyze(
                 f"sigma_mm = {sigma_mm:.3g} mm ({s_px:.1f} px) is finer than the demodulation resolution "
                 f"({np.sqrt(worst):.1f} px); the effective smoothing is coarser than requested"
             )
+    # Block A runs on block means of the demodulation grid, as coarse as the reporting
+    # smoothing allows (step <= sigma/2; the box blur joins the compensated budget).
+    m = _analysis_block(sigma_mm / mm_per_px, blur, grid, p)
+    agrid = F.block_grid(grid, m)
+    valid_f = valid
+    if m > 1:
+        phases, fill = F.block_mean(phases, valid, m)
+        hb, wb = agrid.shape
+        block_label = labels.reshape(hb, m, wb, m).max(axis=(1, 3))
+        # Whole blocks only (their mean sits at the block centre); partial border blocks
+        # get the smooth extrapolation from inside, and the fine mask trims them below.
+        labels = np.where(fill >= 1.0, block_label, 0)
+        valid = labels > 0
+        report = ndimage.binary_dilation(valid, iterations=1) & (fill > 0)
+        if blur is not None:
+            blur = blur + (m * max(grid.step)) ** 2 / 12.0 * np.eye(2)
+        yy, xx = agrid.coords()
+    else:
+        report = valid
     if p.a1_mode == "projective":
         delta = phases * (p_c / (2 * np.pi))  # grid-frame components, exact
         J = p_c * inverse_jacobian(H_jac, xx, yy)
-        hc, wc = grid.shape
+        hc, wc = agrid.shape
         R = _polar_rotation(J[hc // 2, wc // 2])
         ch = evaluate_displacement(
             delta, valid, distance_m=distance_m, mm_per_px=mm_per_px, detrend_degree=p.detrend_degree,
-            sigma_mm=sigma_mm, jacobian=J, labels=labels, step_px=grid.step, component_blur_px2=blur, frame_rotation=R,
+            sigma_mm=sigma_mm, jacobian=J, labels=labels, step_px=agrid.step, component_blur_px2=blur, frame_rotation=R,
+            report_mask=report,
         )
         delta_cam = delta @ R
     else:
@@ -532,28 +576,34 @@ def analyze(
         iso_blur = None if blur is None else np.repeat((np.trace(blur, axis1=1, axis2=2).mean() / 2 * np.eye(2))[None], 2, 0)
         ch = evaluate_displacement(
             delta_cam, valid, distance_m=distance_m, mm_per_px=mm_per_px, detrend_degree=p.detrend_degree,
-            sigma_mm=sigma_mm, labels=labels, step_px=grid.step, component_blur_px2=iso_blur,
+            sigma_mm=sigma_mm, labels=labels, step_px=agrid.step, component_blur_px2=iso_blur, report_mask=report,
         )
 
     cover = float(valid.mean())
     if cover < 0.5:
         warn.append(f"only {100 * cover:.0f}% of the image could be analysed (occlusion, low contrast or blur)")
-    stack = np.concatenate(
-        [delta_cam, ch.displacement_detrended_mm, np.stack([ch.phi_eff_mD, ch.phi_shear_mD, ch.phi_total_mD, ch.axis_deg], -1)],
-        axis=-1,
-    )
-    valid_c = valid & np.all(np.isfinite(stack), axis=-1)
-    full, valid_full = _upsample(stack, valid_c, grid, mask)
+    fields = [delta_cam[..., 0], delta_cam[..., 1], ch.displacement_detrended_mm[..., 0], ch.displacement_detrended_mm[..., 1],
+              ch.phi_eff_mD, ch.phi_shear_mD, ch.phi_total_mD, ch.axis_deg]
+    valid_c = report.copy()
+    for f_ in fields:
+        valid_c &= np.isfinite(f_)
+    if m > 1:  # the border of the valid region keeps the demodulation grid's resolution
+        import cv2
+
+        H_, W_ = grid.full_shape
+        fine = cv2.resize(valid_f.astype(np.float32), (W_, H_), interpolation=cv2.INTER_LINEAR) >= 0.5
+        mask = fine if mask is None else (mask & fine)
+    full, valid_full = _upsample(fields, valid_c, agrid, mask)
     for w in warn:
         log.warning(w)
     return AnalysisResult(
         method=method,
-        displacement_mm=full[..., 0:2],
-        displacement_detrended_mm=full[..., 2:4],
-        phi_eff_mD=full[..., 4],
-        phi_shear_mD=full[..., 5],
-        phi_total_mD=full[..., 6],
-        axis_deg=full[..., 7],
+        displacement_mm=np.stack(full[0:2], axis=-1),
+        displacement_detrended_mm=np.stack(full[2:4], axis=-1),
+        phi_eff_mD=full[4],
+        phi_shear_mD=full[5],
+        phi_total_mD=full[6],
+        axis_deg=full[7],
         valid=valid_full,
         mm_per_px=mm_per_px,
         sigma_mm=float(sigma_mm),
@@ -566,6 +616,6 @@ def analyze(
         homography_fit=fit,
         params=p,
         warnings=tuple(warn),
-        sampling_step_px=grid.step,
+        sampling_step_px=agrid.step,
         n_regions=n,
     )
