@@ -1,0 +1,106 @@
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from glassdist.errors import InputError
+from glassdist.scene import (
+    GaussianBump, Pillow, Plane, RollerWave, SphericalCap, landing_jacobian, load_scene, pattern_intensity,
+)
+from glassdist.theory import carrier_period_mm, nominal_mm_per_px
+
+from test_scene_helpers import make_scene
+
+EXAMPLES = sorted((Path(__file__).parents[1] / "examples" / "scenes").glob("*.yaml"))
+
+TERMS = [
+    RollerWave(kind="roller_wave", amplitude_mm=0.2, wavelength_mm=150, direction_deg=25, phase_deg=10,
+               harmonics=[{"order": 2, "amplitude_mm": 0.03, "phase_deg": 40}]),
+    Pillow(kind="pillow", amplitude_mm=1.0, size_mm=(900, 700), center_mm=(20, -10)),
+    SphericalCap(kind="spherical_cap", radius_mm=-20000, aperture_mm=300, center_mm=(10, 5)),
+    GaussianBump(kind="gaussian", amplitude_mm=0.05, sigma_mm=40, center_mm=(-5, 8)),
+    Plane(kind="plane", slope=(1e-3, -2e-3), offset_mm=0.1),
+]
+
+
+@pytest.mark.parametrize("term", TERMS, ids=lambda t: t.kind)
+def test_term_derivatives_match_finite_differences(term):
+    rng = np.random.default_rng(0)
+    u, v = rng.uniform(-200, 200, (2, 50))
+    h = 1e-3
+    gu, gv = term.gradient(u, v)
+    fd_u = (term.height(u + h, v) - term.height(u - h, v)) / (2 * h)
+    fd_v = (term.height(u, v + h) - term.height(u, v - h)) / (2 * h)
+    scale = max(np.abs(gu).max(), np.abs(gv).max(), 1e-12)
+    assert np.allclose(gu, fd_u, atol=1e-5 * scale) and np.allclose(gv, fd_v, atol=1e-5 * scale)
+    huu, huv, hvv = term.hessian(u, v)
+    fd_uu = (term.gradient(u + h, v)[0] - term.gradient(u - h, v)[0]) / (2 * h)
+    fd_uv = (term.gradient(u, v + h)[0] - term.gradient(u, v - h)[0]) / (2 * h)
+    fd_vv = (term.gradient(u, v + h)[1] - term.gradient(u, v - h)[1]) / (2 * h)
+    hs = max(np.abs(huu).max(), np.abs(hvv).max(), 1e-12)
+    for a, b in ((huu, fd_uu), (huv, fd_uv), (hvv, fd_vv)):
+        assert np.allclose(a, b, atol=1e-5 * hs)
+    hg = term.height_gradient(u, v)
+    assert np.allclose(hg[0], term.height(u, v)) and np.allclose(hg[1], gu) and np.allclose(hg[2], gv)
+
+
+@pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.stem)
+def test_examples_load_and_resolve_the_carrier(path):
+    scene = load_scene(path)
+    period_px = carrier_period_mm(scene) / nominal_mm_per_px(scene)
+    assert period_px >= 6.0
+
+
+def test_example_set_covers_the_paper_cases():
+    names = {p.stem for p in EXAMPLES}
+    assert {"wavy_slab", "biconvex_lens_p96", "biconvex_lens_p64", "biconvex_lens_p48",
+            "mild_slab_aligned", "mild_slab_rotated", "pillowed_igu"} <= names
+
+
+def test_bad_scenes_raise_one_line_input_errors(tmp_path):
+    with pytest.raises(InputError, match="does not exist"):
+        load_scene(tmp_path / "missing.yaml")
+    good = make_scene().model_dump(mode="json")
+    for mutate, pattern in (
+        (lambda d: d["pane"].__setitem__("thickness_mm", -1), "thickness_mm"),
+        (lambda d: d["pane"].__setitem__("colour", "green"), "unknown key 'pane.colour'"),
+        (lambda d: d.pop("camera"), "missing key 'camera'"),
+        (lambda d: d["camera"].__setitem__("position_mm", [0, 0, 500]), "in front of the pane"),
+        (lambda d: d["pane"]["deformation"].__setitem__("both", [{"kind": "ripple"}]), "deformation"),
+    ):
+        data = json.loads(json.dumps(good))
+        mutate(data)
+        f = tmp_path / "bad.json"
+        f.write_text(json.dumps(data))
+        with pytest.raises(InputError, match=pattern) as exc:
+            load_scene(f)
+        assert "\n" not in str(exc.value)
+    f = tmp_path / "broken.yaml"
+    f.write_text("pane: [1, 2\n")
+    with pytest.raises(InputError, match="cannot be parsed"):
+        load_scene(f)
+
+
+def test_box_filtered_pattern_has_the_printed_duty_cycle():
+    scene = make_scene(backdrop=dict(pitch_mm=20.0, line_width_mm=5.0))
+    x = np.linspace(0, 20, 2001)[:-1]
+    cover = pattern_intensity(scene.backdrop, x, np.full_like(x, 10.0))
+    b, w = scene.backdrop.black, scene.backdrop.white
+    assert np.mean(cover) == pytest.approx(w - (w - b) * 0.25, abs=1e-3)
+    # a box spanning whole periods averages to the same value everywhere
+    boxed = pattern_intensity(scene.backdrop, x, np.full_like(x, 10.0), (np.full_like(x, 20.0), 0.0))
+    assert np.allclose(boxed, w - (w - b) * 0.25)
+    cb = make_scene(backdrop=dict(pattern="checkerboard", pitch_mm=30.0, line_width_mm=None))
+    assert pattern_intensity(cb.backdrop, 1.0, 1.0) == pytest.approx(cb.backdrop.white)
+    assert pattern_intensity(cb.backdrop, 31.0, 1.0) == pytest.approx(cb.backdrop.black)
+
+
+def test_backdrop_frame_follows_the_image_axes():
+    scene = make_scene(pixels=(64, 48))
+    J = landing_jacobian(scene)
+    # +col moves the landing point to +X, +row to +Y (camera without roll)
+    assert np.all(J[..., 0, 0] > 0) and np.all(J[..., 1, 1] > 0)
+    assert np.abs(J[..., 0, 1]).max() < 1e-9 * J[..., 0, 0].max() + 1e-12
+    # mm per px = pixel pitch * distance / f
+    assert J[24, 32, 0, 0] == pytest.approx(36 / 64 * 13000 / 300, rel=1e-4)
