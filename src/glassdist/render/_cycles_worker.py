@@ -9,7 +9,8 @@ own NumPy, usually 1.26); it imports nothing from glassdist. It is started by
 and communicates only through files and single-line messages on stdout:
 
 ``GLASSDIST-PROGRESS <phase> <done> <total>``
-    progress; ``phase`` is ``setup``, ``sync`` (scene upload) or ``sample``.
+    progress; ``phase`` is ``setup`` (scene construction) or ``sample``
+    (samples per pixel done out of the total).
 ``GLASSDIST-DONE <path of the .npy image>``
     the render finished and the image was written.
 ``GLASSDIST-ERROR <message>``
@@ -45,7 +46,12 @@ size in Blender.
     analytic gradients (dz/dx, dz/dy), used as smooth shading normals.
     ``ior`` is the refractive index; ``bsdf`` is ``"refraction"`` (no
     Fresnel reflection: every ray is transmitted) or ``"glass"`` (Fresnel
-    reflection and transmission, ghosts included).
+    reflection and transmission, ghosts included); ``transmittance`` ``T``
+    (default 1) is applied as ``sqrt(T)`` at each interface. ``frame``
+    (optional): ``{"intensity", "inner_half_mm": [hu, hv], "lift_mm"}``, an
+    opaque band emitting ``intensity`` over the front-face quads outside
+    ``|x| <= hu, |y| <= hv``, lifted ``lift_mm`` towards the camera (the grid
+    should have lines at ``x = +-hu`` and ``y = +-hv``).
 ``backdrop``
     An emitting rectangle: centre ``origin_mm``, unit in-plane axes ``u``,
     ``v`` (job world), ``size_mm`` ``[su, sv]``. Its radiance at plane
@@ -62,7 +68,9 @@ size in Blender.
     (bilinear interpolation).
 ``render``
     ``samples`` (per pixel), ``seed`` (integer), ``threads`` (0 = all
-    cores), ``max_bounces``, ``pixel_filter`` (``"box"``, width 1 px).
+    cores), ``max_bounces``, ``chunks``: the samples are rendered as this
+    many consecutive subsets of one sample sequence (for progress reports;
+    the mean of the subsets equals a single render of all samples).
 ``outputs``
     ``npy`` (required): float32 image (H, W), row 0 at the top, linear
     radiance (1.0 = a backdrop of value 1 seen directly); ``exr``: optional
@@ -235,8 +243,7 @@ def _build_glass(bpy, job, arrays, world_to_blender):
     obj = _new_object(bpy, "glass", mesh, m)
 
     mat = bpy.data.materials.new("glass")
-    mat.use_nodes = True
-    nt = mat.node_tree
+    nt = _node_tree(mat)
     nt.nodes.clear()
     out = nt.nodes.new("ShaderNodeOutputMaterial")
     kind = g.get("bsdf", "refraction")
@@ -277,8 +284,7 @@ def _build_frame(bpy, frame, verts, quads, rot, origin_b):
     m[:3, 3] = centre_w
     obj = _new_object(bpy, "frame", mesh, m)
     mat = bpy.data.materials.new("frame")
-    mat.use_nodes = True
-    nt = mat.node_tree
+    nt = _node_tree(mat)
     nt.nodes.clear()
     out = nt.nodes.new("ShaderNodeOutputMaterial")
     emit = nt.nodes.new("ShaderNodeEmission")
@@ -288,6 +294,13 @@ def _build_frame(bpy, frame, verts, quads, rot, origin_b):
     nt.links.new(emit.outputs["Emission"], out.inputs["Surface"])
     obj.data.materials.append(mat)
     return obj
+
+
+def _node_tree(owner):
+    """The shader node tree of a material or world (created on builds that still need it)."""
+    if owner.node_tree is None:
+        owner.use_nodes = True
+    return owner.node_tree
 
 
 def _math(nt, op, *inputs, label=None):
@@ -384,12 +397,11 @@ def _build_backdrop(bpy, job, arrays, world_to_blender):
     obj = _new_object(bpy, "backdrop", mesh, m)
 
     mat = bpy.data.materials.new("backdrop")
-    mat.use_nodes = True
     try:
         mat.emission_sampling = "NONE"  # reached only through specular paths: no light sampling
     except AttributeError:  # pragma: no cover - older builds
         pass
-    nt = mat.node_tree
+    nt = _node_tree(mat)
     nt.nodes.clear()
     out = nt.nodes.new("ShaderNodeOutputMaterial")
     coord = nt.nodes.new("ShaderNodeTexCoord")
@@ -483,8 +495,7 @@ def _configure(bpy, job):
     scene.view_settings.exposure = 0.0
     scene.view_settings.gamma = 1.0
     world = bpy.data.worlds.new("black")
-    world.use_nodes = True
-    bg = world.node_tree.nodes.get("Background")
+    bg = _node_tree(world).nodes.get("Background")
     if bg is not None:
         bg.inputs["Strength"].default_value = 0.0
         bg.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
@@ -498,7 +509,15 @@ def _configure(bpy, job):
     img.exr_codec = "ZIP"
 
 
-def _progress_handler(total):
+def _chunks(total, n):
+    """Split ``total`` samples into ``n`` consecutive slices ``(offset, count)``."""
+    n = max(1, min(int(n), total))
+    edges = [round(i * total / n) for i in range(n + 1)]
+    return [(a, b - a) for a, b in zip(edges[:-1], edges[1:])]
+
+
+def _progress_handler(offset, total):
+    """``render_stats`` handler turning Cycles' "Sample k/n" status into progress lines."""
     import re
 
     pattern = re.compile(r"Sample (\d+)/(\d+)")
@@ -508,14 +527,27 @@ def _progress_handler(total):
         text = " ".join(str(a) for a in args)  # the handler receives the status line
         m = pattern.search(text)
         if m:
-            done = int(m.group(1))
+            done = offset + int(m.group(1))
             if done != last[0]:
                 last[0] = done
-                _say("PROGRESS", "sample", done, int(m.group(2)))
-        elif "Updating" in text or "Loading" in text:
-            _say("PROGRESS", "sync", 0, total)
+                _say("PROGRESS", "sample", done, total)
 
     return handler
+
+
+def _write_exr(bpy, path, image):
+    """Save a (H, W) float image as a 32-bit grey-in-RGB OpenEXR file (row 0 at the top)."""
+    height, width = image.shape
+    img = bpy.data.images.new("result", width=width, height=height, alpha=False, float_buffer=True)
+    img.colorspace_settings.name = "Non-Color"
+    rgba = np.ones((height, width, 4), dtype=np.float32)
+    rgba[..., :3] = image[::-1, :, None]
+    img.pixels.foreach_set(rgba.ravel())
+    img.filepath_raw = path
+    img.file_format = "OPEN_EXR"
+    scene = bpy.context.scene
+    img.save_render(path, scene=scene)
+    bpy.data.images.remove(img)
 
 
 def _read_exr(bpy, path, width, height):
@@ -560,22 +592,39 @@ def run(job_path: str) -> str:
     if blend:
         bpy.ops.wm.save_as_mainfile(filepath=blend, check_existing=False, compress=True)
 
-    exr = resolve(outs.get("exr")) or os.path.join(base, "render.exr")
     scene = bpy.context.scene
-    scene.render.filepath = exr
-    handler = _progress_handler(int(job["render"]["samples"]))
-    bpy.app.handlers.render_stats.append(handler)
-    try:
-        bpy.ops.render.render(write_still=True)
-    finally:
-        bpy.app.handlers.render_stats.remove(handler)
-    if not os.path.exists(exr):
-        raise RuntimeError(f"Cycles wrote no image at {exr}")
-    image = _read_exr(bpy, exr, int(job["image"]["width"]), int(job["image"]["height"]))
+    width, height = int(job["image"]["width"]), int(job["image"]["height"])
+    total = int(job["render"]["samples"])
+    chunks = _chunks(total, int(job["render"].get("chunks", 1)))
+    # each chunk renders the next slice of the same sample sequence (a sample subset), so
+    # their weighted mean equals one render of all samples (to float rounding). Persistent
+    # data must stay off: with it, Cycles ignores the changed subset offset.
+    scene.render.use_persistent_data = False
+    part = os.path.join(base, "part.exr")
+    scene.render.filepath = part
+    acc = np.zeros((height, width), dtype=np.float64)
+    scene.cycles.samples = total
+    scene.cycles.use_sample_subset = len(chunks) > 1
+    for offset, count in chunks:
+        scene.cycles.sample_offset = offset
+        scene.cycles.sample_subset_length = count
+        handler = _progress_handler(offset, total)
+        bpy.app.handlers.render_stats.append(handler)
+        try:
+            bpy.ops.render.render(write_still=True)
+        finally:
+            bpy.app.handlers.render_stats.remove(handler)
+        if not os.path.exists(part):
+            raise RuntimeError(f"Cycles wrote no image at {part}")
+        acc += count * _read_exr(bpy, part, width, height)
+        os.remove(part)
+        _say("PROGRESS", "sample", offset + count, total)
+    image = (acc / total).astype(np.float32)
     npy = resolve(outs["npy"])
     np.save(npy, image)
-    if not outs.get("exr"):
-        os.remove(exr)
+    exr = resolve(outs.get("exr"))
+    if exr:
+        _write_exr(bpy, exr, image)
     sys.stderr.write(f"rendered in {time.time() - t0:.1f} s\n")
     return npy
 

@@ -36,8 +36,9 @@ the scene is built in metres with Blender's Z up (world ``(x, y, z)`` maps to
 Blender ``(x, z, -y)``), so a saved ``.blend`` opens upright at true size.
 
 Light transport: a perfectly smooth dielectric of index ``n`` (``bsdf =
-"refraction"``: every ray is transmitted, the exact engine's photometry;
-``"glass"``: Fresnel reflection and transmission with ghost images), with
+"glass"``, the default: Fresnel reflection and transmission with ghost
+images; ``"refraction"``: every ray is transmitted, the exact engine's
+photometry), with
 the pane transmittance ``T`` applied as ``sqrt(T)`` per interface; box pixel
 filter of 1 px, no denoiser, no adaptive sampling, fixed seed, black world.
 The EXR is read back as scene-linear radiance (no view transform). The
@@ -406,6 +407,15 @@ def _backdrop_section(scene: Scene) -> dict:
     }
 
 
+def _chunk_count(pixels: int, samples: int) -> int:
+    """Number of sample slices a render is split into, for progress reports.
+
+    Each slice re-synchronises the scene (about 0.5 s), so slices hold at least
+    about 4 million pixel-samples (3 to 6 s on two cores), and at most 20.
+    """
+    return int(max(1, min(samples, 20, round(pixels * samples / 4e6))))
+
+
 def write_job(
     scene: Scene,
     directory: str | os.PathLike,
@@ -414,7 +424,7 @@ def write_job(
     samples: int | None = None,
     seed: int = 0,
     spacing_mm: float = 2.0,
-    bsdf: str = "refraction",
+    bsdf: str = "glass",
     threads: int = 0,
     blend: str | os.PathLike | None = None,
     exr: str | os.PathLike | None = None,
@@ -436,8 +446,9 @@ def write_job(
     spacing_mm : float
         Largest vertex spacing of the pane mesh, mm (2 mm reproduces the analytic
         line positions to about 0.005 px on the paper's geometry).
-    bsdf : {"refraction", "glass"}
-        Refraction only (no reflection) or Fresnel glass (reflections, ghosts).
+    bsdf : {"glass", "refraction"}
+        Fresnel glass (reflections, ghosts; the default) or refraction only
+        (every ray transmitted, as in the exact engine).
     threads : int
         CPU threads for Cycles, 0 for all.
     blend, exr : path-like, optional
@@ -483,6 +494,7 @@ def write_job(
             "seed": int(seed) % (2**31),
             "threads": int(threads),
             "max_bounces": 32,
+            "chunks": _chunk_count(W * H, int(samples if samples is not None else scene.render.samples_per_pixel)),
         },
         "outputs": {
             "npy": "render.npy",
@@ -568,9 +580,11 @@ class CyclesRenderer:
 
     Parameters
     ----------
-    bsdf : {"refraction", "glass"}
-        ``"refraction"`` transmits every ray (photometry of the exact engine,
-        least noise); ``"glass"`` adds Fresnel reflections and ghost images.
+    bsdf : {"glass", "refraction"}
+        ``"glass"`` (default): Fresnel reflection and transmission at both
+        faces, ghost images included, so the glass looks darker than in the
+        exact engine (about 8 % at normal incidence) and is a little noisier;
+        ``"refraction"`` transmits every ray (the exact engine's photometry).
     spacing_mm : float
         Largest vertex spacing of the pane mesh, mm.
     samples : int, optional
@@ -598,7 +612,7 @@ class CyclesRenderer:
 
     name = "cycles"
 
-    bsdf: str = "refraction"
+    bsdf: str = "glass"
     spacing_mm: float = 2.0
     samples: int | None = None
     save_blend: str | os.PathLike | None = None
