@@ -52,7 +52,8 @@ class HomographyFit:
 
 
 def logical_grid_points(
-    U: np.ndarray, V: np.ndarray, y: np.ndarray, x: np.ndarray, valid: np.ndarray, spacing: int
+    U: np.ndarray, V: np.ndarray, y: np.ndarray, x: np.ndarray, valid: np.ndarray, spacing: int,
+    max_points: int = 40_000,
 ) -> tuple[np.ndarray, np.ndarray]:
     """I1: subsample (logical grid, pixel) pairs at about one point per carrier period.
 
@@ -74,6 +75,8 @@ def logical_grid_points(
         ``(x, y)`` pixel positions.
     """
     s = max(int(spacing), 1)
+    # One point per carrier period, but no more than ~max_points: 8 parameters need far fewer.
+    s = max(s, int(np.ceil(np.sqrt(valid.sum() / max_points))))
     sl = (slice(s // 2, None, s), slice(s // 2, None, s))
     m = valid[sl]
     src = np.stack([U[sl][m], V[sl][m]], axis=1)

@@ -312,7 +312,7 @@ def _polar_rotation(J: np.ndarray) -> np.ndarray:
     return u @ vt
 
 
-def _upsample(fields: list[np.ndarray], valid: np.ndarray, grid: F.SamplingGrid, user_mask):
+def _upsample(fields: list[np.ndarray], valid: np.ndarray, grid: F.SamplingGrid, user_mask, fine_valid=None):
     """Bilinear upsampling of coarse fields to the image grid; NaN outside the valid region.
 
     Invalid coarse samples are first filled with their nearest valid value, so the
@@ -325,20 +325,24 @@ def _upsample(fields: list[np.ndarray], valid: np.ndarray, grid: F.SamplingGrid,
         idx = ndimage.distance_transform_edt(~valid, return_distances=False, return_indices=True)
     else:
         idx = None
-    if grid.is_full:
-        valid_full = valid.copy()
+    v = valid
+    if fine_valid is not None:  # keep the border at the finer grid's resolution
+        m = fine_valid.shape[0] // valid.shape[0]
+        v = fine_valid & np.repeat(np.repeat(valid, m, axis=0), m, axis=1)
+    if v.shape == (H, W):
+        valid_full = v.copy()
     else:
-        valid_full = cv2.resize(valid.astype(np.float32), (W, H), interpolation=cv2.INTER_LINEAR) >= 0.5
+        valid_full = cv2.resize(v.astype(np.uint8), (W, H), interpolation=cv2.INTER_NEAREST).astype(bool)
     if user_mask is not None:
         valid_full &= user_mask
     invalid = ~valid_full
     out = []
-    for f in fields:
-        f = np.asarray(f, np.float32)
+    for f in fields:  # (h, w) or (h, w, 2)
+        f = np.ascontiguousarray(f, np.float32)
         if idx is not None:
             f = f[idx[0], idx[1]]
         up = f.copy() if grid.is_full else cv2.resize(f, (W, H), interpolation=cv2.INTER_LINEAR)
-        np.copyto(up, np.float32(np.nan), where=invalid)
+        np.copyto(up, np.float32(np.nan), where=invalid if up.ndim == 2 else invalid[..., None])
         out.append(up)
     return out, valid_full
 
@@ -582,28 +586,21 @@ def analyze(
     cover = float(valid.mean())
     if cover < 0.5:
         warn.append(f"only {100 * cover:.0f}% of the image could be analysed (occlusion, low contrast or blur)")
-    fields = [delta_cam[..., 0], delta_cam[..., 1], ch.displacement_detrended_mm[..., 0], ch.displacement_detrended_mm[..., 1],
-              ch.phi_eff_mD, ch.phi_shear_mD, ch.phi_total_mD, ch.axis_deg]
+    fields = [delta_cam, ch.displacement_detrended_mm, ch.phi_eff_mD, ch.phi_shear_mD, ch.phi_total_mD, ch.axis_deg]
     valid_c = report.copy()
     for f_ in fields:
-        valid_c &= np.isfinite(f_)
-    if m > 1:  # the border of the valid region keeps the demodulation grid's resolution
-        import cv2
-
-        H_, W_ = grid.full_shape
-        fine = cv2.resize(valid_f.astype(np.float32), (W_, H_), interpolation=cv2.INTER_LINEAR) >= 0.5
-        mask = fine if mask is None else (mask & fine)
-    full, valid_full = _upsample(fields, valid_c, agrid, mask)
+        valid_c &= np.isfinite(f_) if f_.ndim == 2 else np.all(np.isfinite(f_), axis=-1)
+    full, valid_full = _upsample(fields, valid_c, agrid, mask, fine_valid=valid_f if m > 1 else None)
     for w in warn:
         log.warning(w)
     return AnalysisResult(
         method=method,
-        displacement_mm=np.stack(full[0:2], axis=-1),
-        displacement_detrended_mm=np.stack(full[2:4], axis=-1),
-        phi_eff_mD=full[4],
-        phi_shear_mD=full[5],
-        phi_total_mD=full[6],
-        axis_deg=full[7],
+        displacement_mm=full[0],
+        displacement_detrended_mm=full[1],
+        phi_eff_mD=full[2],
+        phi_shear_mD=full[3],
+        phi_total_mD=full[4],
+        axis_deg=full[5],
         valid=valid_full,
         mm_per_px=mm_per_px,
         sigma_mm=float(sigma_mm),

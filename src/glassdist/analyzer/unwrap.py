@@ -21,8 +21,8 @@ __all__ = ["wrap", "residues", "unwrap", "label_regions"]
 
 
 def wrap(phase: np.ndarray) -> np.ndarray:
-    """Wrap a phase to (-pi, pi]."""
-    return np.angle(np.exp(1j * phase))
+    """Wrap a phase to [-pi, pi)."""
+    return np.mod(phase + np.pi, 2 * np.pi) - np.pi
 
 
 def residues(phase: np.ndarray) -> np.ndarray:
@@ -73,24 +73,26 @@ def label_regions(valid: np.ndarray, min_size: int = 1) -> tuple[np.ndarray, int
 _COARSE_UNWRAP_MIN_SIZE = 200_000
 
 
-def _unwrap_by_halves(phase: np.ndarray, valid: np.ndarray, seed: int) -> np.ndarray | None:
-    """Unwrap every other sample, then snap each sample to the 2 pi multiple nearest that estimate.
+def _unwrap_coarse(phase: np.ndarray, valid: np.ndarray, seed: int, k: int) -> np.ndarray | None:
+    """Unwrap every k-th sample, then snap each sample to the 2 pi multiple nearest that estimate.
 
     The demodulated phase is smooth on the scale of the sampling grid (it was
-    low-passed at a fraction of the carrier period), so the 2 pi multiples are
-    decided on a 2x coarser grid at a quarter of the cost. Returns None when the
+    low-passed at a fraction of the carrier period), so the 2 pi multiples can be
+    decided on a k x coarser grid at 1/k^2 of the cost. Returns None when the
     snapped result is not consistent (a neighbour difference beyond pi), in which
-    case the caller unwraps at full resolution.
+    case the caller unwraps at a finer step.
     """
-    sub = phase[::2, ::2]
-    vsub = valid[::2, ::2]
+    sub = phase[k // 2 :: k, k // 2 :: k]
+    vsub = valid[k // 2 :: k, k // 2 :: k]
     if vsub.sum() < 16:
         return None
     un_c = np.asarray(unwrap_phase(np.ma.masked_array(sub, mask=~vsub), rng=seed).filled(np.nan), dtype=float)
     if not vsub.all():
         idx = ndimage.distance_transform_edt(~vsub, return_distances=False, return_indices=True)
         un_c = un_c[idx[0], idx[1]]
-    est = np.repeat(np.repeat(un_c, 2, axis=0), 2, axis=1)[: phase.shape[0], : phase.shape[1]]
+    est = np.repeat(np.repeat(un_c, k, axis=0), k, axis=1)
+    est = np.pad(est, ((0, max(0, phase.shape[0] - est.shape[0])), (0, max(0, phase.shape[1] - est.shape[1]))), mode="edge")
+    est = est[: phase.shape[0], : phase.shape[1]]
     un = phase + 2 * np.pi * np.round((est - phase) / (2 * np.pi))
     un[~valid] = np.nan
     with np.errstate(invalid="ignore"):
@@ -118,8 +120,9 @@ def unwrap(phase: np.ndarray, valid: np.ndarray, labels: np.ndarray, n_regions: 
     if n_regions == 0:
         return out
     un = None
-    if phase.size > _COARSE_UNWRAP_MIN_SIZE:
-        un = _unwrap_by_halves(phase, valid, seed)
+    for k in (4, 2):  # coarsest first; each falls back to the next when inconsistent
+        if un is None and phase.size > _COARSE_UNWRAP_MIN_SIZE * k * k / 4:
+            un = _unwrap_coarse(phase, valid, seed, k)
     if un is None:
         masked = np.ma.masked_array(phase, mask=~valid)
         un = np.asarray(unwrap_phase(masked, rng=seed).filled(np.nan), dtype=float)
