@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from .._version import __version__
+from ..errors import InputError
 from ..io import prepare_output_dir, write_png16
 from ..scene import load_scene
 
@@ -52,7 +53,7 @@ def apply_render_overrides(scene, args):
 def add_render_options(p) -> None:
     """Options shared by render and validate."""
     p.add_argument("--engine", default="exact", help="render engine: exact (default) or cycles")
-    p.add_argument("--spp", type=int, help="samples per pixel (default: the scene's render.samples_per_pixel)")
+    p.add_argument("--spp", "--samples", dest="spp", type=int, help="samples per pixel (default: the scene's render.samples_per_pixel)")
     p.add_argument("--seed", type=int, help="random seed (default: the scene's render.seed)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -71,6 +72,7 @@ def register(subparsers):
     add_render_options(p)
     p.add_argument("--no-reference", action="store_true", help="skip the glass-less reference image")
     p.add_argument("--displacement", action="store_true", help="also write the exact displacement field")
+    p.add_argument("--save-blend", type=Path, metavar="FILE", help="with --engine cycles: also save the Blender scene")
     p.set_defaults(func=run)
     return p
 
@@ -80,6 +82,10 @@ def run(args) -> int:
 
     scene = apply_render_overrides(load_scene(args.scene), args)
     engine = get_renderer(args.engine)
+    if args.save_blend is not None:
+        if not hasattr(engine, "save_blend"):
+            raise InputError("--save-blend needs --engine cycles")
+        engine.save_blend = args.save_blend
     out = prepare_output_dir(args.out)
     timings = {}
     with progress_reporter(not args.no_progress) as report:

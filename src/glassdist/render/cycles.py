@@ -13,9 +13,9 @@ Finding the Cycles interpreter
 1. ``$GLASSDIST_CYCLES_PYTHON``: any Python interpreter that can
    ``import bpy`` (for example a Blender-bundled Python, or a virtual
    environment of your own).
-2. Otherwise the managed environment ``<cache>/glassdist/cycles-venv``, where
-   ``<cache>`` is ``$GLASSDIST_CACHE_DIR`` or ``$XDG_CACHE_HOME`` or
-   ``~/.cache``. Create it once with ``glassdist cycles-setup`` (or
+2. Otherwise the managed environment ``<cache>/cycles-venv``, where
+   ``<cache>`` is ``$GLASSDIST_CACHE_DIR``, else ``$XDG_CACHE_HOME/glassdist``,
+   else ``~/.cache/glassdist``. Create it once with ``glassdist cycles-setup`` (or
    ``python -m glassdist.render.cycles`` or ``bash scripts/install_cycles.sh``);
    it needs a ``python3.11`` interpreter and network access to PyPI (a 374 MB
    download).
@@ -109,10 +109,12 @@ class CyclesError(GlassdistError, RuntimeError):
 def managed_env_dir() -> Path:
     """Folder of the managed Cycles virtual environment (may not exist yet).
 
-    ``$GLASSDIST_CACHE_DIR/glassdist/cycles-venv`` if set, else
+    ``$GLASSDIST_CACHE_DIR/cycles-venv`` if set, else
     ``$XDG_CACHE_HOME/glassdist/cycles-venv``, else ``~/.cache/glassdist/cycles-venv``.
     """
-    base = os.environ.get(ENV_CACHE) or os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    if os.environ.get(ENV_CACHE):
+        return Path(os.environ[ENV_CACHE]).expanduser() / "cycles-venv"
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
     return Path(base).expanduser() / "glassdist" / "cycles-venv"
 
 
