@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 from scipy import ndimage
@@ -71,11 +72,9 @@ class AnalysisResult:
 
     method: str
     displacement_mm: np.ndarray
-    displacement_detrended_mm: np.ndarray
     phi_eff_mD: np.ndarray
     phi_shear_mD: np.ndarray
     phi_total_mD: np.ndarray
-    axis_deg: np.ndarray
     valid: np.ndarray
     mm_per_px: float
     sigma_mm: float
@@ -91,6 +90,19 @@ class AnalysisResult:
     version: str = __version__
     sampling_step_px: tuple[float, float] = (1.0, 1.0)
     n_regions: int = 1
+    _deferred: dict | None = field(default=None, repr=False, compare=False)
+
+    # Secondary fields are brought to the image grid on first use (they cost as much as the
+    # primary ones and many callers never read them).
+    @cached_property
+    def displacement_detrended_mm(self) -> np.ndarray:
+        """delta_* after A2 detrend and metric smoothing, (H, W, 2) float32, mm."""
+        return _upsample_deferred(self._deferred, "displacement_detrended_mm", self.valid)
+
+    @cached_property
+    def axis_deg(self) -> np.ndarray:
+        """Astigmatism principal axis, degrees from +x towards +y, in (-90, 90]; (H, W) float32."""
+        return _upsample_deferred(self._deferred, "axis_deg", self.valid)
 
     @property
     def valid_fraction(self) -> float:
@@ -168,15 +180,18 @@ def _check_image(img: np.ndarray, what: str, warn: list[str]) -> np.ndarray:
     if a.ndim != 2:
         raise InputError(f"the {what} must be a 2-D grey image, got an array of shape {a.shape}")
     a = a.astype(np.float32, copy=False)
-    if not np.all(np.isfinite(a)):
-        raise InputError(f"the {what} contains NaN or infinite values")
     if min(a.shape) < 32:
         raise InputError(f"the {what} is only {a.shape[1]}x{a.shape[0]} px; at least 32x32 px are needed")
-    lo, hi = float(a.min()), float(a.max())
-    if hi - lo < 1e-3 or float(a.std()) < 2e-3:
+    lo, hi = float(a.min()), float(a.max())  # also NaN-detecting: NaN propagates through min/max
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        raise InputError(f"the {what} contains NaN or infinite values")
+    # Exposure statistics need no more than a regular subsample of a large photo.
+    k = max(1, int(np.sqrt(a.size / 2_000_000)))
+    a_s = a[::k, ::k]
+    if hi - lo < 1e-3 or float(a_s.std()) < 2e-3:
         raise InputError(f"the {what} is blank (no contrast); check the exposure and that the grid is in view")
-    sat = float(np.mean(a >= 0.999 * max(hi, 1e-12))) if hi >= 0.98 else 0.0
-    dark = float(np.mean(a <= 1e-3))
+    sat = float(np.mean(a_s >= 0.999 * max(hi, 1e-12))) if hi >= 0.98 else 0.0
+    dark = float(np.mean(a_s <= 1e-3))
     if sat > 0.7 or dark > 0.7:
         raise InputError(
             f"the {what} is {'saturated' if sat > 0.7 else 'black'} over {100 * max(sat, dark):.0f}% of its pixels; "
@@ -219,16 +234,22 @@ def _basebands(spec: F.Spectrum, carriers: F.CarrierPair, covs, grid: F.Sampling
 
 
 def _modulation(b: np.ndarray, period_px: float, grid: F.SamplingGrid, p: AnalyzerParams) -> np.ndarray:
-    return np.abs(F.smooth_complex(np.abs(b).astype(complex), p.smoothing_periods * period_px, grid))
+    """Local modulation G*|b| (same kernel as F3)."""
+    sy, sx = grid.step
+    s = p.smoothing_periods * period_px
+    return ndimage.gaussian_filter(np.abs(b), sigma=(s / sy, s / sx), mode="nearest", truncate=3.5)
 
 
-def _smooth_with_coherence(zs, ks, grid, p: AnalyzerParams):
-    """F3 smoothing of each complex signal and its phase coherence |G*z| / G*|z| in [0, 1]."""
+def _smooth_with_coherence(zs, ks, grid, p: AnalyzerParams, smoothed_abs=None):
+    """F3 smoothing of each complex signal and its phase coherence |G*z| / G*|z| in [0, 1].
+
+    ``smoothed_abs``: the G*|z| maps when already known (Direct Method: the modulation).
+    """
     out, coh = [], []
-    for z, c in zip(zs, ks):
+    for i, (z, c) in enumerate(zip(zs, ks)):
         s = p.smoothing_periods * c.period_px
         zs_ = F.smooth_complex(z, s, grid)
-        a = F.smooth_complex(np.abs(z).astype(complex), s, grid).real
+        a = smoothed_abs[i] if smoothed_abs is not None else _modulation(z, c.period_px, grid, p)
         out.append(zs_)
         coh.append(np.abs(zs_) / np.maximum(a, 1e-30))
     return tuple(out), tuple(coh)
@@ -336,15 +357,26 @@ def _upsample(fields: list[np.ndarray], valid: np.ndarray, grid: F.SamplingGrid,
     if user_mask is not None:
         valid_full &= user_mask
     invalid = ~valid_full
-    out = []
-    for f in fields:  # (h, w) or (h, w, 2)
-        f = np.ascontiguousarray(f, np.float32)
-        if idx is not None:
-            f = f[idx[0], idx[1]]
-        up = f.copy() if grid.is_full else cv2.resize(f, (W, H), interpolation=cv2.INTER_LINEAR)
-        np.copyto(up, np.float32(np.nan), where=invalid if up.ndim == 2 else invalid[..., None])
-        out.append(up)
-    return out, valid_full
+    out = [_upsample_one(f, idx, grid, invalid) for f in fields]
+    return out, valid_full, idx
+
+
+def _upsample_one(f: np.ndarray, idx, grid: F.SamplingGrid, invalid: np.ndarray) -> np.ndarray:
+    import cv2
+
+    H, W = grid.full_shape
+    f = np.ascontiguousarray(f, np.float32)  # (h, w) or (h, w, 2)
+    if idx is not None:
+        f = f[idx[0], idx[1]]
+    up = f.copy() if grid.is_full else cv2.resize(f, (W, H), interpolation=cv2.INTER_LINEAR)
+    np.copyto(up, np.float32(np.nan), where=invalid if up.ndim == 2 else invalid[..., None])
+    return up
+
+
+def _upsample_deferred(deferred: dict | None, name: str, valid_full: np.ndarray) -> np.ndarray:
+    if deferred is None or name not in deferred["fields"]:
+        raise AttributeError(name)
+    return _upsample_one(deferred["fields"][name], deferred["idx"], deferred["grid"], ~valid_full)
 
 
 def _analysis_block(sigma_px: float, blur, grid: F.SamplingGrid, p: AnalyzerParams) -> int:
@@ -393,7 +425,7 @@ def prepare_reference(reference: np.ndarray, *, params: AnalyzerParams | dict | 
     bb = _basebands(spec, carriers, covs, grid)
     mods = tuple(_modulation(b, c.period_px, grid, p) for b, c in zip(bb, (carriers.k1, carriers.k2)))
     # Homography of the reference's own grid: the pixel -> backdrop Jacobian (A1, projective).
-    zs, cohs = _smooth_with_coherence(bb, (carriers.k1, carriers.k2), grid, p)
+    zs, cohs = _smooth_with_coherence(bb, (carriers.k1, carriers.k2), grid, p, smoothed_abs=mods)
     valid, labels, n = _quality(zs, cohs, mods, carriers, grid, p, None, [])
     if n == 0:
         raise InputError("the reference photo shows no usable grid region; check it is in focus and well exposed")
@@ -509,7 +541,7 @@ def analyze(
         mods += list(refm.modulation)
     else:
         zs = bb
-    zs, cohs = _smooth_with_coherence(zs, ks, grid, p)  # F3
+    zs, cohs = _smooth_with_coherence(zs, ks, grid, p, smoothed_abs=None if refm is not None else mods)  # F3
     valid, labels, n = _quality(zs, cohs, mods, carriers, grid, p, mask, warn)
     if n == 0:
         raise AnalysisError(
@@ -586,21 +618,20 @@ def analyze(
     cover = float(valid.mean())
     if cover < 0.5:
         warn.append(f"only {100 * cover:.0f}% of the image could be analysed (occlusion, low contrast or blur)")
-    fields = [delta_cam, ch.displacement_detrended_mm, ch.phi_eff_mD, ch.phi_shear_mD, ch.phi_total_mD, ch.axis_deg]
+    fields = [delta_cam, ch.phi_eff_mD, ch.phi_shear_mD, ch.phi_total_mD]
+    deferred = {"displacement_detrended_mm": ch.displacement_detrended_mm, "axis_deg": ch.axis_deg}
     valid_c = report.copy()
-    for f_ in fields:
+    for f_ in fields + list(deferred.values()):
         valid_c &= np.isfinite(f_) if f_.ndim == 2 else np.all(np.isfinite(f_), axis=-1)
-    full, valid_full = _upsample(fields, valid_c, agrid, mask, fine_valid=valid_f if m > 1 else None)
+    full, valid_full, idx = _upsample(fields, valid_c, agrid, mask, fine_valid=valid_f if m > 1 else None)
     for w in warn:
         log.warning(w)
     return AnalysisResult(
         method=method,
         displacement_mm=full[0],
-        displacement_detrended_mm=full[1],
-        phi_eff_mD=full[2],
-        phi_shear_mD=full[3],
-        phi_total_mD=full[4],
-        axis_deg=full[5],
+        phi_eff_mD=full[1],
+        phi_shear_mD=full[2],
+        phi_total_mD=full[3],
         valid=valid_full,
         mm_per_px=mm_per_px,
         sigma_mm=float(sigma_mm),
@@ -615,4 +646,5 @@ def analyze(
         warnings=tuple(warn),
         sampling_step_px=agrid.step,
         n_regions=n,
+        _deferred={"fields": deferred, "idx": idx, "grid": agrid},
     )
