@@ -166,18 +166,12 @@ def find_cycles_python() -> Path:
 
 def _find_base_python() -> str | None:
     """A Python 3.11 interpreter to create the managed environment from."""
-    if sys.version_info[:2] == BPY_PYTHON and not os.environ.get("VIRTUAL_ENV"):
-        return sys.executable
-    candidates = [f"python{BPY_PYTHON[0]}.{BPY_PYTHON[1]}"]
     if sys.version_info[:2] == BPY_PYTHON:
-        base = getattr(sys, "_base_executable", None)
-        if base:
-            candidates.insert(0, base)
-    for name in candidates:
-        path = shutil.which(name) or (name if Path(name).is_file() else None)
-        if path:
-            return path
-    return None
+        in_venv = sys.prefix != sys.base_prefix
+        base = getattr(sys, "_base_executable", None) if in_venv else sys.executable
+        if base and Path(base).is_file():
+            return base
+    return shutil.which(f"python{BPY_PYTHON[0]}.{BPY_PYTHON[1]}")
 
 
 def install_cycles(
