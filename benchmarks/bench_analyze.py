@@ -1,0 +1,259 @@
+"""Speed, memory and accuracy of `glassdist.analyze`, as ratios measured in one run.
+
+For each image size a synthetic line-grid photo with a known smooth distortion (a roller
+wave) and its glass-less reference are made once; then each measurement runs in a fresh
+process (so its peak RSS is its own):
+
+* one ``numpy.fft.rfft2`` of the same image (the floor of any Fourier method),
+* ``analyze`` Direct and Comparative (the Comparative reference prepared inside the timing),
+* peers a user might pick: OpenCV Farneback optical flow (Comparative) and, if an
+  interpreter with OpenLSA is available (``GLASSDIST_OPENLSA_PYTHON`` or
+  ``~/.cache/glassdist/openlsa-venv``; see ``benchmarks/setup_openlsa.sh``), OpenLSA.
+
+Accuracy: phi_eff against the truth put through the same evaluation stack (same N, sigma,
+region), and the displacement error against the known field (Comparative and peers), so
+a speed-up that costs accuracy shows. ``--full-res-check`` compares the default path with
+the full-resolution path (no decimation) on one size.
+
+Usage::
+
+    python benchmarks/bench_analyze.py --sizes 2000x1500 6000x4000 --out benchmarks/results.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+PITCH_PX = 8.0  # carrier period, px (mm_per_px = 1)
+L_M = 10.0
+WAVE = dict(amplitude_mm=0.8, wavelength_mm=300.0, direction_deg=20.0)
+PARAMS = {"detrend_degree": 2, "sigma_mm": 40.0}
+
+
+def _wave(X, Y):
+    t = np.radians(WAVE["direction_deg"])
+    e = np.array([np.cos(t), np.sin(t)])
+    a = WAVE["amplitude_mm"] * np.sin(2 * np.pi * (e[0] * X + e[1] * Y) / WAVE["wavelength_mm"])
+    return a * e[0], a * e[1]
+
+
+def make_images(shape, folder: Path) -> None:
+    """Write img.npy, ref.npy (float32) for a wave seen through a line grid, in row blocks (low memory)."""
+    from glassdist.synthetic import backdrop_pattern
+
+    H, W = shape
+    img = np.lib.format.open_memmap(folder / "img.npy", mode="w+", dtype=np.float32, shape=(H, W))
+    ref = np.lib.format.open_memmap(folder / "ref.npy", mode="w+", dtype=np.float32, shape=(H, W))
+    x = np.arange(W) - (W - 1) / 2.0
+    for r0 in range(0, H, 256):
+        y = np.arange(r0, min(H, r0 + 256)) - (H - 1) / 2.0
+        X, Y = np.meshgrid(x, y)
+        dX, dY = _wave(X, Y)
+        ref[r0 : r0 + len(y)] = backdrop_pattern(X, Y, pitch_mm=PITCH_PX)
+        img[r0 : r0 + len(y)] = backdrop_pattern(X + dX, Y + dY, pitch_mm=PITCH_PX)
+    img.flush()
+    ref.flush()
+
+
+def _truth_on(shape, step):
+    H, W = shape
+    y = np.arange(step // 2, H, step) - (H - 1) / 2.0
+    x = np.arange(step // 2, W, step) - (W - 1) / 2.0
+    X, Y = np.meshgrid(x, y)
+    dX, dY = _wave(X, Y)
+    return np.stack([dX, dY], -1)
+
+
+def _phi_error(phi_eff_full, valid_full, mm_per_px, sigma_mm, degree, step):
+    """phi_eff against the truth through the same stack, on every step-th pixel."""
+    from glassdist.analyzer.metrics import evaluate_displacement
+
+    sl = (slice(step // 2, None, step), slice(step // 2, None, step))
+    v = valid_full[sl]
+    truth = evaluate_displacement(_truth_on(valid_full.shape, step), v, distance_m=L_M, mm_per_px=mm_per_px,
+                                  detrend_degree=degree, sigma_mm=sigma_mm, step_px=(step, step))
+    a = phi_eff_full[sl][v]
+    b = truth.phi_eff_mD[v]
+    ok = np.isfinite(a) & np.isfinite(b)
+    a, b = a[ok], b[ok]
+    return {
+        "phi_eff_ratio": float(np.mean(np.abs(a)) / np.mean(np.abs(b))),
+        "phi_eff_corr": float(np.corrcoef(a, b)[0, 1]),
+        "phi_eff_rel_rms_error": float(np.sqrt(np.mean((a - b) ** 2) / np.mean(b**2))),
+    }
+
+
+def _disp_error(disp, valid, step):
+    sl = (slice(step // 2, None, step), slice(step // 2, None, step))
+    t = _truth_on(valid.shape, step)
+    v = valid[sl] & np.all(np.isfinite(disp[sl]), axis=-1)
+    e = disp[sl][v] - t[v]
+    return {"displacement_rms_error_mm": float(np.sqrt(np.mean(e**2))),
+            "displacement_rel_rms_error": float(np.sqrt(np.mean(e**2) / np.mean(t[v] ** 2)))}
+
+
+def _peak_rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def worker(task: dict) -> dict:
+    """One measurement in this (fresh) process."""
+    folder = Path(task["folder"])
+    img = np.load(folder / "img.npy")
+    kind = task["kind"]
+    out = {"kind": kind, "shape": list(img.shape)}
+    step = max(1, int(np.sqrt(img.size / 1e6)))
+    if kind == "rfft2":
+        ts = []
+        for _ in range(2):
+            t0 = time.perf_counter()
+            np.fft.rfft2(img)
+            ts.append(time.perf_counter() - t0)
+        out["seconds"] = min(ts)
+    elif kind in ("direct", "comparative"):
+        from glassdist import analyze, prepare_reference
+
+        params = dict(PARAMS, **task.get("params", {}))
+        ref = np.load(folder / "ref.npy") if kind == "comparative" else None
+        t0 = time.perf_counter()
+        r = prepare_reference(ref, params=params) if ref is not None else None
+        res = analyze(img, pitch_mm=PITCH_PX, distance_m=L_M, reference=r, params=params)
+        out["seconds"] = time.perf_counter() - t0
+        out["peak_rss_mb"] = _peak_rss_mb()
+        out["valid_fraction"] = res.valid_fraction
+        out.update(_phi_error(res.phi_eff_mD, res.valid, res.mm_per_px, res.sigma_mm, res.detrend_degree, step))
+        if kind == "comparative":
+            out.update(_disp_error(res.displacement_mm, res.valid, step))
+    elif kind == "farneback":
+        import cv2
+
+        ref = np.load(folder / "ref.npy")
+        a = np.round(ref * 255).astype(np.uint8)
+        b = np.round(img * 255).astype(np.uint8)
+        t0 = time.perf_counter()
+        flow = cv2.calcOpticalFlowFarneback(a, b, None, 0.5, 3, 15, 3, 5, 1.2, 0)
+        out["seconds"] = time.perf_counter() - t0
+        out["peak_rss_mb"] = _peak_rss_mb()
+        disp = -flow.astype(np.float64)  # ref(x) = img(x + f) and img(x) = ref(x + delta): delta = -f
+        valid = np.ones(img.shape, bool)
+        m = int(4 * PITCH_PX)
+        valid[:m], valid[-m:], valid[:, :m], valid[:, -m:] = False, False, False, False
+        out.update(_disp_error(disp, valid, step))
+        from glassdist.analyzer.metrics import evaluate_displacement
+
+        sl = (slice(step // 2, None, step), slice(step // 2, None, step))
+        ch = evaluate_displacement(disp[sl], valid[sl], distance_m=L_M, mm_per_px=1.0, detrend_degree=PARAMS["detrend_degree"],
+                                   sigma_mm=PARAMS["sigma_mm"], step_px=(step, step))
+        full = np.full(img.shape, np.nan)
+        full[sl] = ch.phi_eff_mD
+        vv = np.zeros(img.shape, bool)
+        vv[sl] = valid[sl]
+        out.update(_phi_error(full, vv, 1.0, PARAMS["sigma_mm"], PARAMS["detrend_degree"], step))
+    return out
+
+
+def _run_worker(task: dict, python: str | None = None, script: Path | None = None) -> dict:
+    cmd = [python or sys.executable, str(script or Path(__file__)), "--worker", json.dumps(task)]
+    env = dict(os.environ)
+    env.setdefault("PYTHONPATH", str(HERE.parent / "src"))
+    p = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    if p.returncode != 0:
+        return {"kind": task["kind"], "error": p.stderr.strip().splitlines()[-1] if p.stderr.strip() else "failed"}
+    return json.loads(p.stdout.strip().splitlines()[-1])
+
+
+def _openlsa_python() -> str | None:
+    cand = os.environ.get("GLASSDIST_OPENLSA_PYTHON") or str(Path.home() / ".cache/glassdist/openlsa-venv/bin/python")
+    return cand if Path(cand).exists() else None
+
+
+def bench(sizes, peers=True, full_res_check=None):
+    rows = []
+    for shape in sizes:
+        with tempfile.TemporaryDirectory() as d:
+            make_images(shape, Path(d))
+            base = {"folder": d}
+            fft = _run_worker(dict(base, kind="rfft2"))
+            row = {"shape": list(shape), "megapixels": shape[0] * shape[1] / 1e6, "rfft2_s": fft.get("seconds")}
+            kinds = ["direct", "comparative"] + (["farneback"] if peers else [])
+            for k in kinds:
+                r = _run_worker(dict(base, kind=k))
+                if "seconds" in r and row["rfft2_s"]:
+                    r["x_rfft2"] = r["seconds"] / row["rfft2_s"]
+                    r["mpx_per_s"] = row["megapixels"] / r["seconds"]
+                row[k] = r
+            py = _openlsa_python() if peers else None
+            if py:
+                r = _run_worker(dict(base, kind="openlsa", pitch_px=PITCH_PX), python=py, script=HERE / "_openlsa_worker.py")
+                if "displacement" in r:
+                    disp = np.load(r.pop("displacement"))
+                    valid = np.all(np.isfinite(disp), axis=-1)
+                    r.update(_disp_error(disp, valid, max(1, int(np.sqrt(valid.size / 1e6)))))
+                if "seconds" in r and row["rfft2_s"]:
+                    r["x_rfft2"] = r["seconds"] / row["rfft2_s"]
+                    r["mpx_per_s"] = row["megapixels"] / r["seconds"]
+                row["openlsa"] = r
+            if full_res_check and tuple(full_res_check) == tuple(shape):
+                row["direct_full_resolution"] = _run_worker(dict(base, kind="direct", params={"decimation": 1, "analysis_block": 1}))
+                row["comparative_full_resolution"] = _run_worker(
+                    dict(base, kind="comparative", params={"decimation": 1, "analysis_block": 1}))
+        rows.append(row)
+    return rows
+
+
+def _fmt(rows) -> str:
+    lines = ["| image | method | time s | x rfft2 | Mpx/s | peak RSS MB | phi_eff ratio | phi_eff corr | disp. RMS err mm |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for row in rows:
+        size = f"{row['shape'][1]}x{row['shape'][0]}"
+        lines.append(f"| {size} | numpy rfft2 | {row['rfft2_s']:.3f} | 1 | {row['megapixels'] / row['rfft2_s']:.1f} | | | | |")
+        for k in ("direct", "comparative", "direct_full_resolution", "comparative_full_resolution", "farneback", "openlsa"):
+            r = row.get(k)
+            if not r:
+                continue
+            if "error" in r:
+                lines.append(f"| {size} | {k} | failed: {r['error']} | | | | | | |")
+                continue
+            x = r.get("x_rfft2", r["seconds"] / row["rfft2_s"])
+            lines.append(
+                f"| {size} | {k} | {r['seconds']:.2f} | {x:.1f} | {row['megapixels'] / r['seconds']:.1f} | "
+                f"{r.get('peak_rss_mb', float('nan')):.0f} | {r.get('phi_eff_ratio', float('nan')):.4f} | "
+                f"{r.get('phi_eff_corr', float('nan')):.4f} | {r.get('displacement_rms_error_mm', float('nan')):.4f} |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", nargs="+", default=["2000x1500", "6000x4000"], help="WxH sizes")
+    ap.add_argument("--no-peers", action="store_true")
+    ap.add_argument("--full-res-check", default=None, help="WxH size on which to also run the full-resolution path")
+    ap.add_argument("--out", type=Path, default=None, help="write the JSON results here")
+    ap.add_argument("--worker", default=None, help=argparse.SUPPRESS)
+    a = ap.parse_args(argv)
+    if a.worker:
+        print(json.dumps(worker(json.loads(a.worker))))
+        return 0
+    parse = lambda s: tuple(int(v) for v in s.lower().split("x"))[::-1]  # noqa: E731 - WxH -> (H, W)
+    sizes = [parse(s) for s in a.sizes]
+    rows = bench(sizes, peers=not a.no_peers, full_res_check=parse(a.full_res_check) if a.full_res_check else None)
+    table = _fmt(rows)
+    print(table)
+    if a.out:
+        a.out.write_text(json.dumps({"rows": rows, "table": table, "wave": WAVE, "pitch_px": PITCH_PX, "params": PARAMS,
+                                     "cpu_count": os.cpu_count()}, indent=2) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
