@@ -272,8 +272,10 @@ def find_carriers(spectrum: Spectrum, *, min_period_px: float = 3.0, max_peaks: 
     band[:, 0] &= fy[:, 0] > 0
     if W % 2 == 0:
         band[:, -1] &= fy[:, 0] > 0
-    work = np.where(band, mag, np.float32(0.0))
-    sub = mag[::3, ::3][band[::3, ::3]]
+    # Whiten by |f|: edges of frames and opaque objects have spectra falling as 1/|f| that
+    # would otherwise outshine the grid at low frequencies; a carrier is a sharp peak either way.
+    work = np.where(band, mag * fr.astype(np.float32), np.float32(0.0))
+    sub = work[::3, ::3][band[::3, ::3]]
     background = float(np.median(sub)) if sub.size else 0.0
     peak = float(work.max()) if band.any() else 0.0
     background = max(background, 1e-9 * peak)  # a noise-free synthetic grid has an exactly empty background
@@ -292,7 +294,7 @@ def find_carriers(spectrum: Spectrum, *, min_period_px: float = 3.0, max_peaks: 
     if strengths[0] < 8.0:
         raise InputError(
             f"no grid pattern found in the image (strongest spectral peak only {strengths[0]:.1f}x the background); "
-            "check the photo shows the printed grid in focus and is not blank or blurred"
+            "check the photo shows the printed grid in focus, and that at least 6 grid periods fit across it"
         )
     i1 = 0
     cand = [j for j in range(1, len(vecs)) if _angle_between(vecs[j], vecs[i1]) > 45.0]

@@ -320,7 +320,7 @@ def _fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParam
             V[sel] -= np.round(np.median(V[sel] - v0[sel]))
         src, dst = logical_grid_points(U, V, yy, xx, labels > 0, spacing)
         fit = fit_homography(src, dst, threshold_px=thr, max_trials=p.ransac_max_trials, seed=p.ransac_seed)
-    if fit.inlier_fraction < 0.3:
+    if fit.inlier_fraction < 0.1:
         warn.append(
             f"only {100 * fit.inlier_fraction:.0f}% of grid points fit the homography; strong distortion or "
             "lens distortion may bias the Direct Method's baseline"
@@ -543,6 +543,11 @@ def analyze(
         zs = bb
     zs, cohs = _smooth_with_coherence(zs, ks, grid, p, smoothed_abs=None if refm is not None else mods)  # F3
     valid, labels, n = _quality(zs, cohs, mods, carriers, grid, p, mask, warn)
+    if n:
+        # Grid modulation: amplitude of the fundamental (|b| is half of it), intensity units.
+        amp = 2.0 * min(float(np.median(m_[valid])) for m_ in mods[:2])
+        if amp < 0.03:
+            warn.append(f"low grid contrast (carrier amplitude {amp:.3f} of full scale); expect a noisier result")
     if n == 0:
         raise AnalysisError(
             "no region of the photo carries a reliable grid signal; check focus, exposure and that the grid fills the view"
@@ -616,8 +621,8 @@ def analyze(
         )
 
     cover = float(valid.mean())
-    if cover < 0.5:
-        warn.append(f"only {100 * cover:.0f}% of the image could be analysed (occlusion, low contrast or blur)")
+    if cover < 0.75:
+        warn.append(f"only {100 * cover:.0f}% of the image could be analysed (occlusion, frames, low contrast or blur)")
     fields = [delta_cam, ch.phi_eff_mD, ch.phi_shear_mD, ch.phi_total_mD]
     deferred = {"displacement_detrended_mm": ch.displacement_detrended_mm, "axis_deg": ch.axis_deg}
     valid_c = report.copy()
