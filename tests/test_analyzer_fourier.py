@@ -76,3 +76,20 @@ def test_sampling_grid_positions_match_area_resampling():
     yy, xx = g.coords()
     assert g.step == (4.0, 4.0)
     assert yy[0, 0] == pytest.approx(1.5) and xx[0, 1] == pytest.approx(5.5)
+
+
+def test_thin_lines_pick_the_fundamental_not_a_harmonic():
+    from glassdist.synthetic import backdrop_pattern
+
+    y, x = np.mgrid[0:256, 0:320].astype(float)
+    img = backdrop_pattern(x, y, pitch_mm=12.0, line_width=0.08)  # narrow lines: strong harmonics
+    c = F.find_carriers(F.compute_spectrum(img))
+    assert c.k1.period_px == pytest.approx(12.0, rel=2e-3) and c.k2.period_px == pytest.approx(12.0, rel=2e-3)
+
+
+def test_opaque_object_does_not_outshine_the_grid():
+    cap = synthetic_capture((300, 360), pitch_mm=8.0, mm_per_px=1.0)
+    img = 0.5 + 0.06 * (cap.image - 0.5)
+    img[100:250, 80:300] = 0.3  # large dark object with sharp edges
+    c = F.find_carriers(F.compute_spectrum(img))
+    assert c.k1.period_px == pytest.approx(8.0, rel=5e-3)

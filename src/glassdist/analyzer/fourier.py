@@ -272,9 +272,11 @@ def find_carriers(spectrum: Spectrum, *, min_period_px: float = 3.0, max_peaks: 
     band[:, 0] &= fy[:, 0] > 0
     if W % 2 == 0:
         band[:, -1] &= fy[:, 0] > 0
-    # Whiten by |f|: edges of frames and opaque objects have spectra falling as 1/|f| that
-    # would otherwise outshine the grid at low frequencies; a carrier is a sharp peak either way.
-    work = np.where(band, mag * fr.astype(np.float32), np.float32(0.0))
+    # Soft whitening below ~16 periods across the image: edges of frames and opaque objects
+    # have spectra falling as 1/|f| that would otherwise outshine the grid at low frequencies;
+    # above it the weight is ~1, so harmonics gain little on their fundamental.
+    f0 = 16.0 / min(H, W)
+    work = np.where(band, mag * (fr / (fr + f0)).astype(np.float32), np.float32(0.0))
     sub = work[::3, ::3][band[::3, ::3]]
     background = float(np.median(sub)) if sub.size else 0.0
     peak = float(work.max()) if band.any() else 0.0
@@ -296,13 +298,22 @@ def find_carriers(spectrum: Spectrum, *, min_period_px: float = 3.0, max_peaks: 
             f"no grid pattern found in the image (strongest spectral peak only {strengths[0]:.1f}x the background); "
             "check the photo shows the printed grid in focus, and that at least 6 grid periods fit across it"
         )
-    i1 = 0
-    cand = [j for j in range(1, len(vecs)) if _angle_between(vecs[j], vecs[i1]) > 45.0]
+    def fundamental(i: int) -> int:
+        """A harmonic q = 2p of a peak p with comparable strength is replaced by p."""
+        for j in range(len(vecs)):
+            if j != i and strengths[j] > 0.3 * strengths[i]:
+                for sign in (1.0, -1.0):
+                    if np.linalg.norm(2 * sign * vecs[j] - vecs[i]) < 2.5 / min(H, W):
+                        return fundamental(j)
+        return i
+
+    i1 = fundamental(0)
+    cand = [j for j in range(len(vecs)) if j != i1 and _angle_between(vecs[j], vecs[i1]) > 45.0]
     if not cand:
         raise InputError(
             "only one family of grid lines found; glassdist needs a crossed line grid or a checkerboard"
         )
-    i2 = max(cand, key=lambda j: strengths[j])
+    i2 = fundamental(max(cand, key=lambda j: strengths[j]))
     # Reject cross terms q = p +- k1: prefer the lower-frequency peak p if it exists and is >45 deg from k1.
     for _ in range(2):
         q = vecs[i2]
