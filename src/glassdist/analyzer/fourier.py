@@ -299,12 +299,13 @@ def find_carriers(spectrum: Spectrum, *, min_period_px: float = 3.0, max_peaks: 
             "check the photo shows the printed grid in focus, and that at least 6 grid periods fit across it"
         )
     def fundamental(i: int) -> int:
-        """A harmonic q = 2p of a peak p with comparable strength is replaced by p."""
+        """A harmonic q = n p (n = 2, 3, 4) of a peak p of comparable strength is replaced by p."""
         for j in range(len(vecs)):
             if j != i and strengths[j] > 0.3 * strengths[i]:
-                for sign in (1.0, -1.0):
-                    if np.linalg.norm(2 * sign * vecs[j] - vecs[i]) < 2.5 / min(H, W):
-                        return fundamental(j)
+                for n in (2, 3, 4):
+                    for sign in (1.0, -1.0):
+                        if np.linalg.norm(n * sign * vecs[j] - vecs[i]) < (n + 1.5) / min(H, W):
+                            return fundamental(j)
         return i
 
     i1 = fundamental(0)
