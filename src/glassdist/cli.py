@@ -66,7 +66,7 @@ def _register_analyze(sub) -> None:
     p.add_argument("--out", type=Path, required=True, help="output folder (created if needed)")
     p.add_argument("--spec", type=Path, help="acceptance specification JSON: prints PASS/FAIL, exit 3 on FAIL")
     p.add_argument("--report", action="store_true", help="also write a self-contained HTML report")
-    p.add_argument("--export", action="store_true", help="also export the fields as NPZ and 32-bit TIFF and statistics as CSV")
+    p.add_argument("--export", action="store_true", help="also export the fields as NPZ and 32-bit TIFF (statistics.csv is always written)")
     p.set_defaults(func=_run_analyze)
 
 
