@@ -262,8 +262,8 @@ def find_carriers(spectrum: Spectrum, *, min_period_px: float = 3.0, max_peaks: 
     """
     H, W = spectrum.shape
     mag = np.abs(spectrum.rfft).astype(np.float32, copy=False)
-    fy = sfft.fftfreq(H)[:, None]
-    fx = sfft.rfftfreq(W)[None, :]
+    fy = sfft.fftfreq(H).astype(np.float32)[:, None]
+    fx = sfft.rfftfreq(W).astype(np.float32)[None, :]
     fr = np.hypot(fx, fy)
     # Ignore DC/illumination (fewer than 4 periods across the image) and finer than min_period_px.
     low = 4.0 / min(H, W)
@@ -275,8 +275,9 @@ def find_carriers(spectrum: Spectrum, *, min_period_px: float = 3.0, max_peaks: 
     # Soft whitening below ~16 periods across the image: edges of frames and opaque objects
     # have spectra falling as 1/|f| that would otherwise outshine the grid at low frequencies;
     # above it the weight is ~1, so harmonics gain little on their fundamental.
-    f0 = 16.0 / min(H, W)
-    work = np.where(band, mag * (fr / (fr + f0)).astype(np.float32), np.float32(0.0))
+    f0 = np.float32(16.0 / min(H, W))
+    work = mag * (fr / (fr + f0))
+    work[~band] = 0.0
     sub = work[::3, ::3][band[::3, ::3]]
     background = float(np.median(sub)) if sub.size else 0.0
     peak = float(work.max()) if band.any() else 0.0
@@ -426,16 +427,21 @@ def block_mean(a: np.ndarray, weight: np.ndarray, m: int) -> tuple[np.ndarray, n
     return mean, fill
 
 
-def baseband(spectrum: Spectrum, carrier: Carrier, cov_f: np.ndarray, grid: SamplingGrid) -> np.ndarray:
+def baseband(
+    spectrum: Spectrum, carrier: Carrier, cov_f: np.ndarray, grid: SamplingGrid, *, smooth_sigma_px: float | None = None
+) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
     """F1+F2 (flat reference): bandpassed analytic signal of ``carrier`` at baseband on ``grid``.
 
     Returns ``b(r) = a(r) exp(-2 pi i f . r)`` sampled on ``grid``, where ``a`` is
     the inverse FFT of the spectrum times the Gaussian bandpass centred on the
     (sub-bin) carrier frequency.
 
+    With ``smooth_sigma_px``, also returns ``G * b`` (F3, a Gaussian of that sigma in
+    image px), applied as a product in the spectral patch at no extra pass.
+
     Returns
     -------
-    ndarray, complex128, shape ``grid.shape``
+    ndarray, complex64, shape ``grid.shape`` (or the pair ``(b, G * b)``)
     """
     H, W = spectrum.shape
     h, w = grid.shape
@@ -458,16 +464,26 @@ def baseband(spectrum: Spectrum, carrier: Carrier, cov_f: np.ndarray, grid: Samp
     patch *= ex[None, :]
     if inv[0, 1] != 0:
         patch *= np.exp(np.float32(-inv[0, 1]) * np.outer(ny.astype(np.float32), nx.astype(np.float32)))
-    b = sfft.ifft2(sfft.ifftshift(patch), workers=_WORKERS)
-    b *= np.float32(h * w / (H * W))
-    # Remove the fractional-bin remainder of the carrier: b = a * exp(-2 pi i f.r) (separable).
     sy, sx = grid.step
     yv = np.arange(h) * sy + oy
     xv = np.arange(w) * sx + ox
     frac_y, frac_x = (ky_c - ky0) / H, (kx_c - kx0) / W
-    b *= np.exp(-2j * np.pi * frac_y * yv).astype(np.complex64)[:, None]
-    b *= np.exp(-2j * np.pi * frac_x * xv).astype(np.complex64)[None, :]
-    return b
+    # Remove the fractional-bin remainder of the carrier: b = a * exp(-2 pi i f.r) (separable).
+    ry = (np.exp(-2j * np.pi * frac_y * yv) * (h * w / (H * W))).astype(np.complex64)[:, None]
+    rx = np.exp(-2j * np.pi * frac_x * xv).astype(np.complex64)[None, :]
+
+    def to_space(pt):
+        b = sfft.ifft2(sfft.ifftshift(pt), workers=_WORKERS)
+        b *= ry
+        b *= rx
+        return b
+
+    if smooth_sigma_px is None:
+        return to_space(patch)
+    g = 2 * np.pi**2 * smooth_sigma_px**2
+    sm = patch * np.exp(-g * ny**2).astype(np.float32)[:, None]
+    sm *= np.exp(-g * nx**2).astype(np.float32)[None, :]
+    return to_space(patch), to_space(sm)
 
 
 def smooth_complex(z: np.ndarray, sigma_px: float, grid: SamplingGrid) -> np.ndarray:

@@ -533,15 +533,21 @@ def analyze(
         own = F.find_carriers(spec, min_period_px=p.min_period_px)  # raises if the photo shows no grid
         del own
     ks = (carriers.k1, carriers.k2)
-    bb = _basebands(spec, carriers, covs, grid)
-    del spec
-    mods = [_modulation(b, c.period_px, grid, p) for b, c in zip(bb, ks)]
-    if refm is not None:
+    if refm is None:
+        # Direct: F3 applied in the spectral patch; coherence against the modulation G*|b|.
+        pairs = [F.baseband(spec, c, cov, grid, smooth_sigma_px=p.smoothing_periods * c.period_px) for c, cov in zip(ks, covs)]
+        del spec
+        mods = [_modulation(b, c.period_px, grid, p) for (b, _), c in zip(pairs, ks)]
+        zs = tuple(gb for _, gb in pairs)
+        cohs = tuple(np.abs(z) / np.maximum(m_, 1e-30) for z, m_ in zip(zs, mods))
+        del pairs
+    else:
+        bb = _basebands(spec, carriers, covs, grid)
+        del spec
+        mods = [_modulation(b, c.period_px, grid, p) for b, c in zip(bb, ks)]
         zs = tuple(b * np.conj(r) for b, r in zip(bb, refm.baseband))
         mods += list(refm.modulation)
-    else:
-        zs = bb
-    zs, cohs = _smooth_with_coherence(zs, ks, grid, p, smoothed_abs=None if refm is not None else mods)  # F3
+        zs, cohs = _smooth_with_coherence(zs, ks, grid, p)  # F3
     valid, labels, n = _quality(zs, cohs, mods, carriers, grid, p, mask, warn)
     if n:
         # Grid modulation: amplitude of the fundamental (|b| is half of it), intensity units.
