@@ -376,7 +376,7 @@ def bandpass_covariance(
 
 def sampling_grid(
     shape: tuple[int, int], covariances: list[np.ndarray], decimation: int | str = "auto", *, support: float = 4.0,
-    multiple: int = 4, max_step_px: float = 6.0,
+    multiple: int = 4,
 ) -> SamplingGrid:
     """Choose the coarse grid that carries the bandpassed signals without aliasing.
 
@@ -388,9 +388,7 @@ def sampling_grid(
     H, W = shape
     if decimation == "auto":
         sd = max(float(np.sqrt(np.max(np.linalg.eigvalsh(c)))) for c in covariances)
-        # Wide enough for the bandpass, and no coarser than max_step_px: coarse carriers
-        # still leave features (a lens, a ripple) only a few carrier periods wide.
-        half = max(support * sd, 0.5 / max_step_px)  # cycles/px
+        half = support * sd  # cycles/px
         h = min(H, int(2 * np.ceil(half * H)))
         w = min(W, int(2 * np.ceil(half * W)))
     else:

@@ -368,9 +368,7 @@ def _upsample_one(f: np.ndarray, idx, grid: F.SamplingGrid, invalid: np.ndarray)
     f = np.ascontiguousarray(f, np.float32)  # (h, w) or (h, w, 2)
     if idx is not None:
         f = f[idx[0], idx[1]]
-    # Bicubic: the fields are smooth on the grid's scale, and bilinear interpolation would
-    # flatten their extrema by ~h^2 f''/8.
-    up = f.copy() if grid.is_full else cv2.resize(f, (W, H), interpolation=cv2.INTER_CUBIC)
+    up = f.copy() if grid.is_full else cv2.resize(f, (W, H), interpolation=cv2.INTER_LINEAR)
     np.copyto(up, np.float32(np.nan), where=invalid if up.ndim == 2 else invalid[..., None])
     return up
 
@@ -391,7 +389,7 @@ def _analysis_block(sigma_px: float, blur, grid: F.SamplingGrid, p: AnalyzerPara
     step = max(grid.step)
     h, w = grid.shape
     for m in (4, 2):
-        if h % m == 0 and w % m == 0 and m * step <= residual / 4.0 and min(h, w) // m >= 16:
+        if h % m == 0 and w % m == 0 and m * step <= residual / 2.0 and min(h, w) // m >= 16:
             return m
     return 1
 
