@@ -128,3 +128,16 @@ def test_results_are_deterministic():
     a = _run(cap, "direct")
     b = _run(cap, "direct")
     assert np.array_equal(a.phi_eff_mD, b.phi_eff_mD, equal_nan=True)
+
+
+def test_narrow_frame_band_splits_regions():
+    # A dark frame about one carrier period wide: the bandpass blurs it so that its modulation dip stays
+    # above the global threshold; the local-level test must still cut the regions apart there.
+    cap = synthetic_capture((300, 420), pitch_mm=PITCH, mm_per_px=1.0, displacement=wave_displacement(0.5, 150.0, 0.0))
+    img = cap.image.copy()
+    img[:, 205:214] = 0.05
+    res = analyze(img, pitch_mm=PITCH, distance_m=L, params=PARAMS)
+    assert res.n_regions == 2
+    assert not res.valid[:, 205:214].any()
+    off = analyze(img, pitch_mm=PITCH, distance_m=L, params=dict(PARAMS, local_modulation_threshold=0.0))
+    assert off.n_regions == 1  # the global threshold alone misses it

@@ -66,6 +66,10 @@ class AnalyzerParams(BaseModel):
     modulation_threshold: float = Field(
         0.3, gt=0, lt=1, description="valid region: local modulation / median modulation must exceed this"
     )
+    local_modulation_threshold: float = Field(
+        0.42, ge=0, lt=1,
+        description="valid region: modulation / its local level (max over ~4 periods) must exceed this (frames, mullions)",
+    )
     coherence_threshold: float = Field(
         0.5, ge=0, lt=1, description="valid region: phase coherence |G*z|/G*|z| of the smoothed signal must exceed this"
     )

@@ -275,14 +275,21 @@ def _erode(valid: np.ndarray, margin_px: float, grid: F.SamplingGrid) -> np.ndar
 def _quality(zs, coherences, mods, carriers, grid, p: AnalyzerParams, user_mask, warn: list[str]):
     """Valid region on the sampling grid: modulation, coherence, user mask, border, residues."""
     valid = np.ones(grid.shape, bool)
+    period = max(carriers.k1.period_px, carriers.k2.period_px)
     for m in mods:
         ref = np.percentile(m, 75)
         valid &= m > p.modulation_threshold * ref
+        # Against the local level (max over a few periods, smoothed): slow lighting changes pass,
+        # a narrow opaque band (a frame or mullion blurred by the bandpass) does not.
+        sy, sx = grid.step
+        size = (max(3, int(4 * period / sy) | 1), max(3, int(4 * period / sx) | 1))
+        local = ndimage.gaussian_filter(ndimage.maximum_filter(m, size=size, mode="nearest"),
+                                        (2 * period / sy, 2 * period / sx), mode="nearest")
+        valid &= m > p.local_modulation_threshold * local
     for coh in coherences:
         valid &= coh > p.coherence_threshold
     if user_mask is not None:
         valid &= _downsample_mask(user_mask, grid)
-    period = max(carriers.k1.period_px, carriers.k2.period_px)
     valid = _erode(valid, p.border_periods * period, grid)
     bad = np.zeros(grid.shape, bool)
     for z in zs:
