@@ -46,6 +46,7 @@ __all__ = [
     "block_grid",
     "block_mean",
     "smooth_complex",
+    "gaussian_blur",
 ]
 
 _WORKERS = -1  # scipy.fft: use every core
@@ -175,6 +176,19 @@ class Spectrum:
     rfft: np.ndarray
     shape: tuple[int, int]
 
+    def block(self, ky0: int, kx0: int, h: int, w: int) -> np.ndarray:
+        """Full complex spectrum on the ``h x w`` block of bins starting at ``(ky0, kx0)`` (any sign).
+
+        Rows wrap around; columns are read from the stored half-plane, the
+        negative ones through Hermitian symmetry (:meth:`full`) only when the block
+        reaches them.
+        """
+        H, W = self.shape
+        if 0 <= kx0 and kx0 + w - 1 <= self.rfft.shape[1] - 1 - (W % 2 == 0):
+            rows = np.mod(np.arange(ky0, ky0 + h), H)
+            return self.rfft[:, kx0 : kx0 + w][rows]
+        return self.full(np.arange(ky0, ky0 + h)[:, None], np.arange(kx0, kx0 + w)[None, :])
+
     def full(self, ky: np.ndarray, kx: np.ndarray) -> np.ndarray:
         """Full complex spectrum at integer bins ``(ky, kx)`` (any sign), via Hermitian symmetry."""
         H, W = self.shape
@@ -190,9 +204,15 @@ class Spectrum:
 
 
 def compute_spectrum(image: np.ndarray) -> Spectrum:
-    """Real 2-D FFT of the image after subtracting its mean (the DC term carries no phase)."""
+    """Real 2-D FFT of the mean-subtracted image (the DC term carries no phase).
+
+    Subtracting the mean changes the DC bin alone, so it is zeroed after the
+    transform instead of copying the image.
+    """
     img = np.asarray(image, dtype=np.float32)
-    return Spectrum(sfft.rfft2(img - np.float32(img.mean()), workers=_WORKERS), img.shape)
+    rfft = sfft.rfft2(img, workers=_WORKERS)
+    rfft[0, 0] = 0
+    return Spectrum(rfft, img.shape)
 
 
 def _jacobsen(xm: complex, x0: complex, xp: complex) -> float:
@@ -218,7 +238,8 @@ def _spectral_peaks(work: np.ndarray, n: int) -> np.ndarray:
         lm = (work == ndimage.maximum_filter(work, size=5, mode="wrap")) & (work > 0)
         return np.flatnonzero(lm)
     hh, ww = h // b * b, w // b * b
-    pooled = work[:hh, :ww].reshape(hh // b, b, ww // b, b).max(axis=(1, 3))
+    # Rows first (contiguous blocks), then columns: several times faster than one 4-D reduction.
+    pooled = work[:hh, :ww].reshape(hh // b, b, ww).max(axis=1).reshape(hh // b, ww // b, b).max(axis=2)
     lm = (pooled == ndimage.maximum_filter(pooled, size=3, mode="wrap")) & (pooled > 0)
     cand = np.flatnonzero(lm)
     cand = cand[np.argsort(pooled.ravel()[cand])[::-1][:n]]
@@ -261,22 +282,38 @@ def find_carriers(spectrum: Spectrum, *, min_period_px: float = 3.0, max_peaks: 
         If no periodic pattern stands out of the spectral background.
     """
     H, W = spectrum.shape
-    mag = np.abs(spectrum.rfft).astype(np.float32, copy=False)
-    fy = sfft.fftfreq(H).astype(np.float32)[:, None]
-    fx = sfft.rfftfreq(W).astype(np.float32)[None, :]
-    fr = np.hypot(fx, fy)
+    # Only bins below 1/min_period_px can hold a carrier: cut that block out first
+    # (rows fftshifted when cut, so that row r holds the signed frequency ky[r]).
+    ky_max = int(np.ceil(H / min_period_px))
+    kx_max = min(W // 2, int(np.ceil(W / min_period_px)))
+    rf = spectrum.rfft
+    if 2 * ky_max + 1 < H:
+        mag = np.empty((2 * ky_max + 1, kx_max + 1), np.float32)
+        np.abs(rf[H - ky_max :, : kx_max + 1], out=mag[:ky_max])
+        np.abs(rf[: ky_max + 1, : kx_max + 1], out=mag[ky_max:])
+        ky = np.arange(-ky_max, ky_max + 1)
+    else:
+        mag = np.abs(rf[:, : kx_max + 1]).astype(np.float32, copy=False)
+        ky = np.rint(sfft.fftfreq(H) * H).astype(int)
+    fy = (ky / H).astype(np.float32)[:, None]
+    fx = (np.arange(kx_max + 1) / W).astype(np.float32)[None, :]
+    fr = np.sqrt(fx * fx + fy * fy)
     # Ignore DC/illumination (fewer than 4 periods across the image) and finer than min_period_px.
     low = 4.0 / min(H, W)
     band = (fr > low) & (fr < 1.0 / min_period_px)
     # Column kx = 0 holds both +f and -f; keep one half-line so a peak is seen once.
     band[:, 0] &= fy[:, 0] > 0
-    if W % 2 == 0:
+    if W % 2 == 0 and kx_max == W // 2:
         band[:, -1] &= fy[:, 0] > 0
     # Soft whitening below ~16 periods across the image: edges of frames and opaque objects
     # have spectra falling as 1/|f| that would otherwise outshine the grid at low frequencies;
     # above it the weight is ~1, so harmonics gain little on their fundamental.
     f0 = np.float32(16.0 / min(H, W))
-    work = mag * (fr / (fr + f0))
+    fr += f0
+    np.divide(fr - f0, fr, out=fr)
+    work = mag
+    work *= fr
+    del fr
     work[~band] = 0.0
     sub = work[::3, ::3][band[::3, ::3]]
     background = float(np.median(sub)) if sub.size else 0.0
@@ -289,7 +326,7 @@ def find_carriers(spectrum: Spectrum, *, min_period_px: float = 3.0, max_peaks: 
         raise InputError("no grid pattern found in the image; check the photo shows the printed grid in focus")
     idx = idx[np.argsort(work.ravel()[idx])[::-1][:max_peaks]]
     rows, cols = np.unravel_index(idx, work.shape)
-    kys = np.where(rows > H // 2, rows - H, rows).astype(float)
+    kys = ky[rows].astype(float)
     kxs = cols.astype(float)
     strengths = work.ravel()[idx] / background
     vecs = np.stack([kxs / W, kys / H], axis=1)  # (fx, fy) at integer bins
@@ -413,18 +450,25 @@ def block_grid(grid: SamplingGrid, m: int) -> SamplingGrid:
 
 
 def block_mean(a: np.ndarray, weight: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
-    """Weighted ``m x m`` block means of ``a`` (h, w[, c]) and the block fill fraction of ``weight``."""
+    """Weighted ``m x m`` block means of ``a`` (h, w[, c]) and the block fill fraction of ``weight``.
+
+    NaN samples of ``a`` must have zero weight. Computed in single precision
+    (OpenCV's area resampling, which is the exact block mean for an integer factor).
+    """
     if m == 1:
         return a, weight.astype(float)
+    import cv2
+
     h, w = weight.shape
-    wt = weight.astype(float).reshape(h // m, m, w // m, m)
-    fill = wt.mean(axis=(1, 3))
-    extra = a.shape[2:]
-    av = np.nan_to_num(a).reshape((h // m, m, w // m, m) + extra)
-    wb = wt.reshape(wt.shape + (1,) * len(extra))
+    size = (w // m, h // m)
+    wt = np.ascontiguousarray(weight, np.float32)
+    fill = cv2.resize(wt, size, interpolation=cv2.INTER_AREA)
+    aw = np.nan_to_num(np.asarray(a, np.float32))
+    aw *= wt if aw.ndim == 2 else wt[..., None]
+    s = cv2.resize(aw, size, interpolation=cv2.INTER_AREA)
     with np.errstate(invalid="ignore", divide="ignore"):
-        mean = (av * wb).sum(axis=(1, 3)) / (fill.reshape(fill.shape + (1,) * len(extra)) * m * m)
-    return mean, fill
+        mean = s / (fill if s.ndim == 2 else fill[..., None])
+    return mean, fill.astype(float)
 
 
 def baseband(
@@ -449,7 +493,7 @@ def baseband(
     ky0, kx0 = int(np.round(ky_c)), int(np.round(kx_c))
     my = np.arange(-(h // 2), h - h // 2)
     mx = np.arange(-(w // 2), w - w // 2)
-    patch = spectrum.full((ky0 + my)[:, None], (kx0 + mx)[None, :]).astype(np.complex64)
+    patch = spectrum.block(ky0 + my[0], kx0 + mx[0], h, w).astype(np.complex64, copy=False)
     # Gaussian bandpass exp(-q/2), q = nu^T Sigma^-1 nu, as separable factors times the cross term.
     ny = (ky0 + my - ky_c) / H
     nx = (kx0 + mx - kx_c) / W
@@ -473,7 +517,7 @@ def baseband(
     rx = np.exp(-2j * np.pi * frac_x * xv).astype(np.complex64)[None, :]
 
     def to_space(pt):
-        b = sfft.ifft2(sfft.ifftshift(pt), workers=_WORKERS)
+        b = sfft.ifft2(sfft.ifftshift(pt), workers=_WORKERS, overwrite_x=True)
         b *= ry
         b *= rx
         return b
@@ -486,6 +530,32 @@ def baseband(
     return to_space(patch), to_space(sm)
 
 
+def gaussian_blur(a: np.ndarray, sigma: tuple[float, float], *, truncate: float = 4.0) -> np.ndarray:
+    """Separable Gaussian filter of a real or complex 2-D array, edge samples replicated.
+
+    Same kernel as ``scipy.ndimage.gaussian_filter(a, sigma, mode="nearest",
+    truncate=truncate)`` (radius ``int(truncate * sigma + 0.5)`` samples), computed in
+    single precision by OpenCV, several times faster on large grids.
+
+    Parameters
+    ----------
+    a : ndarray (h, w), float or complex
+    sigma : (float, float)
+        Standard deviation along rows and along columns, samples.
+    """
+    import cv2
+
+    sy, sx = (float(v) for v in sigma)
+    cplx = np.iscomplexobj(a)
+    src = np.ascontiguousarray(a, np.complex64 if cplx else np.float32)
+    if cplx:
+        src = src.view(np.float32).reshape(a.shape + (2,))
+    ky = cv2.getGaussianKernel(2 * int(truncate * sy + 0.5) + 1, sy, cv2.CV_32F) if sy > 0 else np.ones((1, 1), np.float32)
+    kx = cv2.getGaussianKernel(2 * int(truncate * sx + 0.5) + 1, sx, cv2.CV_32F) if sx > 0 else np.ones((1, 1), np.float32)
+    out = cv2.sepFilter2D(src, -1, kx, ky, borderType=cv2.BORDER_REPLICATE)
+    return out.reshape(out.shape[:2] + (-1,)).view(np.complex64)[..., 0] if cplx else out
+
+
 def smooth_complex(z: np.ndarray, sigma_px: float, grid: SamplingGrid) -> np.ndarray:
     """F3: Gaussian smoothing of the complex signal (real and imaginary parts), sigma in full-res px.
 
@@ -493,7 +563,7 @@ def smooth_complex(z: np.ndarray, sigma_px: float, grid: SamplingGrid) -> np.nda
     inherit phase from the well-modulated grid lines around them (paper F3).
     """
     sy, sx = grid.step
-    return ndimage.gaussian_filter(z, sigma=(sigma_px / sy, sigma_px / sx), mode="nearest", truncate=3.5)
+    return gaussian_blur(z, (sigma_px / sy, sigma_px / sx), truncate=3.5)
 
 
 def _check_size(shape, period_px: float) -> None:

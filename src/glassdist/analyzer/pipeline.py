@@ -36,6 +36,20 @@ __all__ = ["AnalysisResult", "ReferenceModel", "analyze", "prepare_reference"]
 log = logging.getLogger(__name__)
 
 
+class _ImageGridField:
+    """A result field kept on the analysis grid, upsampled to the image grid on first access and cached."""
+
+    def __init__(self, name: str):
+        self.name = name
+
+    def __get__(self, obj, objtype=None):
+        if obj is None:
+            return self
+        val = _upsample_deferred(obj._deferred, self.name, obj.valid)
+        obj.__dict__[self.name] = val  # frozen dataclass: cache beside, not through, __setattr__
+        return val
+
+
 @dataclass(frozen=True)
 class AnalysisResult:
     """Everything the Analyzer measured, on the input image's pixel grid.
@@ -71,10 +85,6 @@ class AnalysisResult:
     """
 
     method: str
-    displacement_mm: np.ndarray
-    phi_eff_mD: np.ndarray
-    phi_shear_mD: np.ndarray
-    phi_total_mD: np.ndarray
     valid: np.ndarray
     mm_per_px: float
     sigma_mm: float
@@ -92,17 +102,15 @@ class AnalysisResult:
     n_regions: int = 1
     _deferred: dict | None = field(default=None, repr=False, compare=False)
 
-    # Secondary fields are brought to the image grid on first use (they cost as much as the
-    # primary ones and many callers never read them).
-    @cached_property
-    def displacement_detrended_mm(self) -> np.ndarray:
-        """delta_* after A2 detrend and metric smoothing, (H, W, 2) float32, mm."""
-        return _upsample_deferred(self._deferred, "displacement_detrended_mm", self.valid)
-
-    @cached_property
-    def axis_deg(self) -> np.ndarray:
-        """Astigmatism principal axis, degrees from +x towards +y, in (-90, 90]; (H, W) float32."""
-        return _upsample_deferred(self._deferred, "axis_deg", self.valid)
+    # The fields are carried on the analysis grid and brought to the image's pixel grid on
+    # first use (then cached): at 24 Mpx each plane costs ~0.1 s of memory traffic alone,
+    # and many callers (statistics on a line, a downsampled heatmap) need only some of them.
+    displacement_mm = _ImageGridField("displacement_mm")
+    phi_eff_mD = _ImageGridField("phi_eff_mD")
+    phi_shear_mD = _ImageGridField("phi_shear_mD")
+    phi_total_mD = _ImageGridField("phi_total_mD")
+    displacement_detrended_mm = _ImageGridField("displacement_detrended_mm")
+    axis_deg = _ImageGridField("axis_deg")
 
     @property
     def valid_fraction(self) -> float:
@@ -135,7 +143,8 @@ class AnalysisResult:
             "n_regions": self.n_regions,
             "sampling_step_px": list(self.sampling_step_px),
             "statistics": self.statistics(),
-            "parameters": self.params.resolved(),
+            # the smoothing actually used (the default, null, means 2 carrier periods)
+            "parameters": {**self.params.resolved(), "sigma_mm": self.sigma_mm},
             "warnings": list(self.warnings),
             "conventions": {
                 "displacement": "landing point on the backdrop with glass minus without, mm; [...,0]=x (columns), [...,1]=y (rows)",
@@ -237,7 +246,7 @@ def _modulation(b: np.ndarray, period_px: float, grid: F.SamplingGrid, p: Analyz
     """Local modulation G*|b| (same kernel as F3)."""
     sy, sx = grid.step
     s = p.smoothing_periods * period_px
-    return ndimage.gaussian_filter(np.abs(b), sigma=(s / sy, s / sx), mode="nearest", truncate=3.5)
+    return F.gaussian_blur(np.abs(b), (s / sy, s / sx), truncate=3.5)
 
 
 def _smooth_with_coherence(zs, ks, grid, p: AnalyzerParams, smoothed_abs=None):
@@ -265,26 +274,46 @@ def _downsample_mask(mask: np.ndarray, grid: F.SamplingGrid) -> np.ndarray:
 
 
 def _erode(valid: np.ndarray, margin_px: float, grid: F.SamplingGrid) -> np.ndarray:
+    """Samples farther than ``margin_px`` (image px) from every invalid sample and from the image edge."""
+    import cv2
+
     if margin_px <= 0:
         return valid
-    padded = np.pad(valid, 1, constant_values=False)
-    dist = ndimage.distance_transform_edt(padded, sampling=grid.step)[1:-1, 1:-1]
-    return dist > margin_px
+    sy, sx = grid.step
+    ry, rx = int(margin_px / sy), int(margin_px / sx)
+    if ry == 0 and rx == 0:  # the disc holds the centre alone: only the frame of the image goes
+        out = valid.copy()
+        out[0], out[-1], out[:, 0], out[:, -1] = False, False, False, False
+        return out
+    # Erosion by the disc of radius margin_px: a sample stays when no invalid sample (nor any
+    # outside the image) lies within margin_px of it, i.e. its distance transform exceeds it.
+    j, i = np.mgrid[-ry : ry + 1, -rx : rx + 1]
+    disc = ((j * sy) ** 2 + (i * sx) ** 2 <= margin_px**2).astype(np.uint8)
+    pad = ((ry + 1, ry + 1), (rx + 1, rx + 1))
+    v = np.pad(valid.view(np.uint8), pad)
+    er = cv2.erode(v, disc, borderType=cv2.BORDER_CONSTANT, borderValue=0)
+    return er[ry + 1 : -ry - 1, rx + 1 : -rx - 1].view(bool)
 
 
-def _quality(zs, coherences, mods, carriers, grid, p: AnalyzerParams, user_mask, warn: list[str]):
-    """Valid region on the sampling grid: modulation, coherence, user mask, border, residues."""
+def _quality(phases, coherences, mods, carriers, grid, p: AnalyzerParams, user_mask, warn: list[str]):
+    """Valid region on the sampling grid: modulation, coherence, user mask, border, residues.
+
+    ``phases``: the wrapped phases ``angle(z)`` of the F3-smoothed signals.
+    """
+    import cv2
+
     valid = np.ones(grid.shape, bool)
     period = max(carriers.k1.period_px, carriers.k2.period_px)
+    sy, sx = grid.step
+    size = (max(3, int(4 * period / sy) | 1), max(3, int(4 * period / sx) | 1))
+    box = np.ones(size, np.uint8)
     for m in mods:
-        ref = np.percentile(m, 75)
+        ref = np.percentile(m[::2, ::2], 75)
         valid &= m > p.modulation_threshold * ref
         # Against the local level (max over a few periods, smoothed): slow lighting changes pass,
         # a narrow opaque band (a frame or mullion blurred by the bandpass) does not.
-        sy, sx = grid.step
-        size = (max(3, int(4 * period / sy) | 1), max(3, int(4 * period / sx) | 1))
-        local = ndimage.gaussian_filter(ndimage.maximum_filter(m, size=size, mode="nearest"),
-                                        (2 * period / sy, 2 * period / sx), mode="nearest")
+        local = F.gaussian_blur(cv2.dilate(np.ascontiguousarray(m, np.float32), box, borderType=cv2.BORDER_REPLICATE),
+                                (2 * period / sy, 2 * period / sx))
         valid &= m > p.local_modulation_threshold * local
     for coh in coherences:
         valid &= coh > p.coherence_threshold
@@ -292,8 +321,8 @@ def _quality(zs, coherences, mods, carriers, grid, p: AnalyzerParams, user_mask,
         valid &= _downsample_mask(user_mask, grid)
     valid = _erode(valid, p.border_periods * period, grid)
     bad = np.zeros(grid.shape, bool)
-    for z in zs:
-        bad |= residues(np.angle(z))
+    for ph in phases:
+        bad |= residues(ph)
     if bad.any():
         bad = ndimage.binary_dilation(bad, iterations=1)
         frac = float((bad & valid).sum()) / max(valid.sum(), 1)
@@ -311,20 +340,26 @@ def _points_spacing(carriers: F.CarrierPair, grid: F.SamplingGrid) -> int:
 
 
 def _fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParams, warn: list[str]):
-    """I1 + I2 over all regions, aligning each region's free integer grid offset to the largest."""
+    """I1 + I2 over all regions, aligning each region's free integer grid offset to the largest.
+
+    Returns the fit and, per region label (index 0 unused), the integer offsets (periods)
+    subtracted from U and V.
+    """
     U, V = UV
     spacing = _points_spacing(carriers, grid)
     thr = p.ransac_threshold_periods * min(carriers.k1.period_px, carriers.k2.period_px)
     src, dst = logical_grid_points(U, V, yy, xx, labels == 1, spacing)
     fit = fit_homography(src, dst, threshold_px=thr, max_trials=p.ransac_max_trials, seed=p.ransac_seed)
+    offsets = np.zeros((n + 1, 2))
     if n > 1:
         U = U.copy()
         V = V.copy()
         u0, v0 = apply_inverse(fit.matrix, xx, yy)
         for r in range(2, n + 1):
             sel = labels == r
-            U[sel] -= np.round(np.median(U[sel] - u0[sel]))
-            V[sel] -= np.round(np.median(V[sel] - v0[sel]))
+            offsets[r] = np.round(np.median(U[sel] - u0[sel])), np.round(np.median(V[sel] - v0[sel]))
+            U[sel] -= offsets[r, 0]
+            V[sel] -= offsets[r, 1]
         src, dst = logical_grid_points(U, V, yy, xx, labels > 0, spacing)
         fit = fit_homography(src, dst, threshold_px=thr, max_trials=p.ransac_max_trials, seed=p.ransac_seed)
     if fit.inlier_fraction < 0.1:
@@ -332,7 +367,7 @@ def _fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParam
             f"only {100 * fit.inlier_fraction:.0f}% of grid points fit the homography; strong distortion or "
             "lens distortion may bias the Direct Method's baseline"
         )
-    return fit, U, V
+    return fit, offsets
 
 
 def _polar_rotation(J: np.ndarray) -> np.ndarray:
@@ -340,11 +375,12 @@ def _polar_rotation(J: np.ndarray) -> np.ndarray:
     return u @ vt
 
 
-def _upsample(fields: list[np.ndarray], valid: np.ndarray, grid: F.SamplingGrid, user_mask, fine_valid=None):
-    """Bilinear upsampling of coarse fields to the image grid; NaN outside the valid region.
+def _image_grid_valid(valid: np.ndarray, grid: F.SamplingGrid, user_mask, fine_valid=None):
+    """Valid region on the image grid, and the nearest-valid fill indices of the coarse fields.
 
-    Invalid coarse samples are first filled with their nearest valid value, so the
-    interpolation never mixes NaN into valid pixels near a border.
+    Invalid coarse samples are later filled with their nearest valid value before the
+    bilinear upsampling (:func:`_upsample_one`), so it never mixes NaN into valid pixels
+    near a border.
     """
     import cv2
 
@@ -360,12 +396,10 @@ def _upsample(fields: list[np.ndarray], valid: np.ndarray, grid: F.SamplingGrid,
     if v.shape == (H, W):
         valid_full = v.copy()
     else:
-        valid_full = cv2.resize(v.astype(np.uint8), (W, H), interpolation=cv2.INTER_NEAREST).astype(bool)
+        valid_full = cv2.resize(v.view(np.uint8), (W, H), interpolation=cv2.INTER_NEAREST).view(bool)
     if user_mask is not None:
         valid_full &= user_mask
-    invalid = ~valid_full
-    out = [_upsample_one(f, idx, grid, invalid) for f in fields]
-    return out, valid_full, idx
+    return valid_full, idx
 
 
 def _upsample_one(f: np.ndarray, idx, grid: F.SamplingGrid, invalid: np.ndarray) -> np.ndarray:
@@ -375,8 +409,16 @@ def _upsample_one(f: np.ndarray, idx, grid: F.SamplingGrid, invalid: np.ndarray)
     f = np.ascontiguousarray(f, np.float32)  # (h, w) or (h, w, 2)
     if idx is not None:
         f = f[idx[0], idx[1]]
-    up = f.copy() if grid.is_full else cv2.resize(f, (W, H), interpolation=cv2.INTER_LINEAR)
-    np.copyto(up, np.float32(np.nan), where=invalid if up.ndim == 2 else invalid[..., None])
+    if grid.is_full:
+        up = f.copy()
+    else:
+        # Into an array numpy allocated (large ones get huge pages): several times faster
+        # than letting OpenCV allocate 0.1-0.2 GB of fresh pages.
+        up = np.empty((H, W) + f.shape[2:], np.float32)
+        cv2.resize(f, (W, H), dst=up, interpolation=cv2.INTER_LINEAR)
+    # One plane at a time: a broadcast mask over the channel axis is ~20x slower.
+    for plane in [up] if up.ndim == 2 else [up[..., c] for c in range(up.shape[2])]:
+        np.copyto(plane, np.float32(np.nan), where=invalid)
     return up
 
 
@@ -433,14 +475,15 @@ def prepare_reference(reference: np.ndarray, *, params: AnalyzerParams | dict | 
     mods = tuple(_modulation(b, c.period_px, grid, p) for b, c in zip(bb, (carriers.k1, carriers.k2)))
     # Homography of the reference's own grid: the pixel -> backdrop Jacobian (A1, projective).
     zs, cohs = _smooth_with_coherence(bb, (carriers.k1, carriers.k2), grid, p, smoothed_abs=mods)
-    valid, labels, n = _quality(zs, cohs, mods, carriers, grid, p, None, [])
+    wrapped = [np.angle(z) for z in zs]
+    valid, labels, n = _quality(wrapped, cohs, mods, carriers, grid, p, None, [])
     if n == 0:
         raise InputError("the reference photo shows no usable grid region; check it is in focus and well exposed")
     yy, xx = grid.coords()
-    psi = [unwrap(np.angle(z), valid, labels, n, seed=p.ransac_seed) for z in zs]
+    psi = [unwrap(w, valid, labels, n, seed=p.ransac_seed) for w in wrapped]
     U = carriers.k1.fx * xx + carriers.k1.fy * yy + psi[0] / (2 * np.pi)
     V = carriers.k2.fx * xx + carriers.k2.fy * yy + psi[1] / (2 * np.pi)
-    fit, _, _ = _fit_grid_homography((U, V), yy, xx, labels, n, carriers, grid, p, [])
+    fit, _ = _fit_grid_homography((U, V), yy, xx, labels, n, carriers, grid, p, [])
     return ReferenceModel(ref.shape, carriers, covs, grid, bb, mods, fit, p)
 
 
@@ -555,7 +598,8 @@ def analyze(
         zs = tuple(b * np.conj(r) for b, r in zip(bb, refm.baseband))
         mods += list(refm.modulation)
         zs, cohs = _smooth_with_coherence(zs, ks, grid, p)  # F3
-    valid, labels, n = _quality(zs, cohs, mods, carriers, grid, p, mask, warn)
+    wrapped = [np.angle(z) for z in zs]
+    valid, labels, n = _quality(wrapped, cohs, mods, carriers, grid, p, mask, warn)
     if n:
         # Grid modulation: amplitude of the fundamental (|b| is half of it), intensity units.
         amp = 2.0 * min(float(np.median(m_[valid])) for m_ in mods[:2])
@@ -565,19 +609,22 @@ def analyze(
         raise AnalysisError(
             "no region of the photo carries a reliable grid signal; check focus, exposure and that the grid fills the view"
         )
-    psi = [unwrap(np.angle(z), valid, labels, n, seed=p.ransac_seed) for z in zs]  # F4
+    psi = [unwrap(w, valid, labels, n, seed=p.ransac_seed) for w in wrapped]  # F4
     yy, xx = grid.coords()
 
+    # Phases against the flat carrier (Direct pass 1) or the reference (Comparative).
+    phases = np.stack(psi, axis=-1).astype(np.float32)
+    del psi
     fit = None
     if method == "direct":
-        U = carriers.k1.fx * xx + carriers.k1.fy * yy + psi[0] / (2 * np.pi)
-        V = carriers.k2.fx * xx + carriers.k2.fy * yy + psi[1] / (2 * np.pi)
-        fit, U, V = _fit_grid_homography((U, V), yy, xx, labels, n, carriers, grid, p, warn)  # Block I
-        u0, v0 = apply_inverse(fit.matrix, xx, yy)
-        phases = np.stack([U - u0, V - v0], axis=-1) * (2 * np.pi)  # pass 2: against the warped carrier
+        U = carriers.k1.fx * xx + carriers.k1.fy * yy + phases[..., 0] / (2 * np.pi)
+        V = carriers.k2.fx * xx + carriers.k2.fy * yy + phases[..., 1] / (2 * np.pi)
+        fit, offsets = _fit_grid_homography((U, V), yy, xx, labels, n, carriers, grid, p, warn)  # Block I
+        del U, V
+        if n > 1:
+            phases -= (2 * np.pi * offsets[labels]).astype(np.float32)
         H_jac = fit.matrix
     else:
-        phases = np.stack(psi, axis=-1)
         H_jac = refm.homography.matrix
     phases[~valid] = np.nan
 
@@ -600,7 +647,7 @@ def analyze(
     if m > 1:
         phases, fill = F.block_mean(phases, valid, m)
         hb, wb = agrid.shape
-        block_label = labels.reshape(hb, m, wb, m).max(axis=(1, 3))
+        block_label = labels.reshape(hb, m, wb * m).max(axis=1).reshape(hb, wb, m).max(axis=2)
         # Whole blocks only (their mean sits at the block centre); partial border blocks
         # get the smooth extrapolation from inside, and the fine mask trims them below.
         labels = np.where(fill >= 1.0, block_label, 0)
@@ -611,6 +658,14 @@ def analyze(
         yy, xx = agrid.coords()
     else:
         report = valid
+    if fit is not None:
+        # Pass 2, against the homography-warped carrier: phase += 2 pi (f . r - H^-1(r)). The
+        # term is smooth (affine up to perspective), so on the Block A grid its value at the
+        # block centre equals its block mean.
+        u0, v0 = apply_inverse(fit.matrix, xx, yy)
+        phases = phases + 2 * np.pi * np.stack(
+            [carriers.k1.fx * xx + carriers.k1.fy * yy - u0, carriers.k2.fx * xx + carriers.k2.fy * yy - v0], axis=-1
+        )
     if p.a1_mode == "projective":
         delta = phases * (p_c / (2 * np.pi))  # grid-frame components, exact
         J = p_c * inverse_jacobian(H_jac, xx, yy)
@@ -633,23 +688,22 @@ def analyze(
             sigma_mm=sigma_mm, labels=labels, step_px=agrid.step, component_blur_px2=iso_blur, report_mask=report,
         )
 
-    cover = float(valid.mean())
+    fields = {
+        "displacement_mm": delta_cam, "phi_eff_mD": ch.phi_eff_mD, "phi_shear_mD": ch.phi_shear_mD,
+        "phi_total_mD": ch.phi_total_mD, "displacement_detrended_mm": ch.displacement_detrended_mm,
+        "axis_deg": ch.axis_deg,
+    }
+    valid_c = report.copy()
+    for f_ in fields.values():
+        valid_c &= np.isfinite(f_) if f_.ndim == 2 else np.all(np.isfinite(f_), axis=-1)
+    valid_full, idx = _image_grid_valid(valid_c, agrid, mask, fine_valid=valid_f if m > 1 else None)
+    cover = float(valid_full[::4, ::4].mean())  # the reported region, as summary.json states it
     if cover < 0.75:
         warn.append(f"only {100 * cover:.0f}% of the image could be analysed (occlusion, frames, low contrast or blur)")
-    fields = [delta_cam, ch.phi_eff_mD, ch.phi_shear_mD, ch.phi_total_mD]
-    deferred = {"displacement_detrended_mm": ch.displacement_detrended_mm, "axis_deg": ch.axis_deg}
-    valid_c = report.copy()
-    for f_ in fields + list(deferred.values()):
-        valid_c &= np.isfinite(f_) if f_.ndim == 2 else np.all(np.isfinite(f_), axis=-1)
-    full, valid_full, idx = _upsample(fields, valid_c, agrid, mask, fine_valid=valid_f if m > 1 else None)
     for w in warn:
         log.warning(w)
     return AnalysisResult(
         method=method,
-        displacement_mm=full[0],
-        phi_eff_mD=full[1],
-        phi_shear_mD=full[2],
-        phi_total_mD=full[3],
         valid=valid_full,
         mm_per_px=mm_per_px,
         sigma_mm=float(sigma_mm),
@@ -664,5 +718,5 @@ def analyze(
         warnings=tuple(warn),
         sampling_step_px=agrid.step,
         n_regions=n,
-        _deferred={"fields": deferred, "idx": idx, "grid": agrid},
+        _deferred={"fields": fields, "idx": idx, "grid": agrid},
     )

@@ -21,8 +21,8 @@ __all__ = ["wrap", "residues", "unwrap", "label_regions"]
 
 
 def wrap(phase: np.ndarray) -> np.ndarray:
-    """Wrap a phase to [-pi, pi)."""
-    return np.mod(phase + np.pi, 2 * np.pi) - np.pi
+    """Wrap a phase to [-pi, pi] (the nearest multiple of 2 pi removed; keeps float32 as float32)."""
+    return phase - (2 * np.pi) * np.rint(phase * (1 / (2 * np.pi)))
 
 
 def residues(phase: np.ndarray) -> np.ndarray:
@@ -38,11 +38,13 @@ def residues(phase: np.ndarray) -> np.ndarray:
     ndarray of bool, (h, w)
         True on the four corners of every residue loop.
     """
-    d1 = wrap(np.diff(phase[:-1, :], axis=1))  # top edge, left -> right
-    d2 = wrap(np.diff(phase[:, 1:], axis=0))  # right edge, top -> bottom
-    d3 = -wrap(np.diff(phase[1:, :], axis=1))  # bottom edge, right -> left
-    d4 = -wrap(np.diff(phase[:, :-1], axis=0))  # left edge, bottom -> top
-    loop = np.rint((d1 + d2 + d3 + d4) / (2 * np.pi)) != 0
+    dh = wrap(np.diff(phase, axis=1))  # wrapped differences along rows, (h, w-1)
+    dv = wrap(np.diff(phase, axis=0))  # and along columns, (h-1, w)
+    # Each 2x2 loop: top edge left -> right, right edge down, bottom edge back, left edge up.
+    circ = dh[:-1, :] + dv[:, 1:]
+    circ -= dh[1:, :]
+    circ -= dv[:, :-1]
+    loop = np.abs(circ) > np.pi  # the sum is a multiple of 2 pi: 0 or +-2 pi
     out = np.zeros(phase.shape, bool)
     out[:-1, :-1] |= loop
     out[1:, :-1] |= loop
@@ -70,7 +72,7 @@ def label_regions(valid: np.ndarray, min_size: int = 1) -> tuple[np.ndarray, int
     return lut[labels], int(keep.size)
 
 
-_COARSE_UNWRAP_MIN_SIZE = 200_000
+_COARSE_UNWRAP_MIN_SAMPLES = 30_000  # the coarse unwrap keeps at least this many samples
 
 
 def _unwrap_coarse(phase: np.ndarray, valid: np.ndarray, seed: int, k: int) -> np.ndarray | None:
@@ -86,7 +88,7 @@ def _unwrap_coarse(phase: np.ndarray, valid: np.ndarray, seed: int, k: int) -> n
     vsub = valid[k // 2 :: k, k // 2 :: k]
     if vsub.sum() < 16:
         return None
-    un_c = np.asarray(unwrap_phase(np.ma.masked_array(sub, mask=~vsub), rng=seed).filled(np.nan), dtype=float)
+    un_c = np.asarray(unwrap_phase(np.ma.masked_array(sub, mask=~vsub), rng=seed).filled(np.nan), dtype=phase.dtype)
     if not vsub.all():
         idx = ndimage.distance_transform_edt(~vsub, return_distances=False, return_indices=True)
         un_c = un_c[idx[0], idx[1]]
@@ -116,16 +118,18 @@ def unwrap(phase: np.ndarray, valid: np.ndarray, labels: np.ndarray, n_regions: 
     seed : int
         Seed of the unwrapper's tie-breaking generator (results are reproducible).
     """
-    out = np.full(phase.shape, np.nan)
+    out = np.full(phase.shape, np.nan, dtype=np.result_type(phase.dtype, np.float32))
     if n_regions == 0:
         return out
     un = None
-    for k in (4, 2):  # coarsest first; each falls back to the next when inconsistent
-        if un is None and phase.size > _COARSE_UNWRAP_MIN_SIZE * k * k / 4:
+    # Coarsest first; each falls back to the next when inconsistent. A consistent snapped
+    # result is the same whatever k, so the step changes the cost, not the answer.
+    for k in (8, 4, 2):
+        if un is None and phase.size >= _COARSE_UNWRAP_MIN_SAMPLES * k * k:
             un = _unwrap_coarse(phase, valid, seed, k)
     if un is None:
         masked = np.ma.masked_array(phase, mask=~valid)
-        un = np.asarray(unwrap_phase(masked, rng=seed).filled(np.nan), dtype=float)
+        un = np.asarray(unwrap_phase(masked, rng=seed).filled(np.nan), dtype=out.dtype)
     for r in range(1, n_regions + 1):
         sel = labels == r
         if not sel.any():
