@@ -402,6 +402,33 @@ def _image_grid_valid(valid: np.ndarray, grid: F.SamplingGrid, user_mask, fine_v
     return valid_full, idx
 
 
+_FINAL_STEP_PX = 3.0  # step of the grid the last, bilinear upsampling starts from
+
+
+def _bspline_upsample(f: np.ndarray, k: int, axis: int) -> np.ndarray:
+    """Cubic B-spline interpolation of ``f`` at ``k`` times its density along ``axis``.
+
+    Sample positions follow the area convention of :class:`~glassdist.analyzer.fourier.SamplingGrid`:
+    fine sample ``j k + r`` sits at coarse coordinate ``j + (r + 1/2)/k - 1/2``. Each of the
+    ``k`` phases is a fixed 4-tap combination of the spline coefficients (Unser 1999).
+    """
+    c = np.moveaxis(ndimage.spline_filter1d(f, order=3, axis=axis, mode="nearest", output=np.float32), axis, 0)
+    n = c.shape[0]
+    cp = np.concatenate([c[:1], c[:1], c, c[-1:], c[-1:]])  # coefficients beyond the edge: replicated
+    out = np.empty((n * k,) + c.shape[1:], f.dtype)
+    for r in range(k):
+        t = (r + 0.5) / k - 0.5
+        base = int(np.floor(t))
+        u = t - base
+        w = ((1 - u) ** 3 / 6, (3 * u**3 - 6 * u**2 + 4) / 6, (-3 * u**3 + 3 * u**2 + 3 * u + 1) / 6, u**3 / 6)
+        lo = 2 + base - 1
+        acc = out[r::k]
+        np.multiply(cp[lo : lo + n], np.float32(w[0]), out=acc)
+        for i in range(1, 4):
+            acc += np.float32(w[i]) * cp[lo + i : lo + i + n]
+    return np.moveaxis(out, 0, axis)
+
+
 def _upsample_one(f: np.ndarray, idx, grid: F.SamplingGrid, invalid: np.ndarray) -> np.ndarray:
     import cv2
 
@@ -412,6 +439,13 @@ def _upsample_one(f: np.ndarray, idx, grid: F.SamplingGrid, invalid: np.ndarray)
     if grid.is_full:
         up = f.copy()
     else:
+        # Cubic B-spline to an intermediate grid of ~3 px step, then bilinear: the bilinear
+        # error (h^2/8)|f''| is ~1% of a wave's amplitude at a 13 px step, ~0.05% at 3 px,
+        # and the spline stage works on a grid ~10x smaller than the image.
+        for axis, step in enumerate(grid.step):
+            k = int(step // _FINAL_STEP_PX)
+            if k > 1:
+                f = _bspline_upsample(f, k, axis)
         # Into an array numpy allocated (large ones get huge pages): several times faster
         # than letting OpenCV allocate 0.1-0.2 GB of fresh pages.
         up = np.empty((H, W) + f.shape[2:], np.float32)
