@@ -281,10 +281,8 @@ def _erode(valid: np.ndarray, margin_px: float, grid: F.SamplingGrid) -> np.ndar
         return valid
     sy, sx = grid.step
     ry, rx = int(margin_px / sy), int(margin_px / sx)
-    if ry == 0 and rx == 0:  # the disc holds the centre alone: only the frame of the image goes
-        out = valid.copy()
-        out[0], out[-1], out[:, 0], out[:, -1] = False, False, False, False
-        return out
+    if ry == 0 and rx == 0:  # the disc holds the centre alone
+        return valid.copy()
     # Erosion by the disc of radius margin_px: a sample stays when no invalid sample (nor any
     # outside the image) lies within margin_px of it, i.e. its distance transform exceeds it.
     j, i = np.mgrid[-ry : ry + 1, -rx : rx + 1]
