@@ -84,8 +84,8 @@ def test_bad_input_gives_one_line_error(photos, tmp_path, args, message):
     r = _cli(*[a.format(d=photos) if isinstance(a, str) else a for a in args], "--out", out)
     assert r.returncode == 2
     assert "Traceback" not in r.stderr
-    lines = [ln for ln in r.stderr.strip().splitlines() if not ln.startswith(("usage", " "))]
-    assert len(lines) == 1, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1, r.stderr  # no usage block either
     assert re.search(message, lines[0]), lines[0]
     assert not (out / "result.npz").exists()
 
@@ -102,3 +102,60 @@ def test_bundled_example_runs(tmp_path):
     r = _cli("analyze", DATA / "distorted_floating_ring.bmp", "--reference", DATA / "reference.png", "--pattern",
              "checkerboard", "--pitch-mm", 5, "--distance-m", 0.5, "--out", tmp_path / "ring")
     assert r.returncode == 0, r.stderr
+
+
+# ---------------------------------------------------------------- option errors: one line, exit 2
+
+def _main_error(capsys, argv):
+    from glassdist.cli import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    out, err = capsys.readouterr()
+    assert exc.value.code == 2 and out == ""
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and err.endswith("\n"), err  # no usage block
+    return lines[0]
+
+
+OPTION_ERRORS = [
+    (["analyze", "img.png", "--pitch-mm", "-5", "--distance-m", "1", "--out", "o"], "analyze",
+     "argument --pitch-mm: must be positive, got -5"),
+    (["analyze", "img.png", "--pitch-mm", "5", "--distance-m", "0", "--out", "o"], "analyze",
+     "argument --distance-m: must be positive, got 0"),
+    (["analyze", "img.png", "--pitch-mm", "five", "--distance-m", "1", "--out", "o"], "analyze",
+     "argument --pitch-mm: must be a number, got 'five'"),
+    (["analyze", "img.png", "--pitch-mm", "5", "--out", "o"], "analyze",
+     "the following arguments are required: --distance-m"),
+    (["analyze", "img.png", "--pitch-mm", "5", "--distance-m", "1", "--out", "o", "--bogus"], "analyze",
+     "unrecognized arguments: --bogus"),
+    (["batch", "m.csv"], "batch", "the following arguments are required: --out"),
+    (["validate", "s.yaml", "--method", "both", "--out", "o"], "validate", "argument --method: invalid choice: 'both'"),
+    (["nosuch"], None, "argument COMMAND: invalid choice: 'nosuch'"),
+]
+
+
+@pytest.mark.parametrize("argv,command,message", OPTION_ERRORS)
+def test_option_errors_are_one_line(capsys, argv, command, message):
+    prog = "glassdist" if command is None else f"glassdist {command}"
+    line = _main_error(capsys, argv)
+    assert line.startswith(f"{prog}: error: {message}") and line.endswith(f" (see {prog} --help)"), line
+
+
+def test_every_command_reports_option_errors_in_one_line(capsys):
+    from glassdist.cli import build_parser
+
+    commands = build_parser()._commands.choices
+    assert {"analyze", "batch", "render", "predict", "validate", "cycles-setup", "experiment"} <= set(commands)
+    for command in commands:
+        line = _main_error(capsys, [command, "--no-such-option"])
+        assert line.startswith(f"glassdist {command}: error: ") and line.endswith(f"(see glassdist {command} --help)")
+
+
+def test_option_error_from_the_console(tmp_path):
+    r = _cli("analyze", "img.png", "--pitch-mm", -5, "--distance-m", 1, "--out", tmp_path / "o")
+    assert r.returncode == 2 and r.stdout == ""
+    assert r.stderr == ("glassdist analyze: error: argument --pitch-mm: must be positive, got -5 "
+                        "(see glassdist analyze --help)\n")
+    assert not (tmp_path / "o").exists()
+

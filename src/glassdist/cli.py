@@ -34,17 +34,41 @@ EXIT_BAD_INPUT = 2
 COMMAND_MODULES = ["glassdist.report._batch_cli", "glassdist.render._cli", "glassdist.theory._cli", "glassdist.virtual._cli", "glassdist.render.cycles", "glassdist.experiments._cli"]
 
 
-def _positive(kind: str):
-    def parse(text: str) -> float:
-        try:
-            v = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{kind} must be a number, got '{text}'") from None
-        if not np.isfinite(v) or v <= 0:
-            raise argparse.ArgumentTypeError(f"{kind} must be positive, got {text}")
-        return v
+class OneLineErrorParser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line on stderr (exit status 2), no usage block.
 
-    return parse
+    Sub-command parsers made through ``add_subparsers`` are of the same class, so every
+    ``glassdist`` command reports a bad option as
+    ``glassdist COMMAND: error: MESSAGE (see glassdist COMMAND --help)``.
+    """
+
+    _commands = None  # the sub-parsers action, once add_subparsers is called
+
+    def add_subparsers(self, **kwargs):
+        self._commands = super().add_subparsers(**kwargs)
+        return self._commands
+
+    def parse_args(self, args=None, namespace=None):
+        # argparse reports unknown options from the top-level parser; name the sub-command instead.
+        ns, extras = self.parse_known_args(args, namespace)
+        if extras:
+            cmd = self._commands.choices.get(getattr(ns, self._commands.dest, None)) if self._commands else None
+            (cmd or self).error(f"unrecognized arguments: {' '.join(extras)}")
+        return ns
+
+    def error(self, message):
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def _positive(text: str) -> float:
+    """argparse type: a positive finite number (argparse prefixes errors with the option's name)."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number, got '{text}'") from None
+    if not np.isfinite(v) or v <= 0:
+        raise argparse.ArgumentTypeError(f"must be positive, got {text}")
+    return v
 
 
 def _register_analyze(sub) -> None:
@@ -55,12 +79,12 @@ def _register_analyze(sub) -> None:
         "Writes result.npz, summary.json and heatmaps to --out.",
     )
     p.add_argument("image", type=Path, help="photo of the grid through the glass (PNG/TIFF/BMP/JPEG, 8/16-bit)")
-    p.add_argument("--pitch-mm", type=_positive("--pitch-mm"), required=True, help="grid pitch on the backdrop, mm (line spacing, or square size)")
-    p.add_argument("--distance-m", type=_positive("--distance-m"), required=True, help="glass-to-grid distance L, m")
+    p.add_argument("--pitch-mm", type=_positive, required=True, help="grid pitch on the backdrop, mm (line spacing, or square size)")
+    p.add_argument("--distance-m", type=_positive, required=True, help="glass-to-grid distance L, m")
     p.add_argument("--reference", type=Path, help="glass-less photo from the same camera position (Comparative Method)")
     p.add_argument("--pattern", choices=["lines", "checkerboard"], help="backdrop pattern (default: from --params, else lines)")
     p.add_argument("--detrend-degree", type=int, help="A2 polynomial detrend total degree N (default 2)")
-    p.add_argument("--sigma-mm", type=_positive("--sigma-mm"), help="reporting smoothing scale on the backdrop, mm (default: 2 carrier periods)")
+    p.add_argument("--sigma-mm", type=_positive, help="reporting smoothing scale on the backdrop, mm (default: 2 carrier periods)")
     p.add_argument("--params", type=Path, help="JSON file of analyzer parameters (unknown keys are errors)")
     p.add_argument("--mask", type=Path, help="image whose non-zero pixels mark the region to analyse")
     p.add_argument("--out", type=Path, required=True, help="output folder (created if needed)")
@@ -179,7 +203,7 @@ def _run_analyze(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineErrorParser(
         prog="glassdist",
         description="Measure see-through optical distortion of architectural glass (lengths mm, L in m, power mD).",
     )
