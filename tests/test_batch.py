@@ -215,3 +215,61 @@ def test_two_batches_cannot_share_a_folder(tmp_path):
     runner = FakeRunner()
     _run(_panes(tmp_path, ["a", "b"]), out, runner)
     assert runner.calls == ["b"]
+
+
+class _HeatmapRunner(FakeRunner):
+    """FakeRunner that also writes the real heatmap PNGs (the index's thumbnails) and a report."""
+
+    def __call__(self, pane, out_dir, **kw):
+        from glassdist.report.figures import save_channel_heatmaps
+
+        try:
+            from test_report_figures import fake_result
+        except ImportError:  # tests collected as a package
+            from tests.test_report_figures import fake_result
+
+        outcome = super().__call__(pane, out_dir, **kw)
+        save_channel_heatmaps(fake_result(), out_dir)
+        (out_dir / "report.html").write_text("<html></html>")
+        return outcome
+
+
+def _index_out(tmp_path):
+    out = tmp_path / "out"
+    panes = _panes(tmp_path, ("factory_waves", "factory_ring", "insitu_waves_of_the_north_facade", "insitu_ring"))
+    runner = _HeatmapRunner(verdicts={"factory_waves": "FAIL", "factory_ring": "PASS"}, errors={"insitu_ring"})
+    _run(panes, out, runner)
+    return out
+
+
+def test_index_columns_are_grouped_and_thumbnails_scale(tmp_path):
+    html = (_index_out(tmp_path) / "index.html").read_text()
+    assert html.count('<img class="thumb"') == 3 and 'width="' not in html  # sized by the style sheet
+    assert '<th colspan="3">|phi_eff| (mD)</th>' in html and '<th colspan="3">|phi_shear| (mD)</th>' in html
+    assert "img.thumb{display:block;width:96px;max-width:100%" in html
+
+
+def test_index_fits_a_1200_px_window(tmp_path):
+    import shutil
+    import subprocess
+    import tempfile
+
+    exe = shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
+    if exe is None:
+        pytest.skip("the layout check needs chromium on PATH (e.g. apt-get install chromium)")
+    out = _index_out(tmp_path)
+    probe = out / "probe.html"  # the index, reporting its scroll width into the DOM
+    probe.write_text((out / "index.html").read_text().replace(
+        "</body>", "<script>document.body.dataset.width = document.documentElement.scrollWidth + 'x'"
+                   " + document.documentElement.clientWidth</script></body>"))
+    with tempfile.TemporaryDirectory() as profile:
+        r = subprocess.run(
+            [exe, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run", "--disable-background-networking",
+             "--disable-component-update", "--disable-sync", f"--user-data-dir={profile}", "--window-size=1200,900",
+             "--dump-dom", probe.as_uri()],
+            check=True, capture_output=True, text=True, timeout=120,
+        )
+    import re
+
+    scroll, client = map(int, re.search(r'data-width="(\d+)x(\d+)"', r.stdout).groups())
+    assert client > 1000 and scroll <= client, (scroll, client)  # no horizontal scroll bar

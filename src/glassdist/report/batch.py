@@ -480,8 +480,13 @@ def _index_html(rows, out):
 
     counts = {s: sum(r["status"] == s for r in rows) for s in ("done", "error", "pending")}
     n_fail = sum(r["verdict"] == "FAIL" for r in rows)
-    head = ["pane", "status", "verdict", "method"] + [f"{s.replace('_abs', '')} |{c}| (mD)" for c, s in _INDEX_STATS]
-    head += ["analysed %", "s", "heatmap"]
+    # Two header rows: the statistics grouped under their channel, so that the columns stay
+    # narrow and the table (thumbnail included) fits a 1200 px wide window.
+    channels = list(dict.fromkeys(c for c, _ in _INDEX_STATS))
+    top = "".join(f'<th rowspan="2">{h}</th>' for h in ("pane", "status", "verdict", "method"))
+    top += "".join(f'<th colspan="{sum(c == ch for c, _ in _INDEX_STATS)}">|{escape(ch)}| (mD)</th>' for ch in channels)
+    top += "".join(f'<th rowspan="2">{h}</th>' for h in ("analysed %", "s", "heatmap"))
+    sub = "".join(f"<th>{escape(s.removesuffix('_abs'))}</th>" for _, s in _INDEX_STATS)
     body = ""
     for r in rows:
         pid = escape(r["id"])
@@ -490,7 +495,7 @@ def _index_html(rows, out):
         status = escape(r["status"]) + (f"<br><small>{escape(r['error'])}</small>" if r["error"] else "")
         thumb = ""
         if r["status"] == "done" and (out / "panes" / r["id"] / "phi_eff.png").is_file():
-            thumb = f'<a href="panes/{pid}/phi_eff.png"><img src="panes/{pid}/phi_eff.png" width="120" alt="phi_eff"></a>'
+            thumb = f'<a href="panes/{pid}/phi_eff.png"><img class="thumb" src="panes/{pid}/phi_eff.png" alt="phi_eff"></a>'
         cells = [name, status, escape(r["verdict"]), escape(r["method"])]
         cells += [escape(str(r[f"{c}_{s}_mD"])) for c, s in _INDEX_STATS]
         cells += [escape(str(r["valid_percent"])), escape(str(r["seconds"])), thumb]
@@ -498,15 +503,17 @@ def _index_html(rows, out):
     stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M:%S")
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>glassdist batch index</title><style>
-body{{font-family:system-ui,Arial,sans-serif;margin:1.5em}}table{{border-collapse:collapse}}
-td,th{{border:1px solid #ccc;padding:.2em .5em;text-align:left;vertical-align:middle}}th{{background:#f2f2f2}}
+body{{font-family:system-ui,Arial,sans-serif;margin:1.5em}}table{{border-collapse:collapse;max-width:100%}}
+td,th{{border:1px solid #ccc;padding:.2em .4em;text-align:left;vertical-align:middle;font-size:.92em}}
+th{{background:#f2f2f2}}td:nth-child(-n+2){{overflow-wrap:anywhere;min-width:7em}}
+img.thumb{{display:block;width:96px;max-width:100%;height:auto}}
 tr.PASS td{{background:#f3fbf4}}tr.FAIL td{{background:#fff0ef}}tr.pending td{{color:#888}}
 </style></head><body>
 <h1>Batch index</h1>
 <p>{len(rows)} panes: {counts['done']} analysed ({n_fail} failed their specification), {counts['error']} could not
 be analysed, {counts['pending']} pending. Updated {stamp} UTC by glassdist {escape(__version__)}.
 Machine-readable copy: <a href="index.csv">index.csv</a>.</p>
-<table><tr>{''.join(f'<th>{escape(h)}</th>' for h in head)}</tr>
+<table><tr>{top}</tr><tr>{sub}</tr>
 {body}</table></body></html>
 """
 
