@@ -159,3 +159,15 @@ def test_option_error_from_the_console(tmp_path):
                         "(see glassdist analyze --help)\n")
     assert not (tmp_path / "o").exists()
 
+
+def test_result_npz_has_the_usual_permissions(photos, tmp_path):
+    import os
+    import stat
+
+    out = tmp_path / "out"
+    r = _cli("analyze", photos / "img.png", "--pitch-mm", 8, "--distance-m", 10, "--out", out)
+    assert r.returncode == 0, r.stderr
+    umask = os.umask(0)
+    os.umask(umask)
+    for name in ("result.npz", "summary.json", "statistics.csv", "phi_eff.png"):
+        assert stat.S_IMODE((out / name).stat().st_mode) == 0o666 & ~umask, name

@@ -8,13 +8,10 @@ no traceback), 3 analysis done but an acceptance specification FAILED,
 from __future__ import annotations
 
 import argparse
-import hashlib
 import importlib
 import json
 import logging
-import os
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -94,27 +91,10 @@ def _register_analyze(sub) -> None:
     p.set_defaults(func=_run_analyze)
 
 
-def sha256_file(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
-
-def _atomic_write(path: Path, writer) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix="." + path.name, suffix=".tmp")
-    os.close(fd)
-    try:
-        writer(tmp)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-
-
 def write_analysis(result, out_dir: Path, *, inputs: dict | None = None) -> list[Path]:
-    """Write ``result.npz`` and ``summary.json`` (atomically) for an :class:`AnalysisResult`."""
+    """Write ``result.npz`` and ``summary.json`` (atomically, usual permissions) for an :class:`AnalysisResult`."""
+    from .report.exports import atomic_write, atomic_write_text, to_jsonable
+
     out_dir = Path(out_dir)
     arrays = {
         "displacement_mm": result.displacement_mm,
@@ -125,34 +105,19 @@ def write_analysis(result, out_dir: Path, *, inputs: dict | None = None) -> list
         "axis_deg": result.axis_deg,
         "valid": result.valid,
     }
-
-    def save_npz(tmp):
-        with open(tmp, "wb") as f:
-            np.savez(f, **arrays)
-
-    npz = out_dir / "result.npz"
-    _atomic_write(npz, save_npz)
+    npz = atomic_write(out_dir / "result.npz", lambda fh: np.savez(fh, **arrays))
     summary = result.summary()
     if inputs:
         summary["inputs"] = inputs
-    js = out_dir / "summary.json"
-    _atomic_write(js, lambda tmp: Path(tmp).write_text(json.dumps(summary, indent=2, default=_json_default) + "\n"))
+    js = atomic_write_text(out_dir / "summary.json", json.dumps(to_jsonable(summary), indent=2, allow_nan=False) + "\n")
     return [npz, js]
-
-
-def _json_default(o):
-    if isinstance(o, (np.floating, np.integer)):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, Path):
-        return str(o)
-    raise TypeError(f"not JSON serialisable: {type(o)}")
 
 
 def _run_analyze(args) -> int:
     from .analyzer import analyze, load_params, prepare_reference
     from .io import prepare_output_dir, read_image, read_mask
+    from .report.figures import save_channel_heatmaps
+    from .report.workflow import file_sha256, finish_analysis
 
     # Validate every input before any work or any write.
     params = load_params(args.params, pattern=args.pattern, detrend_degree=args.detrend_degree, sigma_mm=args.sigma_mm)
@@ -175,17 +140,13 @@ def _run_analyze(args) -> int:
     result = analyze(image, pitch_mm=args.pitch_mm, distance_m=args.distance_m, reference=reference, params=params, mask=mask)
     inputs = {
         "image": str(args.image),
-        "image_sha256": sha256_file(args.image),
+        "image_sha256": file_sha256(args.image),
         "reference": None if args.reference is None else str(args.reference),
-        "reference_sha256": None if args.reference is None else sha256_file(args.reference),
+        "reference_sha256": None if args.reference is None else file_sha256(args.reference),
         "mask": None if args.mask is None else str(args.mask),
     }
     written = write_analysis(result, out, inputs=inputs)
-    from .report.figures import save_channel_heatmaps
-
     written += list(save_channel_heatmaps(result, out))
-    from .report.workflow import finish_analysis
-
     code = finish_analysis(
         result, out_dir=out, image_path=args.image, reference_path=args.reference, spec_path=args.spec,
         report=args.report, exports=args.export,

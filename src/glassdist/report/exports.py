@@ -27,7 +27,7 @@ import numpy as np
 
 from .stats import STATISTICS
 
-__all__ = ["to_jsonable", "atomic_write_bytes", "atomic_write_text", "write_statistics_csv", "write_fields_npz", "write_fields_tiff"]
+__all__ = ["to_jsonable", "atomic_write", "atomic_write_bytes", "atomic_write_text", "write_statistics_csv", "write_fields_npz", "write_fields_tiff"]
 
 _FIELDS = (
     ("phi_eff_mD", "mD"), ("phi_shear_mD", "mD"), ("phi_total_mD", "mD"), ("axis_deg", "deg"),
@@ -51,23 +51,33 @@ def to_jsonable(obj):
     return str(obj)
 
 
-def atomic_write_bytes(path, data):
-    """Write ``data`` to ``path`` through a temporary file in the same folder and a rename.
+def atomic_write(path, write):
+    """Write ``path`` by calling ``write(fh)`` on a temporary file in the same folder, then renaming it.
 
-    A reader sees either the previous file or the complete new one, never a part.
-    The file gets the usual permissions (``0o666`` less the umask).
+    A reader sees either the previous file or the complete new one, never a part; the
+    data is streamed (nothing is held in memory). The file gets the usual permissions
+    (``0o666`` less the umask).
+
+    Returns
+    -------
+    Path
     """
     path = Path(path)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
     fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
     try:
         with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
+            write(fh)
         os.replace(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
     return path
+
+
+def atomic_write_bytes(path, data):
+    """:func:`atomic_write` of ``data`` (bytes)."""
+    return atomic_write(path, lambda fh: fh.write(data))
 
 
 def atomic_write_text(path, text):
