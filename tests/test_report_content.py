@@ -176,3 +176,32 @@ def test_report_renders_in_headless_chromium(analysed, tmp_path):
     banner = np.all(np.abs(top - np.array([0xD5, 0xD7, 0xFF])) <= 6, axis=1)  # BGR
     assert banner.sum() > 2000
     assert img.std() > 20  # text, tables and figures were drawn, not a blank page
+
+
+def _report_data(html):
+    p = _Collector()
+    p.feed(html)
+    return p, json.loads(p.ids["glassdist-report-data"])
+
+
+def test_report_parameters_show_the_smoothing_used(analysed):
+    # the parameters leave sigma_mm at its default (None = 2 carrier periods); the report shows the value used
+    html = (analysed["out"] / "report.html").read_text(encoding="utf-8")
+    _, data = _report_data(html)
+    assert data["parameters"]["sigma_mm"] == data["sigma_mm"] == 2.0
+    assert '"sigma_mm": null' not in html and '&quot;sigma_mm&quot;: 2.0' in html
+
+
+def test_direct_report_shows_the_homography_fit():
+    from glassdist.report.html import render_report
+    from glassdist.report.stats import result_statistics
+
+    result = fake_result(method="direct")
+    inputs = {"image": {"name": "pane.png", "sha256": "0" * 64, "size": "128 x 96 px"}, "reference": None}
+    html = render_report(result, stats=result_statistics(result), figures=[], inputs=inputs)
+    p, data = _report_data(html)
+    assert data["homography_fit"] == {"inlier_fraction": 0.875, "n_points": 400, "rms_inlier_px": 0.125}
+    assert p.ids["homography-fit"] == "inliers 87.5 % of 400 grid points, RMS inlier reprojection error 0.125 px"
+    # a Comparative report has no homography, hence no fit row
+    html = render_report(fake_result(), stats=result_statistics(fake_result()), figures=[], inputs=inputs)
+    assert 'id="homography-fit"' not in html and _report_data(html)[1]["homography_fit"] is None

@@ -15,7 +15,9 @@ def fake_result(shape=(96, 128), *, eff_mD=-40.0, shear_mD=12.0, seed=0, method=
 
     ``phi_eff`` is a Gaussian dip of depth ``eff_mD`` at the centre, ``phi_shear``
     a constant ``shear_mD`` plus seeded noise, axis 30 degrees; the top 8 rows
-    are invalid (NaN).
+    are invalid (NaN). Like a real result, the parameters leave ``sigma_mm`` at its
+    default (``None``) while ``sigma_mm`` holds the value used; ``method="direct"``
+    adds a homography and its fit.
     """
     rng = np.random.default_rng(seed)
     h, w = shape
@@ -29,12 +31,16 @@ def fake_result(shape=(96, 128), *, eff_mD=-40.0, shear_mD=12.0, seed=0, method=
     for f in (eff, shear, axis):
         f[~valid] = np.nan
     disp[~valid] = np.nan
+    direct = method == "direct"
     return SimpleNamespace(
         method=method, phi_eff_mD=eff, phi_shear_mD=shear, phi_total_mD=np.hypot(eff, shear),
         axis_deg=axis, valid=valid, displacement_mm=disp, displacement_detrended_mm=disp,
         mm_per_px=0.5, sigma_mm=2.0, detrend_degree=2, pitch_mm=5.0, distance_m=1.5,
-        carriers=SimpleNamespace(to_dict=lambda: {"period_px": [9.8, 9.8]}), homography=None,
-        params=SimpleNamespace(resolved=lambda: {"pattern": "checkerboard"}), warnings=(), version="0.1.0",
+        carriers=SimpleNamespace(to_dict=lambda: {"period_px": [9.8, 9.8]}),
+        homography=np.diag([9.8, 9.8, 1.0]) if direct else None,
+        homography_fit=SimpleNamespace(inlier_fraction=0.875, n_points=400, rms_inlier_px=0.125) if direct else None,
+        params=SimpleNamespace(resolved=lambda: {"pattern": "checkerboard", "sigma_mm": None, "detrend_degree": 2}),
+        warnings=(), version="0.1.0",
     )
 
 

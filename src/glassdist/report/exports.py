@@ -27,7 +27,7 @@ import numpy as np
 
 from .stats import STATISTICS
 
-__all__ = ["to_jsonable", "atomic_write", "atomic_write_bytes", "atomic_write_text", "write_statistics_csv", "write_fields_npz", "write_fields_tiff"]
+__all__ = ["to_jsonable", "resolved_parameters", "atomic_write", "atomic_write_bytes", "atomic_write_text", "write_statistics_csv", "write_fields_npz", "write_fields_tiff"]
 
 _FIELDS = (
     ("phi_eff_mD", "mD"), ("phi_shear_mD", "mD"), ("phi_total_mD", "mD"), ("axis_deg", "deg"),
@@ -49,6 +49,19 @@ def to_jsonable(obj):
     if obj is None or isinstance(obj, (bool, int, str)):
         return obj
     return str(obj)
+
+
+def resolved_parameters(result):
+    """The analyzer parameters a result was computed with, as recorded in summary.json and the report.
+
+    ``result.params.resolved()`` with ``sigma_mm`` replaced by the smoothing scale actually
+    used (the parameter's default, ``None``, stands for 2 carrier periods).
+    """
+    params = getattr(result, "params", None)
+    resolved = dict(params.resolved()) if params is not None else {}
+    if getattr(result, "sigma_mm", None) is not None:
+        resolved["sigma_mm"] = result.sigma_mm
+    return resolved
 
 
 def atomic_write(path, write):

@@ -22,7 +22,7 @@ from html import escape
 
 import numpy as np
 
-from .exports import to_jsonable
+from .exports import resolved_parameters, to_jsonable
 from .stats import STATISTICS
 
 __all__ = ["render_report", "METHOD_TEXT"]
@@ -158,9 +158,13 @@ def render_report(result, *, stats, figures, inputs, verdict=None, valid_percent
     generated = generated or datetime.now(timezone.utc)
     version = str(getattr(result, "version", ""))
     method = str(getattr(result, "method", ""))
-    params = result.params.resolved() if getattr(result, "params", None) is not None else {}
+    params = resolved_parameters(result)
     carriers = result.carriers.to_dict() if getattr(result, "carriers", None) is not None else {}
     homography = getattr(result, "homography", None)
+    fit = getattr(result, "homography_fit", None)
+    fit_facts = None if fit is None else {
+        "inlier_fraction": fit.inlier_fraction, "n_points": fit.n_points, "rms_inlier_px": fit.rms_inlier_px,
+    }
     warnings = tuple(getattr(result, "warnings", ()) or ())
     image_name = inputs["image"]["name"]
     title = f"Glass distortion report: {image_name}"
@@ -178,12 +182,18 @@ def render_report(result, *, stats, figures, inputs, verdict=None, valid_percent
         h = np.asarray(homography, dtype=float)
         rows = "<br>".join(" ".join(f"{x: .6g}" for x in r) for r in h)
         geometry.append(("homography (grid → image)", f'<span class="mono">{rows}</span>'))
+    if fit_facts is not None:
+        share = fit_facts["inlier_fraction"]
+        geometry.append(("homography fit (Direct method)",
+                         f'<span id="homography-fit">inliers {_num(None if share is None else 100 * share)} % of '
+                         f'{_num(fit_facts["n_points"])} grid points, RMS inlier reprojection error '
+                         f'{_num(fit_facts["rms_inlier_px"])} px</span>'))
     data = {
         "glassdist_version": version, "method": method, "generated_utc": generated.isoformat(timespec="seconds"),
         "inputs": inputs, "pitch_mm": result.pitch_mm, "distance_m": result.distance_m,
         "mm_per_px": result.mm_per_px, "sigma_mm": result.sigma_mm, "detrend_degree": result.detrend_degree,
         "valid_percent": valid_percent, "verdict": verdict.to_dict() if verdict is not None else None,
-        "statistics": stats, "parameters": params, "warnings": list(warnings),
+        "statistics": stats, "parameters": params, "homography_fit": fit_facts, "warnings": list(warnings),
     }
     data_json = json.dumps(to_jsonable(data), allow_nan=False).replace("</", "<\\/")
     warn_html = "".join(f'<p class="warn">{escape(w)}</p>' for w in warnings) or "<p>None.</p>"
