@@ -160,6 +160,62 @@ def test_option_error_from_the_console(tmp_path):
     assert not (tmp_path / "o").exists()
 
 
+# ---------------------------------------------------------------- re-running into the same folder
+
+def _files(folder):
+    return sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file())
+
+
+def test_rerun_removes_only_the_previous_runs_own_leftovers(photos, tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    spec = tmp_path / "strict.json"
+    spec.write_text(json.dumps({"name": "strict", "criteria": [{"channel": "phi_eff", "statistic": "max_abs", "max_mD": 0.001}]}))
+    base = ["analyze", photos / "img.png", "--reference", photos / "ref.png", "--pitch-mm", 8, "--distance-m", 10, "--out", out]
+    r = _cli(*base, "--spec", spec, "--report", "--export")
+    assert r.returncode == 3, r.stderr
+    first = _files(out)
+    assert {"report.html", "fields.npz", "tiff/valid.tif", "mask_phi_eff_0.001mD.png", "notes.txt"} <= set(first)
+    s = json.loads((out / "summary.json").read_text())
+    assert sorted(s["outputs"]) == [f for f in first if f not in ("notes.txt", "summary.json")]
+    assert s["outputs"]["result.npz"] == (out / "result.npz").stat().st_size
+    # the user appends to fields.npz after the first run: it is no longer the file glassdist wrote
+    with (out / "fields.npz").open("ab") as fh:
+        fh.write(b"appended by the user")
+
+    r = _cli(*base)  # no spec, no report, no exports
+    assert r.returncode == 0, r.stderr
+    s = json.loads((out / "summary.json").read_text())
+    assert s["verdict"] is None
+    left = _files(out)
+    assert not [f for f in left if f == "report.html" or f.startswith(("mask_", "tiff"))]
+    assert not (out / "tiff").exists()  # the folder it emptied
+    assert "notes.txt" in left and (out / "notes.txt").read_text() == "mine"
+    assert "fields.npz" in left  # changed since glassdist wrote it: kept
+    assert sorted(s["outputs"]) == [f for f in left if f not in ("notes.txt", "summary.json", "fields.npz")]
+    assert "removed from" in r.stdout and "report.html" in r.stdout
+
+
+def test_recorded_outputs_never_leave_the_folder(tmp_path):
+    from glassdist.io import recorded_outputs, remove_outputs
+
+    out = tmp_path / "out"
+    (out / "sub").mkdir(parents=True)
+    outside = tmp_path / "outside.txt"
+    for f in (outside, out / "a.png", out / "sub" / "b.png"):
+        f.write_text("x")
+    (out / "link.png").symlink_to(outside)
+    listed = {"../outside.txt": 1, str(outside): 1, "link.png": 1, "sub/../a.png": 1, "a.png": 1, "sub/b.png": 1,
+              "missing.png": 1, "summary.json": 1, "sub": 1}
+    (out / "summary.json").write_text(json.dumps({"glassdist_version": "0", "outputs": listed}))
+    assert recorded_outputs(out) == {"a.png": 1, "sub/b.png": 1}
+    assert remove_outputs(out, list(listed)) == (["a.png", "sub/b.png"], [])
+    assert outside.read_text() == "x" and (out / "link.png").is_symlink() and not (out / "sub").exists()
+    (out / "summary.json").write_text(json.dumps({"outputs": {"link.png": 1}}))  # not a glassdist summary
+    assert recorded_outputs(out) == {}
+
+
 def test_result_npz_has_the_usual_permissions(photos, tmp_path):
     import os
     import stat

@@ -91,8 +91,14 @@ def _register_analyze(sub) -> None:
     p.set_defaults(func=_run_analyze)
 
 
-def write_analysis(result, out_dir: Path, *, inputs: dict | None = None) -> list[Path]:
-    """Write ``result.npz`` and ``summary.json`` (atomically, usual permissions) for an :class:`AnalysisResult`."""
+def write_analysis(result, out_dir: Path, *, inputs: dict | None = None, outputs: dict | None = None) -> list[Path]:
+    """Write ``result.npz`` and ``summary.json`` (atomically, usual permissions) for an :class:`AnalysisResult`.
+
+    ``outputs`` (``{relative path: bytes}``, see :func:`glassdist.io.recorded_outputs`): files
+    of an earlier run still in ``out_dir``, kept on the summary's list of outputs with
+    ``result.npz`` until the run is complete, so that an interrupted run leaves them known.
+    """
+    from .io import output_record
     from .report.exports import atomic_write, atomic_write_text, to_jsonable
 
     out_dir = Path(out_dir)
@@ -109,13 +115,14 @@ def write_analysis(result, out_dir: Path, *, inputs: dict | None = None) -> list
     summary = result.summary()
     if inputs:
         summary["inputs"] = inputs
+    summary["outputs"] = {**(outputs or {}), **output_record(out_dir, [npz])}
     js = atomic_write_text(out_dir / "summary.json", json.dumps(to_jsonable(summary), indent=2, allow_nan=False) + "\n")
     return [npz, js]
 
 
 def _run_analyze(args) -> int:
     from .analyzer import analyze, load_params, prepare_reference
-    from .io import prepare_output_dir, read_image, read_mask
+    from .io import prepare_output_dir, read_image, read_mask, recorded_outputs, remove_outputs
     from .report.figures import save_channel_heatmaps
     from .report.workflow import file_sha256, finish_analysis
 
@@ -134,6 +141,7 @@ def _run_analyze(args) -> int:
 
         load_spec(args.spec)
     out = prepare_output_dir(args.out)
+    previous = recorded_outputs(out)  # files of an earlier run into this folder
 
     if reference is not None:
         reference = prepare_reference(reference, params=params)
@@ -145,12 +153,14 @@ def _run_analyze(args) -> int:
         "reference_sha256": None if args.reference is None else file_sha256(args.reference),
         "mask": None if args.mask is None else str(args.mask),
     }
-    written = write_analysis(result, out, inputs=inputs)
+    written = write_analysis(result, out, inputs=inputs, outputs=previous)
     written += list(save_channel_heatmaps(result, out))
     code = finish_analysis(
         result, out_dir=out, image_path=args.image, reference_path=args.reference, spec_path=args.spec,
-        report=args.report, exports=args.export,
+        report=args.report, exports=args.export, written=written,
     )
+    # the earlier run's files that this one did not write again (e.g. its report, masks of its spec)
+    removed, problems = remove_outputs(out, sorted(set(previous) - set(recorded_outputs(out))))
     stats = result.statistics()
     print(
         f"{result.method} method: valid {100 * result.valid_fraction:.1f}% of the image, "
@@ -159,6 +169,10 @@ def _run_analyze(args) -> int:
     )
     for w in result.warnings:
         print(f"warning: {w}", file=sys.stderr)
+    if removed:
+        print(f"removed from {out}, left by the previous run: {', '.join(removed)}")
+    for line in problems:
+        print(f"warning: {line}", file=sys.stderr)
     print(f"results written to {out}")
     return code
 

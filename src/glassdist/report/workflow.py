@@ -17,9 +17,10 @@ Files added to the output folder:
   specification (pixels over the limit);
 * ``report.html`` with ``report=True``: self-contained report (:mod:`glassdist.report.html`);
 * ``fields.npz`` and ``tiff/*.tif`` with ``exports=True`` (:mod:`glassdist.report.exports`);
-* ``summary.json`` gains ``verdict`` (``null`` without a specification) and ``a4``
+* ``summary.json`` gains ``verdict`` (``null`` without a specification), ``a4``
   (statistics with the area-over values, analysed-area percentage, files
-  written, input file names and SHA-256).
+  written, input file names and SHA-256) and ``outputs`` (every file of the run,
+  the caller's included, with its size; see :func:`glassdist.io.recorded_outputs`).
 """
 
 from __future__ import annotations
@@ -129,7 +130,7 @@ def _update_summary(path, additions):
 
 
 def finish_analysis(result, *, out_dir, image_path, reference_path=None, spec_path=None, report=False,
-                    exports=False, echo=print):
+                    exports=False, written=(), echo=print):
     """Statistics, verdict, A4 figures, report and exports of an analysis.
 
     Parameters
@@ -147,6 +148,9 @@ def finish_analysis(result, *, out_dir, image_path, reference_path=None, spec_pa
         Write ``report.html``.
     exports : bool
         Write ``fields.npz`` and ``tiff/``.
+    written : sequence of path
+        Files the caller already wrote into ``out_dir`` for this analysis (``result.npz``,
+        heatmaps); listed with this function's own in ``summary.json`` ``"outputs"``.
     echo : callable
         Receives the user-facing lines (verdict, files); default ``print``.
 
@@ -160,7 +164,7 @@ def finish_analysis(result, *, out_dir, image_path, reference_path=None, spec_pa
     InputError
         Invalid specification file.
     """
-    from ..io import read_image
+    from ..io import output_record, read_image
     from .html import render_report
 
     out_dir = Path(out_dir)
@@ -172,6 +176,7 @@ def finish_analysis(result, *, out_dir, image_path, reference_path=None, spec_pa
     inputs = {"image": _describe_input(image_path, shape), "reference": _describe_input(reference_path, shape)}
     cover = valid_percent(result.valid)
 
+    caller_written = list(written)
     written = [write_statistics_csv(stats, out_dir / "statistics.csv")]
     # The heatmap files are the analyze command's own (save_channel_heatmaps); they are
     # rendered here again only for embedding in the report.
@@ -189,6 +194,7 @@ def finish_analysis(result, *, out_dir, image_path, reference_path=None, spec_pa
     _update_summary(out_dir / "summary.json", {
         "verdict": verdict.to_dict() if verdict else None,
         "a4": {"statistics": stats, "valid_percent": cover, "files": names, "inputs": inputs},
+        "outputs": output_record(out_dir, caller_written + written),
     })
     if verdict is not None:
         for line in verdict.lines():
