@@ -143,3 +143,20 @@ def test_comment_key_is_allowed_and_hash_is_of_the_file(tmp_path):
     spec, sha = load_spec(p)
     assert spec.name == "line 2" and sha == hashlib.sha256(p.read_bytes()).hexdigest()
     assert spec_limits(spec) == {"phi_eff": [40.0, 60.0], "phi_shear": [10.0]}
+
+
+def test_example_specifications_and_manifest_use_detrend_3_with_the_direct_method():
+    from pathlib import Path
+
+    from glassdist.report.batch import read_manifest
+
+    examples = Path(__file__).resolve().parents[1] / "examples"
+    factory, _ = load_spec(examples / "factory" / "spec.json")
+    contract, _ = load_spec(examples / "insitu" / "contract_spec.json")
+    assert factory.protocol.method == "comparative"
+    # the Direct method needs N >= 3 on real cameras (cubic lens distortion, no reference to cancel it)
+    assert contract.protocol.method == "direct" and contract.protocol.detrend_degree == 3
+    panes = read_manifest(examples / "batch" / "manifest.csv")
+    direct = [p for p in panes if p.reference is None]
+    assert len(direct) == 2 and all(p.detrend_degree == 3 for p in direct)
+    assert all(p.spec.name == "contract_spec.json" for p in direct)
