@@ -260,9 +260,9 @@ def write_json(path: Path, record: dict) -> Path:
     """Write ``record`` (with the package version) as indented JSON."""
     path = Path(path)
     data = {"glassdist_version": __version__, **record}
-    from ..cli import _json_default
+    from ..report.exports import to_jsonable
 
-    path.write_text(json.dumps(data, indent=2, default=_json_default) + "\n", encoding="utf-8")
+    path.write_text(json.dumps(to_jsonable(data), indent=2) + "\n", encoding="utf-8")
     return path
 
 
