@@ -71,7 +71,8 @@ def predict_channels(
         backdrop scale (:func:`nominal_mm_per_px`). Give the analyzer's value for a
         like-for-like comparison.
     valid : ndarray of bool (H, W), optional
-        Region to evaluate (intersected with the pixels the model covers).
+        Region to evaluate (intersected with the pixels the model covers); its connected
+        parts are detrended and smoothed independently.
     projective : bool
         Differentiate with respect to backdrop mm through the exact glass-less
         pixel -> backdrop Jacobian (True) or the isotropic ``mm_per_px``.
@@ -85,12 +86,16 @@ def predict_channels(
     valid : ndarray of bool (H, W)
     """
     from ..analyzer.metrics import evaluate_displacement
+    from ..analyzer.unwrap import label_regions
 
     pred = predict_displacement(scene) if prediction is None else prediction
     region = pred.valid if valid is None else (pred.valid & np.asarray(valid, bool))
     if not region.any():
         raise InputError("the analytical model has no valid pixel in the requested region")
     mpp = nominal_mm_per_px(scene) if mm_per_px is None else float(mm_per_px)
+    # Connected parts of the region (e.g. the pane and the backdrop beside its frame) are
+    # detrended and smoothed independently, as the Analyzer does with its regions.
+    labels, _ = label_regions(region)
     ch = evaluate_displacement(
         np.nan_to_num(pred.displacement_mm),
         region,
@@ -99,5 +104,6 @@ def predict_channels(
         detrend_degree=int(detrend_degree),
         sigma_mm=float(sigma_mm),
         jacobian=landing_jacobian(scene) if projective else None,
+        labels=labels,
     )
     return pred, ch, region
