@@ -93,3 +93,15 @@ def test_opaque_object_does_not_outshine_the_grid():
     img[100:250, 80:300] = 0.3  # large dark object with sharp edges
     c = F.find_carriers(F.compute_spectrum(img))
     assert c.k1.period_px == pytest.approx(8.0, rel=5e-3)
+
+
+def test_frequency_modulated_carrier_is_found_at_its_mean_frequency():
+    """A strong roller wave spreads a carrier into sidebands taller than the carrier bin
+    (FM index 2: J1(2) = 0.58 > J0(2) = 0.22); the mean frequency must be found, not a sideband."""
+    H, W = 480, 640
+    y, x = np.mgrid[0:H, 0:W].astype(float)
+    fx, fy, fm, beta = 0.125, 0.125, 12 / 640, 2.0
+    img = 0.5 + 0.2 * np.cos(2 * np.pi * fx * x + beta * np.sin(2 * np.pi * fm * x)) + 0.2 * np.cos(2 * np.pi * fy * y)
+    c = F.find_carriers(F.compute_spectrum(img))
+    found = sorted(abs(k.fx) + abs(k.fy) for k in (c.k1, c.k2))
+    assert found == pytest.approx([0.125, 0.125], abs=0.25 / 640)  # a sideband would be 12 bins off

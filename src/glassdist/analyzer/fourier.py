@@ -392,7 +392,7 @@ def find_carriers(spectrum: Spectrum, *, min_period_px: float = 3.0, max_peaks: 
     return CarrierPair(c1, c2)
 
 
-def _spectral_centroid(spectrum: Spectrum, ky: float, kx: float, *, width: float = 0.2, iterations: int = 6):
+def _spectral_centroid(spectrum: Spectrum, ky: float, kx: float, *, width: float = 0.2, iterations: int = 50):
     """Power centroid (bins) of the spectrum around a peak, by Gaussian-weighted mean shift.
 
     The weight has a standard deviation of ``width`` |f| (the scale of the carrier
@@ -417,7 +417,11 @@ def _spectral_centroid(spectrum: Spectrum, ky: float, kx: float, *, width: float
         tot = wgt.sum()
         if not tot > 0:
             break
-        cy, cx = float((wgt.sum(axis=1) @ yy) / tot), float((wgt.sum(axis=0) @ xx) / tot)
+        ny_, nx_ = float((wgt.sum(axis=1) @ yy) / tot), float((wgt.sum(axis=0) @ xx) / tot)
+        done = abs(ny_ - cy) + abs(nx_ - cx) < 1e-3
+        cy, cx = ny_, nx_
+        if done:
+            break
     return cy, cx
 
 
