@@ -26,13 +26,20 @@ def test_gaussian_blur_equals_scipy(sigma):
 
 
 @pytest.mark.parametrize("margin", [2.0, 7.5, 12.0])
-def test_disc_erosion_equals_distance_transform(margin):
+@pytest.mark.parametrize("edge", [0.0, 5.0, 13.0])
+def test_disc_erosion_equals_distance_transform(margin, edge):
     rng = np.random.default_rng(2)
     valid = ndimage.binary_opening(rng.random((90, 130)) > 0.2, iterations=2)
     grid = F.SamplingGrid((270, 520), (90, 130))  # anisotropic step (3, 4) px
-    padded = np.pad(valid, 1, constant_values=False)
-    ref = ndimage.distance_transform_edt(padded, sampling=grid.step)[1:-1, 1:-1] > margin
-    assert np.array_equal(_erode(valid, margin, grid), ref)
+    # distance of sample j to the image edge: (j + 1/2) steps, from either side
+    dy = np.minimum(np.arange(90) + 0.5, 90 - np.arange(90) - 0.5) * 3
+    dx = np.minimum(np.arange(130) + 0.5, 130 - np.arange(130) - 0.5) * 4
+    # excluded samples within `margin` of the image edge belong to the edge: not eroded from
+    band = (dy[:, None] <= margin) | (dx[None, :] <= margin)
+    padded = np.pad(valid | band, 1, constant_values=True)  # outside the image: not an excluded area
+    ref = valid & (ndimage.distance_transform_edt(padded, sampling=grid.step)[1:-1, 1:-1] > margin)
+    ref &= (dy[:, None] > edge) & (dx[None, :] > edge)
+    assert np.array_equal(_erode(valid, margin, grid, edge), ref)
 
 
 def test_block_mean_equals_numpy():

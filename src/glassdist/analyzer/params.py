@@ -73,7 +73,13 @@ class AnalyzerParams(BaseModel):
     coherence_threshold: float = Field(
         0.5, ge=0, lt=1, description="valid region: phase coherence |G*z|/G*|z| of the smoothed signal must exceed this"
     )
-    border_periods: float = Field(1.5, ge=0, description="valid region: margin eroded at image and mask borders, carrier periods")
+    border_periods: float = Field(
+        1.5, ge=0, description="valid region: margin eroded around excluded areas (frames, occluders, the user mask), carrier periods"
+    )
+    edge_margin_periods: float = Field(
+        0.75, ge=0,
+        description="valid region: margin at the image edges, carrier periods (the periodic FFT mixes the opposite edge in)",
+    )
     min_region_fraction: float = Field(0.01, ge=0, lt=1, description="valid region: drop connected regions smaller than this fraction of the image")
     ransac_threshold_periods: float = Field(0.1, gt=0, description="I2: RANSAC inlier threshold, carrier periods")
     ransac_max_trials: int = Field(2000, ge=10)

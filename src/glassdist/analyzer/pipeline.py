@@ -273,24 +273,32 @@ def _downsample_mask(mask: np.ndarray, grid: F.SamplingGrid) -> np.ndarray:
     return cv2.resize(mask.astype(np.float32), (w, h), interpolation=cv2.INTER_AREA) > 0.999
 
 
-def _erode(valid: np.ndarray, margin_px: float, grid: F.SamplingGrid) -> np.ndarray:
-    """Samples farther than ``margin_px`` (image px) from every invalid sample and from the image edge."""
+def _erode(valid: np.ndarray, margin_px: float, grid: F.SamplingGrid, edge_margin_px: float | None = None) -> np.ndarray:
+    """Samples farther than ``margin_px`` (image px) from every invalid sample, and than
+    ``edge_margin_px`` (default ``margin_px``) from the image edges."""
     import cv2
 
-    if margin_px <= 0:
-        return valid
     sy, sx = grid.step
+    edge = margin_px if edge_margin_px is None else edge_margin_px
+    # Sample j sits at j*s + (s-1)/2 px; its distance to the edge is that plus 1/2 px.
+    yv, xv = (np.arange(n) * st + st / 2.0 for n, st in zip(grid.shape, grid.step))
+    H, W = grid.full_shape
+    dy, dx = np.minimum(yv, H - yv), np.minimum(xv, W - xv)
+    out = valid.copy()
     ry, rx = int(margin_px / sy), int(margin_px / sx)
-    if ry == 0 and rx == 0:  # the disc holds the centre alone
-        return valid.copy()
-    # Erosion by the disc of radius margin_px: a sample stays when no invalid sample (nor any
-    # outside the image) lies within margin_px of it, i.e. its distance transform exceeds it.
-    j, i = np.mgrid[-ry : ry + 1, -rx : rx + 1]
-    disc = ((j * sy) ** 2 + (i * sx) ** 2 <= margin_px**2).astype(np.uint8)
-    pad = ((ry + 1, ry + 1), (rx + 1, rx + 1))
-    v = np.pad(valid.view(np.uint8), pad)
-    er = cv2.erode(v, disc, borderType=cv2.BORDER_CONSTANT, borderValue=0)
-    return er[ry + 1 : -ry - 1, rx + 1 : -rx - 1].view(bool)
+    if margin_px > 0 and (ry or rx):
+        # Erosion by the disc of radius margin_px: a sample stays when no excluded sample lies
+        # within margin_px of it (its distance transform exceeds it). Samples excluded within
+        # margin_px of the image edge are the edge's own (the periodic transform mixes the
+        # opposite edge in there): the edge margin below handles them, they are not eroded from.
+        band = (dy <= margin_px)[:, None] | (dx <= margin_px)[None, :]
+        j, i = np.mgrid[-ry : ry + 1, -rx : rx + 1]
+        disc = ((j * sy) ** 2 + (i * sx) ** 2 <= margin_px**2).astype(np.uint8)
+        seed = (valid | band).view(np.uint8)
+        out &= cv2.erode(seed, disc, borderType=cv2.BORDER_CONSTANT, borderValue=1).view(bool)
+    out &= (dy > edge)[:, None]
+    out &= (dx > edge)[None, :]
+    return out
 
 
 def _quality(phases, coherences, mods, carriers, grid, p: AnalyzerParams, user_mask, warn: list[str]):
@@ -317,7 +325,7 @@ def _quality(phases, coherences, mods, carriers, grid, p: AnalyzerParams, user_m
         valid &= coh > p.coherence_threshold
     if user_mask is not None:
         valid &= _downsample_mask(user_mask, grid)
-    valid = _erode(valid, p.border_periods * period, grid)
+    valid = _erode(valid, p.border_periods * period, grid, p.edge_margin_periods * period)
     bad = np.zeros(grid.shape, bool)
     for ph in phases:
         bad |= residues(ph)
