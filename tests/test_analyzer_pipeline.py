@@ -141,3 +141,14 @@ def test_narrow_frame_band_splits_regions():
     assert not res.valid[:, 205:214].any()
     off = analyze(img, pitch_mm=PITCH, distance_m=L, params=dict(PARAMS, local_modulation_threshold=0.0))
     assert off.n_regions == 1  # the global threshold alone misses it
+
+
+def test_distortion_beyond_the_measurable_range_is_flagged():
+    """A wave whose strain (local frequency shift) exceeds ~35% of the carrier is not measured
+    silently; a moderate one (~12%) raises no warning."""
+    for amp, expect in ((3.0, False), (12.0, True)):  # peak strain 2 pi A / 160 mm: 0.12 and 0.47
+        cap = synthetic_capture((400, 520), pitch_mm=PITCH, mm_per_px=1.0, displacement=wave_displacement(amp, 160.0, 0.0))
+        comp = _run(cap, "comparative")
+        direct = _run(cap, "direct")
+        assert any("strong distortion" in w for w in comp.warnings) == expect, comp.warnings
+        assert bool(direct.warnings) == expect, direct.warnings

@@ -468,6 +468,28 @@ def _upsample_deferred(deferred: dict | None, name: str, valid_full: np.ndarray)
     return _upsample_one(deferred["fields"][name], deferred["idx"], deferred["grid"], ~valid_full)
 
 
+_DEVIATION_WARN = 0.35  # relative local-frequency deviation above which results degrade (ray-traced roller waves: fine at 0.31, wrong from 0.41 to 0.54)
+
+
+def _frequency_deviation(phases: np.ndarray, valid: np.ndarray, carriers, step) -> float:
+    """99th percentile over ``valid`` of |grad phi_i| / (2 pi |f_i|), the larger of the two carriers.
+
+    The distortion phase's gradient is the local shift of the grid frequency; the
+    bandpass passes a limited band around the carrier, so large shifts are attenuated
+    (and beyond it the unwrap and the homography fail).
+    """
+    if valid.sum() < 16:
+        return 0.0
+    out = 0.0
+    for i, c in enumerate(carriers):
+        gy, gx = np.gradient(phases[..., i], step[0], step[1])
+        g = np.hypot(gx, gy)[valid]
+        g = g[np.isfinite(g)]
+        if g.size:
+            out = max(out, float(np.percentile(g, 99)) / (2 * np.pi * c.norm))
+    return out
+
+
 def _analysis_block(sigma_px: float, blur, grid: F.SamplingGrid, p: AnalyzerParams) -> int:
     """Block factor (1, 2 or 4) of the Block A grid: its step stays below half the residual smoothing."""
     if p.analysis_block != "auto":
@@ -705,6 +727,13 @@ def analyze(
         u0, v0 = apply_inverse(fit.matrix, xx, yy)
         phases = phases + 2 * np.pi * np.stack(
             [carriers.k1.fx * xx + carriers.k1.fy * yy - u0, carriers.k2.fx * xx + carriers.k2.fy * yy - v0], axis=-1
+        )
+    deviation = _frequency_deviation(phases, valid, ks, agrid.step)
+    if deviation > _DEVIATION_WARN:
+        warn.append(
+            f"strong distortion: the local grid frequency departs from the carrier by up to {100 * deviation:.0f}% "
+            f"(results were reliable up to about {100 * _DEVIATION_WARN:.0f}% in tests); the result may be attenuated or wrong - "
+            "use a finer grid, a shorter distance L or the Comparative Method"
         )
     if p.a1_mode == "projective":
         delta = phases * (p_c / (2 * np.pi))  # grid-frame components, exact
