@@ -353,8 +353,15 @@ def _fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParam
     """
     U, V = UV
     spacing = _points_spacing(carriers, grid)
+    period = max(carriers.k1.period_px, carriers.k2.period_px)
     thr = p.ransac_threshold_periods * min(carriers.k1.period_px, carriers.k2.period_px)
-    src, dst = logical_grid_points(U, V, yy, xx, labels == 1, spacing)
+    # Grid points from the interior only: near the image edges the phase of a single photo
+    # is less certain (the Comparative Method cancels that against its reference, Block I
+    # cannot), and a homography tilted by them would leave a ramp in the displacement.
+    interior = _erode(np.ones(grid.shape, bool), 0.0, grid, p.border_periods * period)
+    if (labels[interior] == 1).sum() < 0.5 * (labels == 1).sum():
+        interior = np.ones(grid.shape, bool)  # small images: keep every point
+    src, dst = logical_grid_points(U, V, yy, xx, (labels == 1) & interior, spacing)
     fit = fit_homography(src, dst, threshold_px=thr, max_trials=p.ransac_max_trials, seed=p.ransac_seed)
     offsets = np.zeros((n + 1, 2))
     if n > 1:
@@ -366,7 +373,7 @@ def _fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParam
             offsets[r] = np.round(np.median(U[sel] - u0[sel])), np.round(np.median(V[sel] - v0[sel]))
             U[sel] -= offsets[r, 0]
             V[sel] -= offsets[r, 1]
-        src, dst = logical_grid_points(U, V, yy, xx, labels > 0, spacing)
+        src, dst = logical_grid_points(U, V, yy, xx, (labels > 0) & interior, spacing)
         fit = fit_homography(src, dst, threshold_px=thr, max_trials=p.ransac_max_trials, seed=p.ransac_seed)
     if fit.inlier_fraction < 0.1:
         warn.append(

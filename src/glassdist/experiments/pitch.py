@@ -188,20 +188,24 @@ def run_pitch(
         summary[reg] = s
     record["summary"] = summary
 
-    own = summary["own"]
+    # Bounds on the region common to all six runs: each grid's own region differs (the image
+    # edge margin is a number of carrier periods), and there the exact truth itself moves by a
+    # few per cent with the region alone (the 'truth spread' column), which no analyzer can
+    # follow. The own-region figures stay in the tables.
+    common_s = summary["common"]
     bounds = {
         f"spread_direct_{ch}": bound(
-            own["spread"][ch]["direct"], BOUNDS["spread"], paper=PAPER["direct_spread"] if ch == "phi_eff" else None,
-            what=f"Direct mean abs {ch}: max deviation from its mean across pitches",
+            common_s["spread"][ch]["direct"], BOUNDS["spread"], paper=PAPER["direct_spread"] if ch == "phi_eff" else None,
+            what=f"Direct mean abs {ch}, common region: max deviation from its mean across pitches",
         )
         for ch in CHANNELS
     }
     for ch in CHANNELS:
         for n in runs:
             bounds[f"direct_vs_comparative_{ch}_{n}"] = bound(
-                own["direct_vs_comparative"][ch][n], BOUNDS["methods"],
+                common_s["direct_vs_comparative"][ch][n], BOUNDS["methods"],
                 paper=PAPER["direct_vs_comparative"].get(n) if ch == "phi_eff" else None,
-                what=f"{ch}, {n} grid: abs(D - C) / max(D, C)",
+                what=f"{ch}, {n} grid, common region: abs(D - C) / max(D, C)",
             )
     record["bounds"] = bounds
     table = pitch_table(record)
