@@ -1,0 +1,445 @@
+"""Accuracy of the Distortion Analyzer against the exact ray-traced truth.
+
+Each scene is rendered once with the exact engine (with and without the glass) and
+analysed with both methods: Comparative (with the rendered glass-less reference) and
+Direct (without it). The truth is the tracer's landing-point displacement passed
+through the same evaluation stack with the analyzer's N, sigma, mm/px and region
+(the ``exact`` channels of :func:`glassdist.virtual.validate_scene`). Per run:
+mean |phi_eff| and mean |phi_shear| Analyzer / truth, Pearson correlation of the
+maps with the truth over the compared region, pane coverage (share of the pixels
+that see the pane, tracer status "through the glass", inside the analyzer's valid
+region), p95 |phi_eff| over the valid region and the analyzer's warnings, checked
+against the acceptance bounds below. Writes accuracy.json and accuracy.md to
+docs/ unless --out is given::
+
+    python experiments/accuracy.py [--out DIR] [--scale S] [--spp N] [--scenes NAME,...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import shlex
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy import ndimage
+
+from glassdist.analyzer.metrics import channel_statistics
+from glassdist.errors import InputError
+from glassdist.experiments import ExperimentResult, evaluate, render_inputs, scaled_scene, write_experiment
+from glassdist.experiments._common import validation_record
+from glassdist.io import prepare_output_dir
+from glassdist.render._tracer import GLASS
+from glassdist.scene import load_scene
+from glassdist.theory import analysis_params, carrier_period_mm
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENES_DIR = ROOT / "examples" / "scenes"
+METHODS = ("comparative", "direct")
+CHANNELS = ("phi_eff", "phi_shear")
+
+#: Acceptance bounds: mean |phi_eff| Analyzer / truth within ``ratio`` of 1, both maps'
+#: correlation with the truth at least ``corr``, pane coverage at least ``coverage``;
+#: flat glass: p95 |phi_eff| at most ``p95_mD``.
+BOUNDS = {
+    "clean": {"ratio": 0.02, "corr": 0.98, "coverage": 0.90},
+    "noisy": {"ratio": 0.05, "corr": 0.95, "coverage": 0.90},
+    "flat": {"p95_mD": 0.4, "coverage": 0.90},
+}
+
+#: Camera noise of the noisy variants (electrons at full scale, read noise as a fraction of it).
+NOISE = {"full_well_e": 10000.0, "read_noise": 0.01}
+#: Uneven lighting of the lighting variant.
+UNEVEN_LIGHT = {"vignetting": 0.3, "lighting": {"gradient": 0.3, "direction_deg": 30.0}}
+
+
+def example(name: str):
+    return load_scene(SCENES_DIR / f"{name}.yaml")
+
+
+def wavy_edge_mid_image():
+    """Wavy slab with the camera moved sideways until the pane's right edge crosses the image centre."""
+    s = example("wavy_slab")
+    edge_x = s.pane.center_mm[0] + 0.5 * s.pane.size_mm[0] * math.cos(math.radians(s.pane.yaw_deg))
+    _, y, z = s.camera.position_mm
+    return s.with_changes(name="wavy_slab_edge_mid", camera={"position_mm": [edge_x, y, z]})
+
+
+FLAT = {"deformation": {"both": [], "front": [], "back": []}}
+
+
+def flat_noisy():
+    """The wavy slab's pane without deformation, with camera noise."""
+    return example("wavy_slab").with_changes(name="flat_noisy", pane=FLAT, imaging={"noise": NOISE})
+
+
+def igu_flat():
+    """The pillowed IGU scene without its domes: the analyzer's floor at that scene's settings (frame in view)."""
+    return example("pillowed_igu").with_changes(name="pillowed_igu_flat", pane=FLAT)
+
+
+def lens_p64_noisy():
+    return example("biconvex_lens_p64").with_changes(name="lens_p64_noisy", imaging={"noise": NOISE})
+
+
+def wavy_uneven_light():
+    return example("wavy_slab").with_changes(name="wavy_slab_uneven_light", imaging=UNEVEN_LIGHT)
+
+
+def wavy_amplitude(amplitude_mm: float):
+    """The wavy slab with its roller wave's amplitude replaced."""
+    s = example("wavy_slab")
+    deformation = s.model_dump()["pane"]["deformation"]
+    deformation["both"] = [{**deformation["both"][0], "amplitude_mm": amplitude_mm}]
+    return s.with_changes(name=f"wavy_slab_A{amplitude_mm:g}", pane={"deformation": deformation})
+
+
+_NOISE_TEXT = f"camera noise (full_well_e {NOISE['full_well_e']:g}, read_noise {NOISE['read_noise']:g})"
+
+def _shipped(name: str, what: str) -> tuple:
+    return "clean", lambda: example(name), f"`examples/scenes/{name}.yaml` ({what})"
+
+
+def _variant(kind: str, build, what: str) -> tuple:
+    return kind, lambda: build().with_changes(description=what), what
+
+
+#: name -> (kind of bounds, scene builder, what it is)
+SCENES = {
+    "wavy_slab": _shipped("wavy_slab", "roller wave 0.3 mm, pitch 24.2 mm"),
+    "biconvex_lens_p48": _shipped("biconvex_lens_p48", "pitch 48.4 mm"),
+    "biconvex_lens_p64": _shipped("biconvex_lens_p64", "pitch 64.6 mm"),
+    "biconvex_lens_p96": _shipped("biconvex_lens_p96", "pitch 96.9 mm"),
+    "mild_slab_rotated": _shipped("mild_slab_rotated", "grid rotated 20°"),
+    "pillowed_igu": _shipped("pillowed_igu", "checkerboard, frame edge in view"),
+    "pillowed_igu_flat": _variant("flat", igu_flat, "control: the pillowed IGU scene without its domes (flat pane, frame in view)"),
+    "wavy_slab_edge_mid": _variant(
+        "clean", wavy_edge_mid_image, "wavy slab, camera moved sideways so that the pane's right edge crosses the image centre"
+    ),
+    "flat_noisy": _variant("flat", flat_noisy, f"the wavy slab's pane without deformation, {_NOISE_TEXT}"),
+    "lens_p64_noisy": _variant("noisy", lens_p64_noisy, f"biconvex_lens_p64 with {_NOISE_TEXT}"),
+    "wavy_slab_uneven_light": _variant("clean", wavy_uneven_light, "wavy slab, vignetting 0.3 and a lighting gradient 0.3 at 30°"),
+    "wavy_slab_A0.5": _variant("clean", lambda: wavy_amplitude(0.5), "wavy slab, wave amplitude 0.5 mm"),
+    "wavy_slab_A0.75": _variant("clean", lambda: wavy_amplitude(0.75), "wavy slab, wave amplitude 0.75 mm"),
+}
+
+
+def _check(value: float, op: str, limit: float, what: str) -> dict:
+    met = bool(np.isfinite(value)) and (value <= limit if op == "<=" else value >= limit)
+    return {"value": float(value), "op": op, "limit": float(limit), "met": met, "what": what}
+
+
+def checks(run: dict, kind: str) -> dict:
+    """The acceptance checks of one run for its kind of scene (see :data:`BOUNDS`)."""
+    b = BOUNDS[kind]
+    out = {"coverage": _check(run["pane_coverage"], ">=", b["coverage"], "pane coverage")}
+    if kind == "flat":
+        out["p95_phi_eff"] = _check(run["p95_abs_phi_eff_mD"], "<=", b["p95_mD"], "p95 |phi_eff|, mD")
+        return out
+    out["ratio_phi_eff"] = _check(abs(run["ratios_vs_exact"]["phi_eff"] - 1.0), "<=", b["ratio"],
+                                  "|mean |phi_eff| Analyzer / truth - 1|")
+    for ch in CHANNELS:
+        out[f"r_{ch}"] = _check(run["correlations_vs_exact"][ch], ">=", b["corr"], f"correlation of {ch} with the truth")
+    return out
+
+
+def against_truth(val, region: np.ndarray) -> dict:
+    """Mean |phi| Analyzer / truth and Pearson correlation of the maps over ``region``, per channel."""
+    out: dict = {"fraction": float(region.mean()), "ratios_vs_exact": {}, "correlations_vs_exact": {}}
+    if region.sum() < 16:
+        return out
+    for ch in CHANNELS:
+        a, t = getattr(val.analysis, f"{ch}_mD")[region], getattr(val.exact, f"{ch}_mD")[region]
+        out["ratios_vs_exact"][ch] = float(np.mean(np.abs(a)) / np.mean(np.abs(t)))
+        out["correlations_vs_exact"][ch] = float(np.corrcoef(a, t)[0, 1])
+    return out
+
+
+def edge_margin_ceiling(res, scene, pane: np.ndarray) -> float:
+    """Share of the pane's pixels farther than ``edge_margin_periods`` carrier periods from the image edge.
+
+    The most pane coverage the image-edge margin alone leaves (carrier period taken at the mean mm/px).
+    """
+    margin_px = res.params.edge_margin_periods * carrier_period_mm(scene) / res.mm_per_px
+    H, W = pane.shape
+    rows, cols = np.arange(H) + 0.5, np.arange(W) + 0.5
+    dist = np.minimum.outer(np.minimum(rows, H - rows), np.minimum(cols, W - cols))
+    return float((pane & (dist >= margin_px)).sum() / max(int(pane.sum()), 1))
+
+
+def measure(inputs, method: str, params, kind: str) -> dict:
+    """One analyzer run against the truth: the record of :func:`validation_record` plus the accuracy figures.
+
+    ``interior``: the same figures on the compared region less a band of one sigma along its
+    border (image edges included), where the region's edge cuts the smoothing kernels.
+    """
+    try:
+        val = evaluate(inputs, method=method, params=params)
+    except InputError as exc:
+        return {"method": method, "error": str(exc)}
+    res, sel = val.analysis, val.valid
+    pane = inputs.truth.status == GLASS
+    run = validation_record(val)
+    run["correlations_vs_exact"] = against_truth(val, sel)["correlations_vs_exact"]
+    interior = ndimage.distance_transform_edt(np.pad(sel, 1))[1:-1, 1:-1] > res.sigma_mm / res.mm_per_px
+    run["interior"] = against_truth(val, interior)
+    run["pane_pixels"] = int(pane.sum())
+    run["pane_coverage"] = float((res.valid & pane).sum() / max(int(pane.sum()), 1))
+    run["edge_margin_ceiling"] = edge_margin_ceiling(res, inputs.scene, pane)
+    run["p95_abs_phi_eff_mD"] = channel_statistics(res.phi_eff_mD, res.valid)["p95_abs"]
+    run["params"] = res.params.resolved()
+    run["checks"] = checks(run, kind)
+    return run
+
+
+def run_accuracy(names, *, scale: float = 1.0, spp: int | None = None) -> dict:
+    scenes = []
+    for name in names:
+        kind, build, what = SCENES[name]
+        scene = scaled_scene(build(), scale=scale, spp=spp)
+        inputs = render_inputs(scene, engine="exact", reference=True)
+        params = analysis_params(scene)
+        entry = {"name": name, "kind": kind, "scene": what, "definition": scene.model_dump(mode="json"),
+                 "timings": inputs.timings, "runs": {}}
+        for method in METHODS:
+            run = measure(inputs, method, params, kind)
+            entry["runs"][method] = run
+            print(f"{name} {method}: " + _summary_line(run), flush=True)
+        scenes.append(entry)
+    return {"engine": "exact", "image_size": list(scene.camera.pixels),
+            "samples_per_pixel": scene.render.samples_per_pixel, "criteria": BOUNDS, "scenes": scenes}
+
+
+def _summary_line(run: dict) -> str:
+    if "error" in run:
+        return f"error: {run['error']}"
+    r, c = run["ratios_vs_exact"], run["correlations_vs_exact"]
+    return (f"ratio {r['phi_eff']:.4f} / {r['phi_shear']:.4f}, r {c['phi_eff']:.4f} / {c['phi_shear']:.4f}, "
+            f"coverage {run['pane_coverage']:.3f}, p95 {run['p95_abs_phi_eff_mD']:.3g} mD, warnings {len(run['warnings'])}")
+
+
+# ---------------------------------------------------------------- markdown
+
+
+def _cell(run: dict, key: str, fmt: str, value: float) -> str:
+    text = format(value, fmt)
+    check = run["checks"].get(key)
+    return f"**{text}**" if check is not None and not check["met"] else text
+
+
+def results_table(record: dict) -> str:
+    rows = [
+        "| scene | method | σ mm | N | φ_eff ratio | φ_shear ratio | r_eff | r_shear | pane coverage "
+        "| p95 \\|φ_eff\\| mD | warnings |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for s in record["scenes"]:
+        for method, run in s["runs"].items():
+            if "error" in run:
+                rows.append(f"| {s['name']} | {method} | | | | | | | | | error: {run['error']} |")
+                continue
+            r, c = run["ratios_vs_exact"], run["correlations_vs_exact"]
+            flat = s["kind"] == "flat"
+            ratio_eff = "—" if flat else _cell(run, "ratio_phi_eff", ".3f", r["phi_eff"])
+            ratio_shear = "—" if flat else f"{r['phi_shear']:.3f}"
+            r_eff = "—" if flat else _cell(run, "r_phi_eff", ".3f", c["phi_eff"])
+            r_shear = "—" if flat else _cell(run, "r_phi_shear", ".3f", c["phi_shear"])
+            warnings = "; ".join(w.replace("|", "\\|") for w in run["warnings"]) or "—"
+            rows.append(
+                f"| {s['name']} | {method} | {run['sigma_mm']:.1f} | {run['detrend_degree']} | {ratio_eff} | {ratio_shear} "
+                f"| {r_eff} | {r_shear} | {_cell(run, 'coverage', '.1%', run['pane_coverage']).replace('%', ' %')} "
+                f"| {_cell(run, 'p95_phi_eff', '.3f', run['p95_abs_phi_eff_mD'])} | {warnings} |"
+            )
+    return "\n".join(rows)
+
+
+def criteria_list(record: dict) -> str:
+    """One line per criterion: how many runs meet it, and the figures of those that do not."""
+    items = [
+        ("clean", "ratio_phi_eff", "clean scenes: mean |φ_eff| within 2 % of the truth"),
+        ("clean", "r_phi_eff", "clean scenes: correlation of φ_eff with the truth ≥ 0.98"),
+        ("clean", "r_phi_shear", "clean scenes: correlation of φ_shear with the truth ≥ 0.98"),
+        ("noisy", "ratio_phi_eff", "noisy scene: mean |φ_eff| within 5 % of the truth"),
+        ("noisy", "r_phi_eff", "noisy scene: correlation of φ_eff ≥ 0.95"),
+        ("noisy", "r_phi_shear", "noisy scene: correlation of φ_shear ≥ 0.95"),
+        (None, "coverage", "pane coverage ≥ 90 %"),
+        ("flat", "p95_phi_eff", "flat glass: p95 |φ_eff| ≤ 0.4 mD"),
+    ]
+    lines = []
+    for kind, key, what in items:
+        met, failed = [], []
+        for s in record["scenes"]:
+            if kind is not None and s["kind"] != kind:
+                continue
+            for method, run in s["runs"].items():
+                if "error" in run:
+                    failed.append(f"{s['name']} {method} (error)")
+                    continue
+                ck = run["checks"][key]
+                (met if ck["met"] else failed).append(f"{s['name']} {method} {_figure(run, key)}")
+        if not met and not failed:
+            continue
+        line = f"- **{what}**: met by {len(met)} of {len(met) + len(failed)} runs"
+        if failed:
+            line += "; not met: " + ", ".join(failed)
+        elif kind in ("noisy", "flat"):
+            line += " (" + ", ".join(met) + ")"
+        lines.append(line + ".")
+    return "\n".join(lines)
+
+
+def _figure(run: dict, key: str) -> str:
+    if key == "ratio_phi_eff":
+        return f"{run['ratios_vs_exact']['phi_eff']:.3f}"
+    if key.startswith("r_"):
+        return f"{run['correlations_vs_exact'][key[2:]]:.3f}"
+    if key == "coverage":
+        return f"{100 * run['pane_coverage']:.1f} % (edge-margin ceiling {100 * run['edge_margin_ceiling']:.1f} %)"
+    return f"{run['p95_abs_phi_eff_mD']:.3f} mD"
+
+
+def accuracy_markdown(record: dict) -> str:
+    t = record["timings"]
+    scenes = "\n".join(f"- {s['name']}: {s['scene']}" for s in record["scenes"])
+    return f"""Wall time {record['wall_s']:.0f} s on 2 shared cores (rendering {t['render_s']:.0f} s, model and truth \
+{t['model_s'] + t['truth_s']:.0f} s, the rest analysis and evaluation). Exact engine, \
+{record['image_size'][0]} × {record['image_size'][1]} px, {record['samples_per_pixel']} spp; each scene is rendered once \
+(with and without the glass) and analysed by both methods with the scene's own analysis settings \
+(`analysis` block; σ = 2 carrier periods where it sets none). Truth: the tracer's landing-point displacement \
+through the same evaluation stack (same N, σ, mm/px and region). Ratio: mean |φ| Analyzer / truth over the \
+compared region; r: Pearson correlation of the maps there; pane coverage: share of the pixels that see the pane \
+(tracer status "through the glass") inside the analyzer's valid region; p95 |φ_eff| over the valid region. \
+Bold: outside the bound of its scene (the φ_shear ratio has none).
+
+Scenes:
+
+{scenes}
+
+{results_table(record)}
+
+## Against the acceptance bounds
+
+Clean: mean |φ_eff| within 2 % of the truth, correlation ≥ 0.98 for φ_eff and φ_shear; noisy: 5 % / 0.95; \
+every scene: pane coverage ≥ 90 %; flat glass: p95 |φ_eff| ≤ 0.4 mD.
+
+{criteria_list(record)}
+
+## Notes
+
+{notes(record)}"""
+
+
+def _runs(record: dict, name: str):
+    """The (comparative, direct) runs of a scene, or None when it was not run or a run failed."""
+    for s in record["scenes"]:
+        if s["name"] == name and not any("error" in r for r in s["runs"].values()):
+            return tuple(s["runs"][m] for m in METHODS)
+    return None
+
+
+def _both(runs, get, fmt: str = ".3f") -> str:
+    """``comparative / direct`` figures (one figure when both read the same)."""
+    texts = [format(get(r), fmt) for r in runs]
+    return texts[0] if len(set(texts)) == 1 else " / ".join(texts)
+
+
+def notes(record: dict) -> str:
+    """Figures behind the unmet bounds (two figures: Comparative / Direct)."""
+    out = []
+    short = [(s["name"], r) for s in record["scenes"] for r in s["runs"].values()
+             if "error" not in r and not r["checks"]["coverage"]["met"]
+             and not any(w.startswith("strong distortion") for w in r["warnings"])]
+    if short:
+        ceilings = [100 * r["edge_margin_ceiling"] for _, r in short]
+        gaps = {name: 100 * (r["edge_margin_ceiling"] - r["pane_coverage"]) for name, r in short}
+        worst = max(gaps, key=gaps.get)
+        out.append(
+            f"- Pane coverage below 90 % (runs without a strong-distortion warning): the image-edge margin "
+            f"(`edge_margin_periods` = {short[0][1]['params']['edge_margin_periods']:g} carrier periods) alone leaves "
+            f"{min(ceilings):.1f}–{max(ceilings):.1f} % of the pane (the ceiling in brackets above); the coverage lies "
+            f"{min(gaps.values()):.1f}–{gaps[worst]:.1f} points below that ceiling, the most on {worst}. With 0.5 "
+            "periods the coverage passes 90 % on the lens and rotated scenes, but φ_eff then moves by 4–5 % near "
+            "the image edges (separate measurement, not part of this run)."
+        )
+    lens = _runs(record, "biconvex_lens_p96")
+    if lens:
+        inner = [r["interior"]["ratios_vs_exact"]["phi_eff"] for r in lens]
+        text = (
+            f"- biconvex_lens_p96: φ_eff reads {_both(lens, lambda r: r['ratios_vs_exact']['phi_eff'])} of the truth, "
+            f"{_both(lens, lambda r: r['interior']['ratios_vs_exact']['phi_eff'])} on the interior (compared region "
+            "less one σ along its border)"
+        )
+        if any(abs(x - 1.0) > BOUNDS["clean"]["ratio"] for x in inner):
+            text += (
+                ": the deficit is not only a border effect. The lens (aperture 160 mm) spans under two carrier "
+                "periods of the 96.9 mm grid, and at σ = 100 mm (about one period) the demodulation bandwidth takes "
+                "more of its rim than the truth's Gaussian (see `docs/experiments/README.md`, \"Coarse grid, not met\")."
+            )
+        else:
+            text += ": within 2 % there, so most of the deficit lies in the band along the region's border."
+        out.append(text)
+    igu, flat = _runs(record, "pillowed_igu"), _runs(record, "pillowed_igu_flat")
+    if igu:
+        text = (
+            f"- pillowed_igu: after the N = 2 detrend the dome leaves a truth of "
+            f"{_both(igu, lambda r: r['statistics']['exact']['phi_eff']['mean_abs'])} mD mean |φ_eff|; the analyzer reads "
+            f"{_both(igu, lambda r: r['statistics']['analyzer']['phi_eff']['mean_abs'])} mD."
+        )
+        if flat:
+            text += (
+                f" On the same scene without the domes (pillowed_igu_flat, truth "
+                f"{_both(flat, lambda r: r['statistics']['exact']['phi_eff']['mean_abs'], '.1e')} mD) it reads "
+                f"{_both(flat, lambda r: r['statistics']['analyzer']['phi_eff']['mean_abs'])} mD (p95 "
+                f"{_both(flat, lambda r: r['p95_abs_phi_eff_mD'])} mD): a floor of the same order as the dome's signal."
+            )
+        text += (
+            f" On the interior (more than σ = {igu[0]['sigma_mm']:.0f} mm from the region borders: frame and image "
+            f"edges) the ratio is {_both(igu, lambda r: r['interior']['ratios_vs_exact']['phi_eff'])} and r_eff "
+            f"{_both(igu, lambda r: r['interior']['correlations_vs_exact']['phi_eff'])}."
+        )
+        out.append(text)
+    for name in ("wavy_slab_A0.5", "wavy_slab_A0.75"):
+        runs = _runs(record, name)
+        if runs:
+            warned = [w for r in runs for w in r["warnings"] if w.startswith("strong distortion")]
+            out.append(
+                f"- {name}: φ_eff ratio {_both(runs, lambda r: r['ratios_vs_exact']['phi_eff'])}, r_eff "
+                f"{_both(runs, lambda r: r['correlations_vs_exact']['phi_eff'])}, r_shear "
+                f"{_both(runs, lambda r: r['correlations_vs_exact']['phi_shear'])}, pane coverage "
+                f"{_both(runs, lambda r: 100 * r['pane_coverage'], '.1f')} %; "
+                + (f"{len(warned)} of 2 runs warn of strong distortion." if warned else "no strong-distortion warning.")
+            )
+    return "\n".join(out) if out else "None."
+
+
+# ---------------------------------------------------------------- command line
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--out", type=Path, default=ROOT / "docs", help="output folder (default docs/)")
+    p.add_argument("--scale", type=float, default=1.0, help="image size relative to the scenes' 1024 x 768 px")
+    p.add_argument("--spp", type=int, help="samples per pixel (default: the scenes', 16)")
+    p.add_argument("--scenes", help=f"comma-separated subset of: {', '.join(SCENES)}")
+    args = p.parse_args(argv)
+    names = list(SCENES) if not args.scenes else args.scenes.split(",")
+    unknown = [n for n in names if n not in SCENES]
+    if unknown:
+        p.error(f"unknown scene(s) {', '.join(unknown)}; choose from {', '.join(SCENES)}")
+    out = prepare_output_dir(args.out)
+    t0 = time.perf_counter()
+    record = run_accuracy(names, scale=args.scale, spp=args.spp)
+    record["wall_s"] = time.perf_counter() - t0
+    record["timings"] = {k: sum(s["timings"][k] for s in record["scenes"]) for k in ("render_s", "model_s", "truth_s")}
+    result = ExperimentResult("accuracy", record, accuracy_markdown(record))
+    written = write_experiment(result, out, command=shlex.join(["python", "experiments/accuracy.py", *argv]))
+    print(f"accuracy: {', '.join(str(w) for w in written)} written in {record['wall_s']:.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
