@@ -392,8 +392,7 @@ def _image_grid_valid(valid: np.ndarray, grid: F.SamplingGrid, user_mask, fine_v
     """Valid region on the image grid, and the nearest-valid fill indices of the coarse fields.
 
     Invalid coarse samples are later filled with their nearest valid value before the
-    bilinear upsampling (:func:`_upsample_one`), so it never mixes NaN into valid pixels
-    near a border.
+    upsampling (:func:`_upsample_one`), so it never mixes NaN into valid pixels near a border.
     """
     import cv2
 
@@ -475,7 +474,9 @@ def _upsample_deferred(deferred: dict | None, name: str, valid_full: np.ndarray)
     return _upsample_one(deferred["fields"][name], deferred["idx"], deferred["grid"], ~valid_full)
 
 
-_DEVIATION_WARN = 0.35  # relative local-frequency deviation above which results degrade (ray-traced roller waves: fine at 0.31, wrong from 0.41 to 0.54)
+# Relative local-frequency deviation above which results degrade (ray-traced roller waves:
+# right at 0.31, wrong from 0.41; docs/accuracy.md).
+_DEVIATION_WARN = 0.35
 
 
 def _frequency_deviation(phases: np.ndarray, valid: np.ndarray, carriers, step) -> float:
