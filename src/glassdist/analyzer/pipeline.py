@@ -441,6 +441,20 @@ def _bspline_upsample(f: np.ndarray, k: int, axis: int) -> np.ndarray:
     return np.moveaxis(out, 0, axis)
 
 
+def _bspline_refine(f: np.ndarray, k: tuple[int, int]) -> np.ndarray:
+    """``f`` (h, w[, c]) interpolated at ``k = (ky, kx)`` times its density, one plane at a time."""
+    if k[0] <= 1 and k[1] <= 1:
+        return f
+    planes = [f] if f.ndim == 2 else [np.ascontiguousarray(f[..., c]) for c in range(f.shape[2])]
+    out = []
+    for p_ in planes:
+        for axis in (0, 1):
+            if k[axis] > 1:
+                p_ = _bspline_upsample(p_, k[axis], axis)
+        out.append(p_)
+    return np.ascontiguousarray(out[0]) if f.ndim == 2 else np.stack(out, axis=-1)
+
+
 def _upsample_one(f: np.ndarray, idx, grid: F.SamplingGrid, invalid: np.ndarray) -> np.ndarray:
     import cv2
 
@@ -454,10 +468,7 @@ def _upsample_one(f: np.ndarray, idx, grid: F.SamplingGrid, invalid: np.ndarray)
         # Cubic B-spline to an intermediate grid of ~3 px step, then bilinear: the bilinear
         # error (h^2/8)|f''| is ~1% of a wave's amplitude at a 13 px step, ~0.05% at 3 px,
         # and the spline stage works on a grid ~10x smaller than the image.
-        for axis, step in enumerate(grid.step):
-            k = int(step // _FINAL_STEP_PX)
-            if k > 1:
-                f = _bspline_upsample(f, k, axis)
+        f = _bspline_refine(f, tuple(int(st // _FINAL_STEP_PX) for st in grid.step))
         # Into an array numpy allocated (large ones get huge pages): several times faster
         # than letting OpenCV allocate 0.1-0.2 GB of fresh pages.
         up = np.empty((H, W) + f.shape[2:], np.float32)
