@@ -401,13 +401,13 @@ def _spectral_centroid(spectrum: Spectrum, ky: float, kx: float, *, width: float
     converges to the mean local frequency (the power centroid of an FM spectrum).
     """
     H, W = spectrum.shape
-    sd_y = width * np.hypot(kx / W, ky / H) * H  # bins along ky
-    sd_x = width * np.hypot(kx / W, ky / H) * W
+    f = np.hypot(kx / W, ky / H)
+    sd_y, sd_x = width * f * H, width * f * W  # bins along ky and kx
     ry, rx = int(np.ceil(3 * sd_y)) + 1, int(np.ceil(3 * sd_x)) + 1
     y0, x0 = int(round(ky)), int(round(kx))
     yy = np.arange(y0 - ry, y0 + ry + 1)
     xx = np.arange(x0 - rx, x0 + rx + 1)
-    pw = np.abs(spectrum.full(yy[:, None], xx[None, :])) ** 2
+    pw = np.abs(spectrum.block(y0 - ry, x0 - rx, yy.size, xx.size)) ** 2
     # Sidebands of a modulated carrier stand well above the background; broadband content
     # (edges of frames and objects, noise) does not and must not pull the centroid.
     pw[pw < 0.05 * pw[ry, rx]] = 0.0
