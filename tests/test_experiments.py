@@ -118,3 +118,28 @@ def test_cli_bad_input(tmp_path, capsys):
         main(["experiment", "parity", "--out", str(tmp_path), "--scale", "-1"])
     assert main(["experiment", "parity", "--out", str(tmp_path), "--spp", "0", "--no-progress"]) == 2
     assert "error" in capsys.readouterr().err
+
+
+def test_accuracy_subset_cli(tmp_path):
+    """The accuracy experiment through the command line on two scenes at half size, 2 spp.
+
+    The wavy slab reads within its clean bounds against the exact truth (mean |phi_eff|
+    within 2 %, correlations >= 0.98) and flat glass with noise stays under p95 0.4 mD.
+    """
+    code = main(["experiment", "accuracy", "--scenes", "wavy_slab,flat_noisy", "--scale", "0.5", "--spp", "2",
+                 "--no-progress", "--out", str(tmp_path)])
+    assert code == 0
+    rec = json.loads((tmp_path / "accuracy.json").read_text())
+    assert rec["command"].startswith("glassdist experiment accuracy")
+    assert [s["name"] for s in rec["scenes"]] == ["wavy_slab", "flat_noisy"]
+    for s in rec["scenes"]:
+        for method, run in s["runs"].items():
+            for key in ("ratio_phi_eff", "r_phi_eff", "r_phi_shear", "p95_phi_eff"):
+                if key in run["checks"]:
+                    assert run["checks"][key]["met"], (s["name"], method, key, run["checks"][key])
+    assert "## Against the acceptance bounds" in (tmp_path / "accuracy.md").read_text()
+
+
+def test_accuracy_unknown_scene_is_bad_input(tmp_path, capsys):
+    assert main(["experiment", "accuracy", "--scenes", "nope", "--out", str(tmp_path), "--no-progress"]) == 2
+    assert "unknown accuracy scene" in capsys.readouterr().err

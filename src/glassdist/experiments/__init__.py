@@ -6,6 +6,8 @@
   Direct vs Comparative, at one physical smoothing scale.
 * :func:`run_rotation` — §3.3, Fig. 9: the same slab with the grid axis-aligned
   and rotated about its normal.
+* :func:`run_accuracy` — both methods against the exact ray-traced truth on 13
+  scenes (docs/accuracy.md).
 
 Each returns an :class:`ExperimentResult` (numbers, markdown table, figures);
 :func:`write_experiment` writes them. ``glassdist experiment NAME --out DIR`` runs
@@ -13,11 +15,12 @@ one from the command line.
 """
 
 from ._common import ExperimentResult, Inputs, evaluate, render_inputs, scaled_scene, write_experiment
+from .accuracy import run_accuracy
 from .parity import run_parity
 from .pitch import run_pitch
 from .rotation import run_rotation
 
-EXPERIMENTS = {"parity": run_parity, "pitch": run_pitch, "rotation": run_rotation}
+EXPERIMENTS = {"parity": run_parity, "pitch": run_pitch, "rotation": run_rotation, "accuracy": run_accuracy}
 
 __all__ = [
     "EXPERIMENTS",
@@ -30,4 +33,5 @@ __all__ = [
     "run_parity",
     "run_pitch",
     "run_rotation",
+    "run_accuracy",
 ]

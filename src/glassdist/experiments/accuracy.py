@@ -1,43 +1,41 @@
 """Accuracy of the Distortion Analyzer against the exact ray-traced truth.
 
-Each scene is rendered once with the exact engine (with and without the glass) and
-analysed with both methods: Comparative (with the rendered glass-less reference) and
-Direct (without it). The truth is the tracer's landing-point displacement passed
-through the same evaluation stack with the analyzer's N, sigma, mm/px and region
-(the ``exact`` channels of :func:`glassdist.virtual.validate_scene`). Per run:
-mean |phi_eff| and mean |phi_shear| Analyzer / truth, Pearson correlation of the
-maps with the truth over the compared region, pane coverage (share of the pixels
-that see the pane, tracer status "through the glass", inside the analyzer's valid
-region), p95 |phi_eff| over the valid region and the analyzer's warnings, checked
-against the acceptance bounds below. Writes accuracy.json and accuracy.md to
-docs/ unless --out is given::
-
-    python experiments/accuracy.py [--out DIR] [--scale S] [--spp N] [--scenes NAME,...]
+Each scene is rendered once (with and without the glass) and analysed with both
+methods: Comparative (with the rendered glass-less reference) and Direct (without
+it). The truth is the tracer's landing-point displacement passed through the same
+evaluation stack with the analyzer's N, sigma, mm/px and region (the ``exact``
+channels of :func:`glassdist.virtual.validate_scene`). Per run: mean |phi_eff| and
+mean |phi_shear| Analyzer / truth, Pearson correlation of the maps with the truth
+over the compared region, pane coverage (share of the pixels that see the pane,
+tracer status "through the glass", inside the analyzer's valid region), p95
+|phi_eff| over the valid region and the analyzer's warnings, checked against the
+acceptance bounds :data:`BOUNDS`. ``glassdist experiment accuracy --out docs``
+writes accuracy.json and accuracy.md (``--scenes NAME,...`` for a subset).
 """
 
 from __future__ import annotations
 
-import argparse
+import logging
 import math
-import shlex
-import sys
 import time
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 from scipy import ndimage
 
-from glassdist.analyzer.metrics import channel_statistics
-from glassdist.errors import InputError
-from glassdist.experiments import ExperimentResult, evaluate, render_inputs, scaled_scene, write_experiment
-from glassdist.experiments._common import validation_record
-from glassdist.io import prepare_output_dir
-from glassdist.render._tracer import GLASS
-from glassdist.scene import load_scene
-from glassdist.theory import analysis_params, carrier_period_mm
+from ..analyzer.metrics import channel_statistics
+from ..errors import InputError
+from ..render._tracer import GLASS
+from ..scene import load_scene
+from ..theory import analysis_params, carrier_period_mm
+from ._common import ExperimentResult, evaluate, render_inputs, scaled_scene, validation_record
 
-ROOT = Path(__file__).resolve().parents[1]
-SCENES_DIR = ROOT / "examples" / "scenes"
+__all__ = ["BOUNDS", "SCENES", "run_accuracy", "accuracy_markdown"]
+
+log = logging.getLogger(__name__)
+
+SCENES_DIR = Path(__file__).resolve().parents[3] / "examples" / "scenes"
 METHODS = ("comparative", "direct")
 CHANNELS = ("phi_eff", "phi_shear")
 
@@ -195,22 +193,69 @@ def measure(inputs, method: str, params, kind: str) -> dict:
     return run
 
 
-def run_accuracy(names, *, scale: float = 1.0, spp: int | None = None) -> dict:
-    scenes = []
-    for name in names:
+def run_accuracy(
+    *,
+    engine: str = "exact",
+    scale: float = 1.0,
+    spp: int | None = None,
+    sigma_mm: float | None = None,
+    scenes=None,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> ExperimentResult:
+    """Run the accuracy experiment.
+
+    Parameters
+    ----------
+    engine : {'exact', 'cycles'}
+        Render engine of the photographs (the truth is always the exact tracer's).
+    scale : float
+        Image size relative to the scenes' (1024 x 768 px); the field of view is kept.
+    spp : int, optional
+        Samples per pixel (default: the scenes', 16).
+    sigma_mm : float, optional
+        Reporting smoothing scale on the backdrop, mm, for every scene (default: each
+        scene's own analysis settings, else 2 carrier periods).
+    scenes : sequence of str, optional
+        Subset of :data:`SCENES` (default: all of them, in that order).
+    progress : callable(stage, done, total), optional
+
+    Returns
+    -------
+    ExperimentResult
+        ``record``: per scene its definition, render timings and both methods' runs with
+        their checks against :data:`BOUNDS`; ``table``: :func:`accuracy_markdown`.
+
+    Raises
+    ------
+    InputError
+        An unknown scene name.
+    """
+    names = list(SCENES) if not scenes else list(scenes)
+    unknown = [n for n in names if n not in SCENES]
+    if unknown:
+        raise InputError(f"unknown accuracy scene(s) {', '.join(unknown)}; choose from {', '.join(SCENES)}")
+    overrides = {} if sigma_mm is None else {"sigma_mm": sigma_mm}
+    t0 = time.perf_counter()
+    entries = []
+    for k, name in enumerate(names):
         kind, build, what = SCENES[name]
         scene = scaled_scene(build(), scale=scale, spp=spp)
-        inputs = render_inputs(scene, engine="exact", reference=True)
-        params = analysis_params(scene)
+        inputs = render_inputs(scene, engine=engine, reference=True)
+        params = analysis_params(scene, **overrides)
         entry = {"name": name, "kind": kind, "scene": what, "definition": scene.model_dump(mode="json"),
                  "timings": inputs.timings, "runs": {}}
         for method in METHODS:
             run = measure(inputs, method, params, kind)
             entry["runs"][method] = run
-            print(f"{name} {method}: " + _summary_line(run), flush=True)
-        scenes.append(entry)
-    return {"engine": "exact", "image_size": list(scene.camera.pixels),
-            "samples_per_pixel": scene.render.samples_per_pixel, "criteria": BOUNDS, "scenes": scenes}
+            log.info("%s %s: %s", name, method, _summary_line(run))
+        entries.append(entry)
+        if progress is not None:
+            progress("accuracy scenes", k + 1, len(names))
+    record = {"engine": engine, "image_size": list(scene.camera.pixels),
+              "samples_per_pixel": scene.render.samples_per_pixel, "criteria": BOUNDS, "scenes": entries}
+    record["wall_s"] = time.perf_counter() - t0
+    record["timings"] = {k: sum(s["timings"][k] for s in entries) for k in ("render_s", "model_s", "truth_s")}
+    return ExperimentResult("accuracy", record, accuracy_markdown(record))
 
 
 def _summary_line(run: dict) -> str:
@@ -413,33 +458,3 @@ def notes(record: dict) -> str:
                 + (f"{len(warned)} of 2 runs warn of strong distortion." if warned else "no strong-distortion warning.")
             )
     return "\n".join(out) if out else "None."
-
-
-# ---------------------------------------------------------------- command line
-
-
-def main(argv=None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--out", type=Path, default=ROOT / "docs", help="output folder (default docs/)")
-    p.add_argument("--scale", type=float, default=1.0, help="image size relative to the scenes' 1024 x 768 px")
-    p.add_argument("--spp", type=int, help="samples per pixel (default: the scenes', 16)")
-    p.add_argument("--scenes", help=f"comma-separated subset of: {', '.join(SCENES)}")
-    args = p.parse_args(argv)
-    names = list(SCENES) if not args.scenes else args.scenes.split(",")
-    unknown = [n for n in names if n not in SCENES]
-    if unknown:
-        p.error(f"unknown scene(s) {', '.join(unknown)}; choose from {', '.join(SCENES)}")
-    out = prepare_output_dir(args.out)
-    t0 = time.perf_counter()
-    record = run_accuracy(names, scale=args.scale, spp=args.spp)
-    record["wall_s"] = time.perf_counter() - t0
-    record["timings"] = {k: sum(s["timings"][k] for s in record["scenes"]) for k in ("render_s", "model_s", "truth_s")}
-    result = ExperimentResult("accuracy", record, accuracy_markdown(record))
-    written = write_experiment(result, out, command=shlex.join(["python", "experiments/accuracy.py", *argv]))
-    print(f"accuracy: {', '.join(str(w) for w in written)} written in {record['wall_s']:.0f} s")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())
