@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 
 from ..io import prepare_output_dir
-from ..render._cli import progress_reporter
+from .._cli_shared import progress_reporter
 
 __all__ = ["register", "run"]
 

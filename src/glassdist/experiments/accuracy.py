@@ -26,7 +26,7 @@ from scipy import ndimage
 
 from ..analyzer.metrics import channel_statistics
 from ..errors import InputError
-from ..render._tracer import GLASS
+from ..render.tracer import GLASS
 from ..scene import load_scene
 from ..theory import analysis_params, carrier_period_mm
 from ._common import ExperimentResult, evaluate, render_inputs, scaled_scene, validation_record

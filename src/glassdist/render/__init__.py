@@ -23,8 +23,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..scene import Scene
-from ._imaging import apply_imaging
-from ._tracer import ExactTracer, Landing, TraceResult, landing_points, refract, render_intensity, trace_rays
+from .imaging import apply_imaging
+from .tracer import ExactTracer, Landing, TraceResult, landing_points, refract, render_intensity, trace_rays
 
 __all__ = [
     "Renderer",
@@ -42,7 +42,7 @@ __all__ = [
 ]
 
 ENGINES = {
-    "exact": ("glassdist.render._tracer", "ExactTracer"),
+    "exact": ("glassdist.render.tracer", "ExactTracer"),
     "cycles": ("glassdist.render.cycles", "CyclesRenderer"),
 }
 

@@ -71,7 +71,7 @@ import numpy as np
 
 from ..errors import GlassdistError, InputError
 from ..scene import Scene, pixel_directions
-from ._imaging import apply_imaging
+from .imaging import apply_imaging
 
 __all__ = [
     "CyclesRenderer",

@@ -46,7 +46,7 @@ References
 Paper §2 and §2.1 (Virtual Pipeline, glass distortion definition).
 """
 
-from ._geometry import (
+from .geometry import (
     landing_jacobian,
     pattern_coordinates,
     pattern_intensity,
@@ -54,7 +54,7 @@ from ._geometry import (
     pixel_grid,
     straight_landing,
 )
-from ._model import (
+from .model import (
     Backdrop,
     Camera,
     Deformation,
@@ -69,7 +69,7 @@ from ._model import (
     rotation_yaw_pitch,
     scene_from_dict,
 )
-from ._surfaces import FaceShape, GaussianBump, Harmonic, Pillow, Plane, RollerWave, SphericalCap
+from .surfaces import FaceShape, GaussianBump, Harmonic, Pillow, Plane, RollerWave, SphericalCap
 
 __all__ = [
     "Scene",

@@ -6,8 +6,8 @@ forward model of the deformed slab evaluated on the camera pixel grid
 passage through the shared evaluation stack (:func:`predict_channels`).
 """
 
-from ._channels import analysis_params, carrier_period_mm, predict_channels
-from ._model import Prediction, nominal_mm_per_px, predict_displacement, slab_shift
+from .channels import analysis_params, carrier_period_mm, predict_channels
+from .model import Prediction, nominal_mm_per_px, predict_displacement, slab_shift
 
 __all__ = [
     "Prediction",

@@ -6,7 +6,7 @@ same evaluation stack and reports the paper's Table 2 figures
 (:class:`Validation`).
 """
 
-from ._figure import validation_figure
-from ._validate import CHANNELS, Validation, compare, procrustes, validate_scene
+from .figure import validation_figure
+from .validate import CHANNELS, Validation, compare, procrustes, validate_scene
 
 __all__ = ["validate_scene", "compare", "procrustes", "Validation", "validation_figure", "CHANNELS"]

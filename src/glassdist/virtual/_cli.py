@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io import prepare_output_dir, write_png16
-from ..render._cli import add_render_options, apply_render_overrides, progress_reporter
+from .._cli_shared import add_render_options, apply_render_overrides, progress_reporter
 from ..scene import load_scene
 
 __all__ = ["register", "run"]

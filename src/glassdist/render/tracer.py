@@ -24,11 +24,28 @@ from typing import Callable
 
 import numpy as np
 
-from ..scene import Scene, landing_jacobian, pattern_intensity, pixel_directions, pixel_grid, straight_landing
-from ..scene._surfaces import FaceShape
-from ._imaging import apply_imaging
+from ..scene import (
+    FaceShape,
+    Scene,
+    landing_jacobian,
+    pattern_intensity,
+    pixel_directions,
+    pixel_grid,
+    straight_landing,
+)
+from .imaging import apply_imaging
 
-__all__ = ["TraceResult", "Landing", "trace_rays", "landing_points", "ExactTracer", "refract", "strata"]
+__all__ = [
+    "TraceResult",
+    "Landing",
+    "trace_rays",
+    "landing_points",
+    "render_intensity",
+    "ExactTracer",
+    "refract",
+    "strata",
+    "GLASS",
+]
 
 MISSED, GLASS, BLOCKED = 0, 1, 2
 _NEWTON_TOL_MM = 1e-10

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._model import Backdrop, Camera, Scene
+from .model import Backdrop, Camera, Scene
 
 __all__ = [
     "pixel_directions",

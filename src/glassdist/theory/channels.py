@@ -10,7 +10,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..scene import Scene, landing_jacobian
-from ._model import Prediction, nominal_mm_per_px, predict_displacement
+from .model import Prediction, nominal_mm_per_px, predict_displacement
 
 __all__ = ["analysis_params", "carrier_period_mm", "predict_channels"]
 

@@ -11,7 +11,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from ..errors import InputError
-from ._surfaces import FaceShape, Term
+from .surfaces import FaceShape, Term
 
 __all__ = [
     "Deformation",
