@@ -48,7 +48,10 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 from ..errors import InputError
 from .stats import format_limit, valid_percent
 
-__all__ = ["Criterion", "Protocol", "Spec", "Check", "Verdict", "load_spec", "evaluate_spec", "spec_limits"]
+__all__ = [
+    "Criterion", "Protocol", "Pane", "Zone", "WorstRegions", "Spec", "Check", "Verdict", "ResolvedProtocol",
+    "load_spec", "evaluate_spec", "spec_limits", "resolve_protocol", "check_capture", "px_per_period",
+]
 
 _SYMBOL = {"phi_eff": "phi_eff", "phi_shear": "phi_shear", "phi_total": "phi_total"}
 _STAT_TEXT = {"mean_abs": "mean |{c}|", "std": "std {c}", "p95_abs": "p95 |{c}|", "max_abs": "max |{c}|"}
@@ -65,6 +68,7 @@ class Criterion(BaseModel):
     threshold_mD: float | None = Field(None, ge=0, description="area_over: pixel threshold on |phi|, mD")
     max_percent: float | None = Field(None, ge=0, le=100, description="area_over: largest allowed area, percent")
     label: str | None = Field(None, description="name printed in verdicts (default: built from the criterion)")
+    zone: str | None = Field(None, description="name of a zone of the spec's 'zones' (default: the analysed region)")
 
     @model_validator(mode="after")
     def _check_limits(self):
@@ -85,19 +89,127 @@ class Criterion(BaseModel):
         if self.label:
             return self.label
         c = _SYMBOL[self.channel]
+        where = f" in zone '{self.zone}'" if self.zone else ""
         if self.statistic == "area_over":
-            return f"area |{c}| > {self.threshold_mD:g} mD <= {self.max_percent:g} %"
-        return f"{_STAT_TEXT[self.statistic].format(c=c)} <= {self.max_mD:g} mD"
+            return f"area |{c}| > {self.threshold_mD:g} mD <= {self.max_percent:g} %{where}"
+        return f"{_STAT_TEXT[self.statistic].format(c=c)}{where} <= {self.max_mD:g} mD"
 
 
 class Protocol(BaseModel):
-    """Analysis settings a specification's limits were written for (each optional)."""
+    """Capture and analysis settings a specification's limits were written for (each optional).
+
+    Pinned values are taken by ``glassdist analyze --spec`` when the matching option is
+    omitted; an option that contradicts one is a bad input (exit 2), see
+    :func:`resolve_protocol`. ``min_px_per_period`` is a capture limit: a photo whose grid
+    carrier period is shorter is refused (exit 2), since a verdict on a capture outside
+    the protocol would not be one on the glass.
+    """
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
     method: Literal["comparative", "direct"] | None = None
-    sigma_mm: float | None = Field(None, gt=0, description="smoothing scale, mm")
+    distance_m: float | None = Field(None, gt=0, allow_inf_nan=False, description="glass-to-grid distance L, m")
+    pitch_mm: float | None = Field(None, gt=0, allow_inf_nan=False, description="printed grid pitch, mm")
+    pattern: Literal["lines", "checkerboard"] | None = None
+    sigma_mm: float | None = Field(None, gt=0, allow_inf_nan=False, description="smoothing scale, mm")
+    sigma_periods: float | None = Field(None, gt=0, allow_inf_nan=False,
+                                        description="smoothing scale, carrier periods (instead of sigma_mm)")
     detrend_degree: int | None = Field(None, ge=0, le=8)
+    min_px_per_period: float | None = Field(
+        None, gt=0, allow_inf_nan=False,
+        description="capture limit: shortest carrier period in the photo, px (pitch for lines, pitch*sqrt(2) "
+                    "for checkerboards)")
+
+    @model_validator(mode="after")
+    def _one_sigma(self):
+        if self.sigma_mm is not None and self.sigma_periods is not None:
+            raise ValueError("give 'sigma_mm' or 'sigma_periods', not both")
+        return self
+
+
+_NAME_RE = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
+
+
+class Pane(BaseModel):
+    """The pane's outline in the photograph: four corners (px) and its size (mm).
+
+    ``corners_px`` are ``[x, y]`` (x along columns, y down the rows) in the order
+    top-left, top-right, bottom-right, bottom-left of the pane as seen; the pane
+    frame's origin is the top-left corner, x along the top edge, y along the left edge.
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    corners_px: tuple[tuple[float, float], tuple[float, float], tuple[float, float], tuple[float, float]]
+    size_mm: tuple[float, float]
+
+    @model_validator(mode="after")
+    def _check(self):
+        import numpy as np
+
+        if not all(np.isfinite(v) and v > 0 for v in self.size_mm):
+            raise ValueError("'size_mm' must be two positive numbers [width, height]")
+        c = np.asarray(self.corners_px, dtype=float)
+        if not np.all(np.isfinite(c)):
+            raise ValueError("'corners_px' must be finite numbers")
+        # a convex quadrilateral in the stated order: every turn has the same sign
+        d = np.roll(c, -1, axis=0) - c
+        turns = d[:, 0] * np.roll(d, -1, axis=0)[:, 1] - d[:, 1] * np.roll(d, -1, axis=0)[:, 0]
+        if not (np.all(turns > 0) or np.all(turns < 0)):
+            raise ValueError("'corners_px' must be a convex quadrilateral: top-left, top-right, bottom-right, "
+                             "bottom-left")
+        return self
+
+
+class Zone(BaseModel):
+    """A named part of the pane, in pane millimetres (exactly one shape key).
+
+    * ``edge_band_mm``: the band of this width along the pane outline;
+    * ``inset_mm``: the pane minus a border of this width (0: the whole pane);
+    * ``polygon_mm``: a polygon ``[[x, y], ...]`` in the pane frame (mm).
+
+    ``min_valid_percent`` (optional): the analysed region must cover at least this
+    share of the zone.
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    name: str = Field(..., pattern=_NAME_RE, description="letters, digits, '_', '.', '-'")
+    edge_band_mm: float | None = Field(None, gt=0, allow_inf_nan=False)
+    inset_mm: float | None = Field(None, ge=0, allow_inf_nan=False)
+    polygon_mm: tuple[tuple[float, float], ...] | None = Field(None, min_length=3)
+    min_valid_percent: float | None = Field(None, ge=0, le=100)
+
+    @model_validator(mode="after")
+    def _one_shape(self):
+        given = [k for k in ("edge_band_mm", "inset_mm", "polygon_mm") if getattr(self, k) is not None]
+        if len(given) != 1:
+            raise ValueError(f"zone '{self.name}' needs exactly one of 'edge_band_mm', 'inset_mm', 'polygon_mm'")
+        if self.polygon_mm is not None:
+            import numpy as np
+
+            if not np.all(np.isfinite(np.asarray(self.polygon_mm, dtype=float))):
+                raise ValueError(f"zone '{self.name}': 'polygon_mm' must be finite numbers")
+        return self
+
+    def describe(self):
+        """Text of the zone's definition, e.g. ``band 50 mm along the pane outline``."""
+        if self.edge_band_mm is not None:
+            return f"band {self.edge_band_mm:g} mm along the pane outline"
+        if self.inset_mm is not None:
+            return f"pane minus a {self.inset_mm:g} mm border"
+        return f"polygon of {len(self.polygon_mm)} vertices (pane mm)"
+
+
+class WorstRegions(BaseModel):
+    """Settings of the worst-region list (see :mod:`glassdist.report.regions`)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    threshold_mD: dict[Literal["phi_eff", "phi_shear", "phi_total"], float] = Field(
+        default_factory=dict, description="per channel threshold on |phi|, mD (default: the spec's limit)")
+    max_count: int = Field(10, ge=1, le=1000)
+    min_area_mm2: float = Field(0.0, ge=0, allow_inf_nan=False)
 
 
 class Spec(BaseModel):
@@ -110,6 +222,25 @@ class Spec(BaseModel):
     criteria: tuple[Criterion, ...] = Field(..., min_length=1)
     min_valid_percent: float | None = Field(None, ge=0, le=100)
     protocol: Protocol = Protocol()
+    pane: Pane | None = None
+    zones: tuple[Zone, ...] = ()
+    worst_regions: WorstRegions = WorstRegions()
+
+    @model_validator(mode="after")
+    def _check_zones(self):
+        names = [z.name for z in self.zones]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise ValueError(f"zone name(s) {', '.join(dup)} given twice; give each zone its own 'name'")
+        for c in self.criteria:
+            if c.zone is not None and c.zone not in names:
+                known = ", ".join(names) or "none defined"
+                raise ValueError(f"a criterion names zone '{c.zone}', which is not in 'zones' ({known})")
+        return self
+
+    def zone(self, name):
+        """The :class:`Zone` called ``name``."""
+        return next(z for z in self.zones if z.name == name)
 
 
 @dataclass(frozen=True)
@@ -243,15 +374,226 @@ def spec_limits(spec):
     return {k: sorted(v) for k, v in out.items()}
 
 
+_OPTION = {"pitch_mm": "--pitch-mm", "distance_m": "--distance-m", "pattern": "--pattern", "sigma_mm": "--sigma-mm",
+           "detrend_degree": "--detrend-degree"}
+_UNIT = {"pitch_mm": " mm", "distance_m": " m", "sigma_mm": " mm", "sigma_periods": " periods"}
+
+
+def _text(v):
+    return f"{v:g}" if isinstance(v, float) else str(v)
+
+
+def _same(a, b):
+    if isinstance(a, float) or isinstance(b, float):
+        return math.isclose(float(a), float(b), rel_tol=1e-9, abs_tol=1e-12)
+    return a == b
+
+
+def _carrier_period_mm(pitch_mm, pattern):
+    return pitch_mm * math.sqrt(2.0) if pattern == "checkerboard" else pitch_mm
+
+
+@dataclass(frozen=True)
+class ResolvedProtocol:
+    """The settings of one analysis after a specification's protocol was applied.
+
+    Attributes
+    ----------
+    method : {'comparative', 'direct'}
+    pitch_mm, distance_m : float
+        Physical inputs (mm, m).
+    pattern : {'lines', 'checkerboard'}
+    detrend_degree : int
+    sigma_mm : float
+        Smoothing scale (mm) the analysis will use.
+    params_overrides : dict
+        Values to pass to :func:`glassdist.analyzer.load_params` as overrides
+        (``pattern``, ``detrend_degree``, ``sigma_mm`` or ``sigma_periods``).
+    pinned : dict
+        The specification's protocol as written (``None`` entries left out).
+    sources : dict
+        For each resolved setting, where it came from: ``"option"``, ``"spec"``,
+        ``"params"`` or ``"default"``.
+    """
+
+    method: str
+    pitch_mm: float
+    distance_m: float
+    pattern: str
+    detrend_degree: int
+    sigma_mm: float
+    params_overrides: dict
+    pinned: dict
+    sources: dict
+
+    def to_dict(self):
+        """JSON form recorded in ``summary.json`` under ``"protocol"``."""
+        return {
+            "pinned": dict(self.pinned),
+            "resolved": {"method": self.method, "pitch_mm": self.pitch_mm, "distance_m": self.distance_m,
+                         "pattern": self.pattern, "detrend_degree": self.detrend_degree, "sigma_mm": self.sigma_mm},
+            "sources": dict(self.sources),
+        }
+
+
+def resolve_protocol(protocol=None, *, reference_given, pitch_mm=None, distance_m=None, pattern=None, sigma_mm=None,
+                     detrend_degree=None, params=None, spec_label="the specification"):
+    """Merge the analysis options with a specification's pinned protocol.
+
+    An omitted option takes the pinned value; an option (or a value set in the
+    ``--params`` file) that differs from a pinned value is refused, so that a pane
+    is never judged against limits written for another capture or analysis.
+
+    Parameters
+    ----------
+    protocol : Protocol, optional
+        The specification's protocol (None: nothing pinned).
+    reference_given : bool
+        True when a glass-less reference photo is given (Comparative method).
+    pitch_mm, distance_m : float, optional
+        Grid pitch (mm) and glass-to-grid distance L (m) from the options.
+    pattern, sigma_mm, detrend_degree : optional
+        The options' values (None: omitted).
+    params : AnalyzerParams, optional
+        Parameters read from the ``--params`` file alone (no overrides): the values it
+        sets explicitly are checked against the pins too.
+    spec_label : str
+        How errors name the specification (e.g. its path).
+
+    Returns
+    -------
+    ResolvedProtocol
+
+    Raises
+    ------
+    InputError
+        An option contradicts the protocol, the method does not match it, or the pitch
+        or distance is given by neither.
+
+    Examples
+    --------
+    >>> p = Protocol(distance_m=1.0, pitch_mm=5.0, sigma_periods=2.0, pattern="checkerboard")
+    >>> r = resolve_protocol(p, reference_given=True)
+    >>> r.distance_m, r.sources["distance_m"], round(r.sigma_mm, 3)
+    (1.0, 'spec', 14.142)
+    >>> resolve_protocol(p, reference_given=True, distance_m=3.0)
+    Traceback (most recent call last):
+    ...
+    glassdist.errors.InputError: --distance-m 3 contradicts the specification's protocol (distance_m = 1 m); leave --distance-m out to use the specification's value, or use a specification written for this setting
+    """
+    protocol = protocol or Protocol()
+    pinned = protocol.model_dump(exclude_none=True)
+    method = "comparative" if reference_given else "direct"
+    if protocol.method is not None and protocol.method != method:
+        fix = "give --reference REF (the glass-less photo)" if protocol.method == "comparative" else "leave --reference out"
+        raise InputError(f"{spec_label}'s protocol requires the {protocol.method} method; {fix}")
+    given = {"pitch_mm": pitch_mm, "distance_m": distance_m, "pattern": pattern, "sigma_mm": sigma_mm,
+             "detrend_degree": detrend_degree}
+    from_file = {}
+    if params is not None:
+        from_file = {k: getattr(params, k) for k in ("pattern", "sigma_mm", "sigma_periods", "detrend_degree")
+                     if k in params.model_fields_set}
+    values, sources = {}, {}
+    for key, opt in _OPTION.items():
+        pin = pinned.get(key)
+        if given[key] is not None:
+            if pin is not None and not _same(given[key], pin):
+                raise InputError(
+                    f"{opt} {_text(given[key])} contradicts {spec_label}'s protocol ({key} = {_text(pin)}"
+                    f"{_UNIT.get(key, '')}); leave {opt} out to use the specification's value, or use a specification "
+                    "written for this setting")
+            values[key], sources[key] = given[key], "option"
+        elif pin is not None:
+            values[key], sources[key] = pin, "spec"
+        elif key in from_file and from_file[key] is not None:
+            values[key], sources[key] = from_file[key], "params"
+    for key in ("pattern", "sigma_mm", "detrend_degree"):
+        if pinned.get(key) is not None and key in from_file and not _same(from_file[key], pinned[key]):
+            raise InputError(f"the --params file sets {key} = {from_file[key]} but {spec_label}'s protocol pins "
+                             f"{key} = {pinned[key]}; remove '{key}' from the parameter file")
+    for key in ("pitch_mm", "distance_m"):
+        if key not in values:
+            what = "the grid pitch, mm" if key == "pitch_mm" else "the glass-to-grid distance L, m"
+            raise InputError(f"{_OPTION[key]} is required ({what}), or a --spec whose protocol pins {key}")
+    values.setdefault("pattern", "lines")
+    sources.setdefault("pattern", "default")
+    values.setdefault("detrend_degree", 2)
+    sources.setdefault("detrend_degree", "default")
+    p_c = _carrier_period_mm(float(values["pitch_mm"]), values["pattern"])
+    overrides = {k: values[k] for k in ("pattern", "detrend_degree") if sources[k] != "default"}
+    if protocol.sigma_periods is not None:
+        want = protocol.sigma_periods * p_c
+        have = values.get("sigma_mm")
+        if have is not None and not _same(float(have), want):
+            via = "--sigma-mm" if sources["sigma_mm"] == "option" else "the --params file's sigma_mm"
+            raise InputError(f"{via} {have:g} contradicts {spec_label}'s protocol (sigma_periods = "
+                             f"{protocol.sigma_periods:g}, i.e. {want:.4g} mm at this pitch and pattern); leave it out "
+                             "to use the specification's value")
+        values["sigma_mm"], sources["sigma_mm"] = want, "spec"
+        overrides["sigma_mm"] = want
+    elif "sigma_mm" in values:
+        overrides["sigma_mm"] = values["sigma_mm"]
+    else:
+        periods = from_file.get("sigma_periods", 2.0) if params is not None else 2.0
+        values["sigma_mm"], sources["sigma_mm"] = periods * p_c, ("params" if "sigma_periods" in from_file else "default")
+    return ResolvedProtocol(method, float(values["pitch_mm"]), float(values["distance_m"]), values["pattern"],
+                            int(values["detrend_degree"]), float(values["sigma_mm"]), overrides, pinned,
+                            {"method": "spec" if protocol.method else "option", "pitch_mm": sources["pitch_mm"],
+                             "distance_m": sources["distance_m"], "pattern": sources["pattern"],
+                             "detrend_degree": sources["detrend_degree"], "sigma_mm": sources["sigma_mm"]})
+
+
+def px_per_period(result):
+    """Shortest carrier period of the photo in px (the capture limit ``min_px_per_period`` is on it)."""
+    carriers = getattr(result, "carriers", None)
+    if carriers is not None:
+        return float(min(carriers.k1.period_px, carriers.k2.period_px))
+    return float(result.carrier_period_mm / result.mm_per_px)
+
+
+def check_capture(protocol, result, *, spec_label="the specification"):
+    """Refuse a capture outside the protocol's capture limits.
+
+    Raises
+    ------
+    InputError
+        The photo's carrier period is shorter than ``min_px_per_period`` px: the pane
+        is not judged (exit 2), the photo must be taken again.
+    """
+    if protocol is None or protocol.min_px_per_period is None:
+        return
+    got = px_per_period(result)
+    if got < protocol.min_px_per_period:
+        raise InputError(
+            f"the photo has {got:.3g} px per grid carrier period but {spec_label}'s protocol requires at least "
+            f"{protocol.min_px_per_period:g} (min_px_per_period); photograph the grid closer, with a longer focal "
+            "length or a coarser grid")
+
+
 def _protocol_checks(protocol, result):
     checks = []
     if protocol.method is not None:
         got = getattr(result, "method", None)
         checks.append(Check(f"protocol: method = {protocol.method}", got, protocol.method, "", "==", got == protocol.method))
-    if protocol.sigma_mm is not None:
+    for key, unit in (("pitch_mm", "mm"), ("distance_m", "m")):
+        want = getattr(protocol, key)
+        if want is not None:
+            got = float(getattr(result, key, float("nan")))
+            ok = math.isclose(got, want, rel_tol=1e-6)
+            checks.append(Check(f"protocol: {key} = {want:g} {unit}", got, want, unit, "==", ok,
+                                "" if ok else f"rerun the analysis with the specification's {_OPTION[key]}"))
+    if protocol.pattern is not None:
+        params = getattr(result, "params", None)
+        got = getattr(params, "pattern", None)
+        checks.append(Check(f"protocol: pattern = {protocol.pattern}", got, protocol.pattern, "", "==",
+                            got == protocol.pattern))
+    want_sigma = protocol.sigma_mm
+    if want_sigma is None and protocol.sigma_periods is not None:
+        want_sigma = protocol.sigma_periods * float(getattr(result, "carrier_period_mm", float("nan")))
+    if want_sigma is not None:
         got = float(getattr(result, "sigma_mm", float("nan")))
-        ok = math.isclose(got, protocol.sigma_mm, rel_tol=1e-6)
-        checks.append(Check(f"protocol: sigma_mm = {protocol.sigma_mm:g} mm", got, protocol.sigma_mm, "mm", "==", ok,
+        ok = math.isclose(got, want_sigma, rel_tol=1e-6)
+        checks.append(Check(f"protocol: sigma_mm = {want_sigma:.4g} mm", got, want_sigma, "mm", "==", ok,
                             "" if ok else "rerun the analysis with the specification's --sigma-mm"))
     if protocol.detrend_degree is not None:
         got = getattr(result, "detrend_degree", None)
@@ -261,7 +603,7 @@ def _protocol_checks(protocol, result):
     return checks
 
 
-def evaluate_spec(spec, stats, result, *, spec_path="", spec_sha256=""):
+def evaluate_spec(spec, stats, result, *, spec_path="", spec_sha256="", zones=None, coverage_percent=None):
     """Check every criterion of ``spec`` against an analysis.
 
     Parameters
@@ -272,21 +614,43 @@ def evaluate_spec(spec, stats, result, *, spec_path="", spec_sha256=""):
         computed with ``over_limits_mD=spec_limits(spec)``.
     result : AnalysisResult
         For ``valid`` (coverage) and the protocol fields ``method``, ``sigma_mm``,
-        ``detrend_degree``.
+        ``detrend_degree``, ``pitch_mm``, ``distance_m``.
     spec_path, spec_sha256 : str
         Recorded in the verdict.
+    zones : dict, optional
+        ``{zone name: {"statistics": {channel: statistics}, "coverage_percent": float}}``
+        (see :func:`glassdist.report.zones.zone_statistics`); needed when a criterion
+        or a zone limit names a zone.
+    coverage_percent : float, optional
+        Analysed share (percent) that ``min_valid_percent`` is checked against; default
+        the share of the image (give the share of the user's mask when one was used).
 
     Returns
     -------
     Verdict
+
+    Raises
+    ------
+    InputError
+        The capture violates the protocol's capture limits (:func:`check_capture`).
     """
+    check_capture(spec.protocol, result)
+    zones = zones or {}
     checks = _protocol_checks(spec.protocol, result)
     if spec.min_valid_percent is not None:
-        cov = valid_percent(result.valid)
-        checks.append(Check(f"analysed area >= {spec.min_valid_percent:g} % of the image", cov,
+        cov = valid_percent(result.valid) if coverage_percent is None else float(coverage_percent)
+        where = "the image" if coverage_percent is None else "the region to analyse"
+        checks.append(Check(f"analysed area >= {spec.min_valid_percent:g} % of {where}", cov,
                             spec.min_valid_percent, "%", ">=", cov >= spec.min_valid_percent))
+    for z in spec.zones:
+        if z.min_valid_percent is not None:
+            cov = float((zones.get(z.name) or {}).get("coverage_percent", float("nan")))
+            ok = (not math.isnan(cov)) and cov >= z.min_valid_percent
+            checks.append(Check(f"analysed area >= {z.min_valid_percent:g} % of zone '{z.name}'", cov,
+                                z.min_valid_percent, "%", ">=", ok, "zone not in the photo" if math.isnan(cov) else ""))
     for c in spec.criteria:
-        value = float(stats.get(c.channel, {}).get(c.stat_key, float("nan")))
+        source = stats if c.zone is None else (zones.get(c.zone) or {}).get("statistics", {})
+        value = float(source.get(c.channel, {}).get(c.stat_key, float("nan")))
         limit = c.max_percent if c.statistic == "area_over" else c.max_mD
         unit = "%" if c.statistic == "area_over" else "mD"
         ok = (not math.isnan(value)) and value <= limit

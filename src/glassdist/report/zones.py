@@ -1,0 +1,322 @@
+"""Zones of a pane: its outline in the photograph, a millimetre frame on it, named zones and their statistics.
+
+A specification's ``"zones"`` name parts of the pane in millimetres (see
+:class:`glassdist.report.spec.Zone`): a band along the pane outline
+(``edge_band_mm``), the pane minus a border (``inset_mm``) or a polygon
+(``polygon_mm``). They are drawn on the image through a :class:`PaneFrame`, the map
+between image pixels ``(x, y)`` (x along columns, y down the rows, pixel centres
+at integer coordinates) and frame millimetres ``(u, v)``:
+
+* **pane given in the specification** (``"pane": {"corners_px", "size_mm"}``): the
+  homography taking the four corners to the rectangle ``[0, w] x [0, h]`` mm; the
+  frame is the pane's own (``units = "pane_mm"``), exact for any perspective, and a
+  pixel's distance to the outline is ``min(u, w - u, v, h - v)``;
+* **outline found in the image**: the region where the grid is visible (the
+  analysed region with its holes filled, grown back by the margin the analyzer
+  eroded around excluded areas) when it lies inside the photo, i.e. a frame or
+  edge of the pane is seen all round; distances are measured in the image and
+  converted with the result's ``mm_per_px`` (backdrop millimetres, ``units =
+  "backdrop_mm"``: exact for a frontal view, and on the backdrop's scale, not the
+  pane's); the frame's origin is the top-left corner of the region's bounding box;
+* **no outline visible** (the grid reaches the photo's edges): the analysed region
+  (holes filled) stands in for the pane, with a warning.
+
+The area of a pixel in the frame is ``|det J|`` with ``J`` the Jacobian of the
+pixel-to-millimetre map; for a homography ``H`` (last row ``h3``),
+``det J = det(H) / (h3 . (x, y, 1))^3``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import ndimage
+
+from .stats import CHANNEL_FIELDS, channel_statistics
+
+__all__ = ["PaneFrame", "pane_frame", "pane_frame_from_corners", "pane_frame_from_region", "zone_masks",
+           "zone_statistics"]
+
+
+def _apply(H, x, y):
+    """``H`` applied to points ``(x, y)`` (arrays), returns ``(u, v)``."""
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    w = H[2, 0] * x + H[2, 1] * y + H[2, 2]
+    return (H[0, 0] * x + H[0, 1] * y + H[0, 2]) / w, (H[1, 0] * x + H[1, 1] * y + H[1, 2]) / w
+
+
+@dataclass(frozen=True)
+class PaneFrame:
+    """The pane in the photograph and a millimetre frame on it.
+
+    Attributes
+    ----------
+    px_to_mm : ndarray, shape (3, 3)
+        Homography from image pixels ``(x, y, 1)`` to frame millimetres ``(u, v, 1)``.
+    inside : ndarray of bool, shape (H, W)
+        Pixels on the pane.
+    edge_distance_mm : ndarray of float32, shape (H, W)
+        Distance from each pixel to the pane outline, mm (NaN outside the pane).
+    source : {'spec', 'image', 'analysed_region'}
+        Where the outline came from.
+    units : {'pane_mm', 'backdrop_mm'}
+        The frame's millimetres: on the pane (corners given) or on the backdrop
+        (through ``mm_per_px``).
+    outline_px : tuple of ndarray (N, 2)
+        The outline as polygons of ``(x, y)`` pixel vertices, for drawing.
+    size_mm : (float, float) or None
+        Width and height of the pane, mm (given, or the region's bounding box).
+    warning : str
+        Said when the outline is a stand-in.
+    """
+
+    px_to_mm: np.ndarray
+    inside: np.ndarray
+    edge_distance_mm: np.ndarray
+    source: str
+    units: str
+    outline_px: tuple = ()
+    size_mm: tuple | None = None
+    warning: str = ""
+    _mm_to_px: np.ndarray = field(default=None, repr=False, compare=False)
+
+    @property
+    def shape(self):
+        """``(H, W)`` of the image."""
+        return self.inside.shape
+
+    def to_mm(self, x, y):
+        """Frame millimetres ``(u, v)`` of image points ``(x, y)`` (px)."""
+        return _apply(self.px_to_mm, x, y)
+
+    def to_px(self, u, v):
+        """Image points ``(x, y)`` (px) of frame millimetres ``(u, v)``."""
+        return _apply(np.linalg.inv(self.px_to_mm), u, v)
+
+    def pixel_area_mm2(self, x, y):
+        """Area (mm^2) of the pixels at ``(x, y)``: ``|det H| / |h3 . (x, y, 1)|^3``."""
+        H = self.px_to_mm
+        w = H[2, 0] * np.asarray(x, dtype=np.float64) + H[2, 1] * np.asarray(y, dtype=np.float64) + H[2, 2]
+        return np.abs(np.linalg.det(H) / w**3)
+
+    def area_mm2(self, mask):
+        """Area (mm^2) of the pixels of ``mask`` (bool, shape (H, W))."""
+        yy, xx = np.nonzero(mask)
+        if yy.size == 0:
+            return 0.0
+        H = self.px_to_mm
+        if H[2, 0] == 0 and H[2, 1] == 0:  # affine: one area for every pixel
+            return float(yy.size * abs(np.linalg.det(H) / H[2, 2] ** 3))
+        return float(self.pixel_area_mm2(xx, yy).sum())
+
+    def to_dict(self):
+        """JSON form for ``summary.json`` (``"pane"``)."""
+        return {
+            "source": self.source, "units": self.units,
+            "size_mm": None if self.size_mm is None else [float(v) for v in self.size_mm],
+            "px_to_mm": self.px_to_mm.tolist(), "area_mm2": self.area_mm2(self.inside),
+            "outline_px": [np.round(p, 2).tolist() for p in self.outline_px], "warning": self.warning or None,
+        }
+
+
+def pane_frame_from_corners(corners_px, size_mm, shape):
+    """The frame of a pane given by its four corners in the photograph.
+
+    Parameters
+    ----------
+    corners_px : array_like, shape (4, 2)
+        ``(x, y)`` of the top-left, top-right, bottom-right, bottom-left corners, px.
+    size_mm : (float, float)
+        Width (top edge) and height (left edge) of the pane, mm.
+    shape : (int, int)
+        ``(H, W)`` of the image.
+
+    Returns
+    -------
+    PaneFrame
+        ``units = "pane_mm"``; the edge distance is ``min(u, w - u, v, h - v)``.
+
+    Examples
+    --------
+    >>> f = pane_frame_from_corners([[9.5, 19.5], [109.5, 19.5], [109.5, 69.5], [9.5, 69.5]], (200, 100), (100, 150))
+    >>> [round(float(c), 6) for c in f.to_mm(59.5, 44.5)], round(f.area_mm2(f.inside), 6)
+    ([100.0, 50.0], 20000.0)
+    """
+    from skimage.transform import ProjectiveTransform
+
+    w_mm, h_mm = (float(v) for v in size_mm)
+    src = np.asarray(corners_px, dtype=np.float64).reshape(4, 2)
+    dst = np.array([[0, 0], [w_mm, 0], [w_mm, h_mm], [0, h_mm]], dtype=np.float64)
+    if hasattr(ProjectiveTransform, "from_estimate"):
+        H = ProjectiveTransform.from_estimate(src, dst).params
+    else:  # scikit-image < 0.26
+        t = ProjectiveTransform()
+        t.estimate(src, dst)
+        H = t.params
+    H = H / H[2, 2]
+    yy, xx = np.mgrid[0 : shape[0], 0 : shape[1]]
+    u, v = _apply(H, xx, yy)
+    dist = np.minimum(np.minimum(u, w_mm - u), np.minimum(v, h_mm - v))
+    inside = dist >= 0
+    dist = np.where(inside, dist, np.nan).astype(np.float32)
+    return PaneFrame(H, inside, dist, "spec", "pane_mm", (src,), (w_mm, h_mm))
+
+
+def _outline_polygons(region):
+    import cv2
+
+    contours, _ = cv2.findContours(region.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    return tuple(cv2.approxPolyDP(c, 1.0, True).reshape(-1, 2).astype(np.float64)
+                 for c in sorted(contours, key=cv2.contourArea, reverse=True) if len(c) >= 3)
+
+
+def pane_frame_from_region(valid, mm_per_px, *, grow_px=0.0):
+    """The pane's outline found in the image: the region where the grid is visible.
+
+    Parameters
+    ----------
+    valid : ndarray of bool, shape (H, W)
+        The analysed region.
+    mm_per_px : float
+        Backdrop mm per px (the result's).
+    grow_px : float
+        Margin (px) the analyzer eroded around excluded areas; the analysed region
+        is grown back by it to reach the edge of the visible grid.
+
+    Returns
+    -------
+    PaneFrame
+        ``source = "image"`` when the visible grid ends inside the photo all round (a
+        frame is seen), else ``"analysed_region"`` (holes filled) with a warning;
+        ``units = "backdrop_mm"``.
+    """
+    valid = np.asarray(valid, dtype=bool)
+    filled = ndimage.binary_fill_holes(valid)
+    region = filled
+    if grow_px > 0 and filled.any():
+        region = ndimage.distance_transform_edt(~filled) <= grow_px
+        region = ndimage.binary_fill_holes(region)
+    border = np.concatenate([region[0], region[-1], region[:, 0], region[:, -1]])
+    warning = ""
+    if not filled.any() or border.any():
+        region = filled
+        source = "analysed_region"
+        warning = ("no pane outline visible all round (the grid reaches the photo's edges): the analysed region "
+                   "stands in for the pane in the zones; give 'pane': {'corners_px', 'size_mm'} in the specification "
+                   "for zones on the pane itself")
+    else:
+        source = "image"
+    # distance from a pixel centre to the region's edge (half a pixel beyond the last pixel centre inside)
+    dist_px = ndimage.distance_transform_edt(region) - 0.5
+    dist = np.where(region, dist_px * mm_per_px, np.nan).astype(np.float32)
+    rows, cols = np.nonzero(region)
+    if rows.size:
+        x0, y0 = cols.min() - 0.5, rows.min() - 0.5
+        size = ((cols.max() + 0.5 - x0) * mm_per_px, (rows.max() + 0.5 - y0) * mm_per_px)
+    else:
+        x0 = y0 = 0.0
+        size = None
+    s = float(mm_per_px)
+    H = np.array([[s, 0.0, -s * x0], [0.0, s, -s * y0], [0.0, 0.0, 1.0]])
+    return PaneFrame(H, region, dist, source, "backdrop_mm", _outline_polygons(region), size, warning)
+
+
+def pane_frame(result, pane=None):
+    """The :class:`PaneFrame` of an analysis: from the specification's ``pane``, else found in the image.
+
+    Parameters
+    ----------
+    result : AnalysisResult
+        Needs ``valid`` and ``mm_per_px``; ``carrier_period_mm`` and ``params.border_periods``
+        set the margin grown back onto the analysed region.
+    pane : glassdist.report.spec.Pane, optional
+    """
+    valid = np.asarray(result.valid, dtype=bool)
+    if pane is not None:
+        return pane_frame_from_corners(pane.corners_px, pane.size_mm, valid.shape)
+    params = getattr(result, "params", None)
+    grow = 0.0
+    if params is not None and getattr(result, "carrier_period_mm", None):
+        grow = float(params.border_periods) * float(result.carrier_period_mm) / float(result.mm_per_px)
+    return pane_frame_from_region(valid, float(result.mm_per_px), grow_px=grow)
+
+
+def zone_masks(frame, zones):
+    """Pixels of each zone.
+
+    Parameters
+    ----------
+    frame : PaneFrame
+    zones : sequence of glassdist.report.spec.Zone
+
+    Returns
+    -------
+    dict
+        ``{name: ndarray of bool (H, W)}``: ``edge_band_mm`` b keeps the pane pixels
+        less than b from the outline, ``inset_mm`` d those at least d from it (the two
+        split the pane when b = d), ``polygon_mm`` the pane pixels inside the polygon.
+    """
+    from skimage.draw import polygon as polygon_pixels
+
+    out = {}
+    d = np.nan_to_num(frame.edge_distance_mm, nan=-1.0)
+    for z in zones:
+        if z.edge_band_mm is not None:
+            m = frame.inside & (d < z.edge_band_mm)
+        elif z.inset_mm is not None:
+            m = frame.inside & (d >= z.inset_mm)
+        else:
+            poly = np.asarray(z.polygon_mm, dtype=np.float64)
+            # a homography keeps straight edges straight: the polygon's vertices suffice, and a
+            # pixel belongs to the zone when its centre is inside
+            x, y = frame.to_px(poly[:, 0], poly[:, 1])
+            m = np.zeros(frame.shape, bool)
+            m[polygon_pixels(y, x, frame.shape)] = True
+            m &= frame.inside
+        out[z.name] = m
+    return out
+
+
+def zone_statistics(result, frame, zones, *, over_limits_mD=None, masks=None):
+    """Statistics and coverage of every zone.
+
+    Parameters
+    ----------
+    result : AnalysisResult
+        The channels and ``valid``.
+    frame : PaneFrame
+    zones : sequence of glassdist.report.spec.Zone
+    over_limits_mD : dict, optional
+        ``{channel: [T, ...]}`` thresholds for the area-over statistics.
+    masks : dict, optional
+        :func:`zone_masks` already computed.
+
+    Returns
+    -------
+    dict
+        ``{name: {"definition", "area_mm2", "analysed_area_mm2", "coverage_percent",
+        "statistics": {channel: statistics}}}``; ``coverage_percent`` is the analysed
+        share of the zone's area (NaN for a zone outside the photo), the statistics are
+        over the analysed pixels of the zone (see :mod:`glassdist.report.stats`).
+    """
+    masks = zone_masks(frame, zones) if masks is None else masks
+    over_limits_mD = over_limits_mD or {}
+    valid = np.asarray(result.valid, dtype=bool)
+    out = {}
+    for z in zones:
+        m = masks[z.name]
+        area = frame.area_mm2(m)
+        analysed = frame.area_mm2(m & valid)
+        stats = {}
+        for name, attr in CHANNEL_FIELDS.items():
+            f = getattr(result, attr, None)
+            if f is not None:
+                stats[name] = channel_statistics(f, valid & m, over_limits_mD=over_limits_mD.get(name, ()))
+        out[z.name] = {
+            "definition": z.describe(), "area_mm2": area, "analysed_area_mm2": analysed,
+            "coverage_percent": 100.0 * analysed / area if area > 0 else math.nan, "statistics": stats,
+        }
+    return out

@@ -1,0 +1,229 @@
+"""Acceptance content of a specification: pinned protocol, zones on the pane, worst regions, per-zone statistics."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from glassdist.errors import InputError
+from glassdist.report.regions import all_worst_regions, regions_csv, worst_regions
+from glassdist.report.spec import Protocol, Spec, Zone, check_capture, evaluate_spec, resolve_protocol, spec_limits
+from glassdist.report.stats import result_statistics
+from glassdist.report.zones import pane_frame, pane_frame_from_corners, pane_frame_from_region, zone_masks
+from glassdist.report.zones import zone_statistics
+
+# ----------------------------------------------------------------- protocol
+
+
+def test_pinned_values_fill_omitted_options_and_sources_are_recorded():
+    p = Protocol(distance_m=1.0, pitch_mm=5.0, pattern="checkerboard", sigma_mm=12.0, detrend_degree=3,
+                 method="comparative")
+    r = resolve_protocol(p, reference_given=True)
+    assert (r.pitch_mm, r.distance_m, r.pattern, r.sigma_mm, r.detrend_degree) == (5.0, 1.0, "checkerboard", 12.0, 3)
+    assert r.params_overrides == {"pattern": "checkerboard", "detrend_degree": 3, "sigma_mm": 12.0}
+    assert set(r.sources.values()) == {"spec"}
+    d = r.to_dict()
+    assert d["resolved"]["sigma_mm"] == 12.0 and d["pinned"]["distance_m"] == 1.0
+
+
+def test_equal_option_is_accepted_and_options_fill_what_is_not_pinned():
+    r = resolve_protocol(Protocol(distance_m=1.0), reference_given=False, distance_m=1.0, pitch_mm=4.0)
+    assert r.method == "direct" and r.sources["distance_m"] == "option" and r.pitch_mm == 4.0
+    # unpinned sigma: 2 carrier periods (line grid: the pitch)
+    assert r.sigma_mm == pytest.approx(8.0) and r.sources["sigma_mm"] == "default"
+    assert "sigma_mm" not in r.params_overrides
+
+
+@pytest.mark.parametrize("option, value, words", [
+    ("sigma_mm", 60.0, "--sigma-mm 60 contradicts"),
+    ("distance_m", 3.0, "--distance-m 3 contradicts"),
+    ("pitch_mm", 6.0, "--pitch-mm 6 contradicts"),
+    ("detrend_degree", 2, "--detrend-degree 2 contradicts"),
+    ("pattern", "lines", "--pattern lines contradicts"),
+])
+def test_contradicting_option_is_refused_in_one_line(option, value, words):
+    p = Protocol(distance_m=1.0, pitch_mm=5.0, pattern="checkerboard", sigma_mm=14.0, detrend_degree=3)
+    with pytest.raises(InputError) as info:
+        resolve_protocol(p, reference_given=True, **{option: value}, spec_label="spec.json")
+    msg = str(info.value)
+    assert msg.startswith(words) and "spec.json" in msg and "leave" in msg and "\n" not in msg
+
+
+def test_sigma_periods_pin_resolves_through_pitch_and_pattern():
+    p = Protocol(sigma_periods=3.0, pattern="checkerboard")
+    r = resolve_protocol(p, reference_given=True, pitch_mm=5.0, distance_m=1.0)
+    assert r.sigma_mm == pytest.approx(3.0 * 5.0 * np.sqrt(2.0))
+    resolve_protocol(p, reference_given=True, pitch_mm=5.0, distance_m=1.0, sigma_mm=15.0 * np.sqrt(2.0))
+    with pytest.raises(InputError, match="sigma_periods = 3"):
+        resolve_protocol(p, reference_given=True, pitch_mm=5.0, distance_m=1.0, sigma_mm=10.0)
+    with pytest.raises(ValueError, match="not both"):
+        Protocol(sigma_mm=1.0, sigma_periods=2.0)
+
+
+def test_method_and_missing_settings_are_input_errors():
+    with pytest.raises(InputError, match="requires the comparative method; give --reference"):
+        resolve_protocol(Protocol(method="comparative"), reference_given=False, pitch_mm=5, distance_m=1)
+    with pytest.raises(InputError, match="requires the direct method; leave --reference out"):
+        resolve_protocol(Protocol(method="direct"), reference_given=True, pitch_mm=5, distance_m=1)
+    with pytest.raises(InputError, match="--pitch-mm is required"):
+        resolve_protocol(None, reference_given=True, distance_m=1.0)
+    with pytest.raises(InputError, match="--distance-m is required"):
+        resolve_protocol(Protocol(pitch_mm=5.0), reference_given=True)
+
+
+def test_params_file_contradicting_a_pin_is_refused():
+    from glassdist.analyzer import load_params
+
+    params = load_params({"detrend_degree": 4})
+    with pytest.raises(InputError, match="--params file sets detrend_degree = 4"):
+        resolve_protocol(Protocol(detrend_degree=3), reference_given=True, pitch_mm=5, distance_m=1, params=params)
+    r = resolve_protocol(Protocol(), reference_given=True, pitch_mm=5, distance_m=1, params=params)
+    assert r.detrend_degree == 4 and r.sources["detrend_degree"] == "params"
+
+
+def test_capture_limit_is_an_input_error():
+    carriers = SimpleNamespace(k1=SimpleNamespace(period_px=6.0), k2=SimpleNamespace(period_px=6.5))
+    res = SimpleNamespace(carriers=carriers)
+    check_capture(Protocol(min_px_per_period=6.0), res)
+    with pytest.raises(InputError, match="6 px per grid carrier period .* at least 8"):
+        check_capture(Protocol(min_px_per_period=8.0), res)
+
+
+# ----------------------------------------------------------------- zones
+
+def _rect_frame(w_mm=400.0, h_mm=300.0, scale=2.0, shape=(200, 260), x0=20.5, y0=10.5):
+    """A rectangular pane seen frontally: w_mm x h_mm at `scale` mm per px, top-left corner at (x0, y0) px."""
+    x1, y1 = x0 + w_mm / scale, y0 + h_mm / scale
+    return pane_frame_from_corners([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], (w_mm, h_mm), shape)
+
+
+def test_rectangle_inset_and_edge_band_areas_match_closed_form():
+    w, h, s = 400.0, 300.0, 2.0
+    frame = _rect_frame(w, h, s)
+    assert frame.area_mm2(frame.inside) == pytest.approx(w * h)
+    for b in (20.0, 50.0):
+        m = zone_masks(frame, [Zone(name="edge", edge_band_mm=b), Zone(name="vision", inset_mm=b)])
+        # pixels are s mm wide: the band's inner edge is placed to within half a pixel along the perimeter
+        tol = 0.5 * s * 2 * ((w - 2 * b) + (h - 2 * b)) + 4 * s * s
+        assert frame.area_mm2(m["vision"]) == pytest.approx((w - 2 * b) * (h - 2 * b), abs=tol)
+        assert frame.area_mm2(m["edge"]) == pytest.approx(w * h - (w - 2 * b) * (h - 2 * b), abs=tol)
+        assert not np.any(m["edge"] & m["vision"]) and np.array_equal(m["edge"] | m["vision"], frame.inside)
+
+
+def test_polygon_zone_area_and_placement():
+    frame = _rect_frame()
+    (m,) = zone_masks(frame, [Zone(name="box", polygon_mm=[[100, 50], [300, 50], [300, 150], [100, 150]])]).values()
+    assert frame.area_mm2(m) == pytest.approx(200 * 100)
+    yy, xx = np.nonzero(m)
+    u, v = frame.to_mm(xx, yy)
+    assert u.min() >= 99 and u.max() <= 301 and v.min() >= 49 and v.max() <= 151
+
+
+def test_perspective_pane_area_is_exact_through_the_jacobian():
+    # a trapezoid in the photo: the pane's area in mm does not depend on the view
+    corners = [[40.3, 30.7], [220.2, 50.1], [210.6, 180.4], [50.9, 170.2]]
+    frame = pane_frame_from_corners(corners, (500.0, 400.0), (200, 260))
+    assert frame.area_mm2(frame.inside) == pytest.approx(500.0 * 400.0, rel=0.02)
+    u, v = frame.to_mm(np.array([40.3, 210.6]), np.array([30.7, 180.4]))
+    assert np.allclose([u[0], v[0], u[1], v[1]], [0, 0, 500, 400], atol=1e-9)
+
+
+def test_outline_found_in_image_or_standing_in():
+    valid = np.zeros((120, 160), bool)
+    valid[20:100, 30:130] = True
+    f = pane_frame_from_region(valid, 0.5, grow_px=5.0)
+    assert f.source == "image" and not f.warning and f.units == "backdrop_mm"
+    assert f.area_mm2(f.inside) == pytest.approx((80 + 10) * (100 + 10) * 0.25, rel=0.03)
+    whole = pane_frame_from_region(np.ones((120, 160), bool), 0.5, grow_px=5.0)
+    assert whole.source == "analysed_region" and "stands in" in whole.warning
+
+
+def _field_result(shape=(200, 260)):
+    eff = np.zeros(shape)
+    eff[:, :130] = 10.0  # left half 10 mD, right half 0
+    return SimpleNamespace(phi_eff_mD=eff, phi_shear_mD=np.abs(eff) / 2, phi_total_mD=np.abs(eff),
+                           valid=np.ones(shape, bool), method="comparative", sigma_mm=2.0, detrend_degree=2,
+                           mm_per_px=2.0, carrier_period_mm=5.0, pitch_mm=5.0, distance_m=1.0,
+                           params=SimpleNamespace(border_periods=1.5, pattern="lines"))
+
+
+def test_per_zone_statistics_and_coverage_against_the_zone():
+    res = _field_result()
+    frame = _rect_frame()
+    zones = [Zone(name="left", polygon_mm=[[0, 0], [200, 0], [200, 300], [0, 300]]),
+             Zone(name="vision", inset_mm=50)]
+    # an intentional mask: only the vision area was analysed
+    m = zone_masks(frame, zones)
+    res.valid = m["vision"].copy()
+    zs = zone_statistics(res, frame, zones)
+    assert zs["vision"]["coverage_percent"] == pytest.approx(100.0)
+    # pane x < 200 mm is image x < 120.5 px: all at 10 mD
+    assert zs["left"]["statistics"]["phi_eff"]["mean_abs"] == pytest.approx(10.0)
+    assert zs["left"]["coverage_percent"] == pytest.approx(100 * 150 * 200 / (200 * 300), rel=0.03)
+    spec = Spec(name="z", zones=zones, criteria=[
+        {"channel": "phi_eff", "statistic": "max_abs", "max_mD": 5, "zone": "vision"},
+        {"channel": "phi_eff", "statistic": "mean_abs", "max_mD": 9.9, "zone": "left"}])
+    stats = result_statistics(res, over_limits_mD=spec_limits(spec))
+    v = evaluate_spec(spec, stats, res, zones=zs)
+    assert [c.passed for c in v.checks] == [False, False]
+    assert "in zone 'vision'" in v.checks[0].criterion and v.checks[0].value == pytest.approx(10.0)
+
+
+def test_zone_coverage_limit_and_unknown_zone():
+    with pytest.raises(ValueError, match="zone 'nope'"):
+        Spec(name="z", criteria=[{"channel": "phi_eff", "statistic": "max_abs", "max_mD": 5, "zone": "nope"}])
+    with pytest.raises(ValueError, match="exactly one"):
+        Zone(name="a", inset_mm=5, edge_band_mm=5)
+    res = _field_result()
+    frame = _rect_frame()
+    zones = [Zone(name="vision", inset_mm=50, min_valid_percent=90)]
+    res.valid[:, :100] = False
+    zs = zone_statistics(res, frame, zones)
+    spec = Spec(name="z", zones=zones, criteria=[{"channel": "phi_eff", "statistic": "max_abs", "max_mD": 50}])
+    v = evaluate_spec(spec, result_statistics(res), res, zones=zs)
+    assert v.checks[0].criterion == "analysed area >= 90 % of zone 'vision'" and not v.checks[0].passed
+
+
+# ----------------------------------------------------------------- worst regions
+
+def test_worst_regions_of_known_blobs():
+    rng = np.random.default_rng(3)
+    shape = (300, 400)
+    f = rng.uniform(-1, 1, shape)
+    yy, xx = np.mgrid[0 : shape[0], 0 : shape[1]]
+    blobs = [(100.0, 120.0, 30.0, 40.0), (250.0, 200.0, 20.0, -25.0)]  # (x, y, radius px, value mD)
+    for x, y, r, val in blobs:
+        f[(xx - x) ** 2 + (yy - y) ** 2 <= r * r] = val
+    s = 0.5
+    frame = pane_frame_from_region(np.ones(shape, bool), s)
+    regs = worst_regions(f, np.ones(shape, bool), frame, 10.0)
+    assert len(regs) == 2
+    assert [r.number for r in regs] == [1, 2] and regs[0].peak_mD == 40.0 and regs[1].peak_mD == -25.0
+    for reg, (x, y, r, val) in zip(regs, blobs):
+        # frame origin at the region's top-left pixel edge: u = (x + 0.5) s
+        assert reg.centroid_mm == pytest.approx(((x + 0.5) * s, (y + 0.5) * s), abs=1e-9)
+        assert reg.area_mm2 == pytest.approx(np.pi * r * r * s * s, rel=0.01)
+        assert reg.mean_abs_mD == pytest.approx(abs(val))
+        assert reg.extent_mm == pytest.approx(((x - r + 0.5) * s, (x + r + 0.5) * s, (y - r + 0.5) * s,
+                                               (y + r + 0.5) * s))
+    # restricted to the valid region, and a minimum area
+    valid = np.ones(shape, bool)
+    valid[:, :200] = False
+    assert [r.peak_mD for r in worst_regions(f, valid, frame, 10.0)] == [-25.0]
+    assert worst_regions(f, np.ones(shape, bool), frame, 10.0, min_area_mm2=np.pi * 25 * 25 * s * s) == regs[:1]
+
+
+def test_region_thresholds_from_spec_or_default_and_csv():
+    res = _field_result()
+    frame = pane_frame(res)
+    spec = Spec(name="s", criteria=[{"channel": "phi_eff", "statistic": "p95_abs", "max_mD": 5}])
+    found = all_worst_regions(res, frame, spec)
+    assert found["phi_eff"]["threshold_mD"] == 5 and found["phi_eff"]["threshold_source"] == "spec limit"
+    (reg,) = found["phi_eff"]["regions"]
+    assert reg.area_mm2 == pytest.approx(130 * 200 * 4.0)
+    assert found["phi_shear"]["threshold_source"] == "p95"
+    text = regions_csv(found)
+    assert text.splitlines()[0].startswith("channel,number,threshold_mD,centroid_x_mm")
+    assert text.splitlines()[1].startswith("phi_eff,1,5,")
