@@ -9,12 +9,24 @@
 * :func:`run_accuracy` — both methods against the exact ray-traced truth on 13
   scenes (docs/accuracy.md).
 
-Each returns an :class:`ExperimentResult` (numbers, markdown table, figures);
-:func:`write_experiment` writes them. ``glassdist experiment NAME --out DIR`` runs
+Each takes the rendering options of :class:`RunOptions` as keywords (``engine``,
+``scale``, ``spp``, ``progress``), renders its scenes once and evaluates them
+(:func:`run_scenes`), and returns an :class:`ExperimentResult` (numbers, markdown
+table, figures); :func:`write_experiment` writes them. ``glassdist experiment NAME --out DIR`` runs
 one from the command line.
 """
 
-from ._common import ExperimentResult, Inputs, evaluate, render_inputs, scaled_scene, write_experiment
+from ._common import (
+    ExperimentResult,
+    Inputs,
+    RunOptions,
+    SceneRun,
+    evaluate,
+    render_inputs,
+    run_scenes,
+    scaled_scene,
+    write_experiment,
+)
 from .accuracy import run_accuracy
 from .parity import run_parity
 from .pitch import run_pitch
@@ -26,8 +38,11 @@ __all__ = [
     "EXPERIMENTS",
     "ExperimentResult",
     "Inputs",
+    "RunOptions",
+    "SceneRun",
     "evaluate",
     "render_inputs",
+    "run_scenes",
     "scaled_scene",
     "write_experiment",
     "run_parity",

@@ -27,15 +27,20 @@ import numpy as np
 from .._version import __version__
 from ..errors import InputError
 from ..render import get_renderer, landing_points, render_scene
-from ..scene import Scene
-from ..theory import Prediction, predict_channels, predict_displacement
+from ..scene import Scene, load_scene
+from ..theory import Prediction, analysis_params, predict_channels, predict_displacement
 from ..virtual import Validation, compare
 
 __all__ = [
     "Inputs",
+    "RunOptions",
+    "SceneRun",
     "scaled_scene",
     "render_inputs",
     "evaluate",
+    "run_scenes",
+    "common_region",
+    "settings_record",
     "region_stats",
     "relative_difference",
     "validation_record",
@@ -203,6 +208,117 @@ def evaluate(inputs: Inputs, *, method: str, params) -> Validation:
     val.metrics["analyze_s"] = t1 - t0
     log.info("%s %s: analysed in %.2f s, evaluated in %.2f s", scene.name, method, t1 - t0, time.perf_counter() - t1)
     return val
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """How an experiment renders its scenes: the options every ``run_*`` function takes.
+
+    Attributes
+    ----------
+    engine : {'exact', 'cycles'}
+        Render engine of the images (the truth always comes from the exact tracer).
+    scale : float
+        Image size relative to the scenes' (1024 x 768 px); the field of view is kept.
+    spp : int, optional
+        Samples per pixel (default: the scenes', 16).
+    progress : callable(stage, done, total), optional
+        Called while rendering.
+    """
+
+    engine: str = "exact"
+    scale: float = 1.0
+    spp: int | None = None
+    progress: Callable[[str, int, int], None] | None = None
+
+    def prepare(self, scene: Scene) -> Scene:
+        """The scene at this image scale and sample count (:func:`scaled_scene`)."""
+        return scaled_scene(scene, scale=self.scale, spp=self.spp)
+
+    def render(self, scene: Scene, *, reference: bool = True) -> Inputs:
+        """Render a prepared scene and its predictions (:func:`render_inputs`)."""
+        return render_inputs(scene, engine=self.engine, reference=reference, progress=self.progress)
+
+
+@dataclass(frozen=True)
+class SceneRun:
+    """One scene of an experiment: rendered once, analysed with each method.
+
+    Attributes
+    ----------
+    scene : Scene
+        The scene as rendered (scaled, samples per pixel set).
+    inputs : Inputs
+        Its renders, model and truth.
+    params : AnalyzerParams
+        Analyzer parameters of every method's run.
+    validations : dict of str -> Validation
+        Method -> the analyzer's run against model and truth (:func:`evaluate`).
+    """
+
+    scene: Scene
+    inputs: Inputs
+    params: object
+    validations: dict
+
+    def entry(self) -> dict:
+        """The record keys every experiment writes for a scene: its name, seed and render timings."""
+        return {"scene": self.scene.name, "seed": self.scene.render.seed, "timings": self.inputs.timings}
+
+
+def run_scenes(
+    scenes: dict,
+    options: RunOptions,
+    *,
+    methods: tuple,
+    reference: bool,
+    detrend_degree: int,
+    sigma_mm: float,
+) -> dict:
+    """Render each scene once and evaluate it with each method at one ``detrend_degree`` and ``sigma_mm``.
+
+    Parameters
+    ----------
+    scenes : dict of str -> path
+        Run name -> scene file.
+    options : RunOptions
+    methods : tuple of {'direct', 'comparative'}
+    reference : bool
+        Also render the glass-less image (the Comparative Method and the figures need it).
+    detrend_degree : int
+        Total degree N of the polynomial detrend.
+    sigma_mm : float
+        Reporting smoothing scale on the backdrop, mm.
+
+    Returns
+    -------
+    dict of str -> SceneRun
+        In the order of ``scenes``.
+    """
+    runs = {}
+    for name, path in scenes.items():
+        scene = options.prepare(load_scene(path))
+        inputs = options.render(scene, reference=reference)
+        params = analysis_params(scene, detrend_degree=detrend_degree, sigma_mm=sigma_mm)
+        runs[name] = SceneRun(scene, inputs, params, {m: evaluate(inputs, method=m, params=params) for m in methods})
+    return runs
+
+
+def common_region(runs: dict) -> np.ndarray:
+    """The pixels compared in every validation of every run (bool, H x W)."""
+    return np.logical_and.reduce([v.valid for run in runs.values() for v in run.validations.values()])
+
+
+def settings_record(run: SceneRun, *, detrend_degree: int, sigma_mm: float, paper: dict) -> dict:
+    """The record keys every experiment writes for its settings: engine, image size, spp, N, sigma, paper."""
+    return {
+        "engine": run.inputs.engine,
+        "image_size": list(run.scene.camera.pixels),
+        "samples_per_pixel": run.scene.render.samples_per_pixel,
+        "detrend_degree": detrend_degree,
+        "sigma_mm": float(sigma_mm),
+        "paper": paper,
+    }
 
 
 def region_stats(field_mD: np.ndarray, region: np.ndarray) -> dict:

@@ -19,7 +19,6 @@ import logging
 import math
 import time
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 from scipy import ndimage
@@ -29,7 +28,7 @@ from ..errors import InputError
 from ..render.tracer import GLASS
 from ..scene import load_scene
 from ..theory import analysis_params, carrier_period_mm
-from ._common import ExperimentResult, evaluate, render_inputs, scaled_scene, validation_record
+from ._common import ExperimentResult, RunOptions, evaluate, render_inputs, validation_record
 
 __all__ = ["BOUNDS", "SCENES", "run_accuracy", "accuracy_markdown"]
 
@@ -193,31 +192,19 @@ def measure(inputs, method: str, params, kind: str) -> dict:
     return run
 
 
-def run_accuracy(
-    *,
-    engine: str = "exact",
-    scale: float = 1.0,
-    spp: int | None = None,
-    sigma_mm: float | None = None,
-    scenes=None,
-    progress: Callable[[str, int, int], None] | None = None,
-) -> ExperimentResult:
+def run_accuracy(*, sigma_mm: float | None = None, scenes=None, **options) -> ExperimentResult:
     """Run the accuracy experiment.
 
     Parameters
     ----------
-    engine : {'exact', 'cycles'}
-        Render engine of the photographs (the truth is always the exact tracer's).
-    scale : float
-        Image size relative to the scenes' (1024 x 768 px); the field of view is kept.
-    spp : int, optional
-        Samples per pixel (default: the scenes', 16).
     sigma_mm : float, optional
         Reporting smoothing scale on the backdrop, mm, for every scene (default: each
         scene's own analysis settings, else 2 carrier periods).
     scenes : sequence of str, optional
         Subset of :data:`SCENES` (default: all of them, in that order).
-    progress : callable(stage, done, total), optional
+    **options
+        ``engine``, ``scale``, ``spp``, ``progress``: see :class:`RunOptions`; ``progress``
+        is called once per scene (stage ``"accuracy scenes"``).
 
     Returns
     -------
@@ -234,13 +221,14 @@ def run_accuracy(
     unknown = [n for n in names if n not in SCENES]
     if unknown:
         raise InputError(f"unknown accuracy scene(s) {', '.join(unknown)}; choose from {', '.join(SCENES)}")
+    opts = RunOptions(**options)
     overrides = {} if sigma_mm is None else {"sigma_mm": sigma_mm}
     t0 = time.perf_counter()
     entries = []
     for k, name in enumerate(names):
         kind, build, what = SCENES[name]
-        scene = scaled_scene(build(), scale=scale, spp=spp)
-        inputs = render_inputs(scene, engine=engine, reference=True)
+        scene = opts.prepare(build())
+        inputs = render_inputs(scene, engine=opts.engine, reference=True)
         params = analysis_params(scene, **overrides)
         entry = {"name": name, "kind": kind, "scene": what, "definition": scene.model_dump(mode="json"),
                  "timings": inputs.timings, "runs": {}}
@@ -249,9 +237,9 @@ def run_accuracy(
             entry["runs"][method] = run
             log.info("%s %s: %s", name, method, _summary_line(run))
         entries.append(entry)
-        if progress is not None:
-            progress("accuracy scenes", k + 1, len(names))
-    record = {"engine": engine, "image_size": list(scene.camera.pixels),
+        if opts.progress is not None:
+            opts.progress("accuracy scenes", k + 1, len(names))
+    record = {"engine": opts.engine, "image_size": list(scene.camera.pixels),
               "samples_per_pixel": scene.render.samples_per_pixel, "criteria": BOUNDS, "scenes": entries}
     record["wall_s"] = time.perf_counter() - t0
     record["timings"] = {k: sum(s["timings"][k] for s in entries) for k in ("render_s", "model_s", "truth_s")}

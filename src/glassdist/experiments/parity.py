@@ -17,19 +17,9 @@ rotation without the directional shaping.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Callable
 
-from ..scene import load_scene
-from ..theory import analysis_params
-from ._common import (
-    ExperimentResult,
-    bound,
-    bounds_table,
-    evaluate,
-    render_inputs,
-    scaled_scene,
-    validation_record,
-)
+from ._common import ExperimentResult, RunOptions, SceneRun, bound, bounds_table, evaluate
+from ._common import run_scenes, settings_record, validation_record
 
 __all__ = ["PAPER", "SCENE", "run_parity", "parity_figure"]
 
@@ -54,12 +44,9 @@ SIGMA_MM = 40.0
 def run_parity(
     *,
     scene_path: str | Path | None = None,
-    engine: str = "exact",
-    scale: float = 1.0,
-    spp: int | None = None,
     sigma_mm: float = SIGMA_MM,
     ablation: bool = True,
-    progress: Callable[[str, int, int], None] | None = None,
+    **options,
 ) -> ExperimentResult:
     """Run the parity experiment.
 
@@ -67,17 +54,12 @@ def run_parity(
     ----------
     scene_path : path, optional
         Scene file (default: ``examples/scenes/wavy_slab.yaml``).
-    engine : {'exact', 'cycles'}
-        Render engine.
-    scale : float
-        Image size relative to the scene's (1024 x 768 px); the field of view is kept.
-    spp : int, optional
-        Samples per pixel (default: the scene's, 16).
     sigma_mm : float
         Reporting smoothing scale on the backdrop, mm (the same for analyzer, model and truth).
     ablation : bool
         Also run the isotropic-bandpass ablation.
-    progress : callable(stage, done, total), optional
+    **options
+        ``engine``, ``scale``, ``spp``, ``progress``: see :class:`RunOptions`.
 
     Returns
     -------
@@ -96,24 +78,28 @@ def run_parity(
     ----------
     Paper §3.1, Table 2, Fig. 6.
     """
-    scene = scaled_scene(load_scene(scene_path or SCENE), scale=scale, spp=spp)
-    inputs = render_inputs(scene, engine=engine, reference=True, progress=progress)
-    params = analysis_params(scene, detrend_degree=DETREND_DEGREE, sigma_mm=sigma_mm)
-    val = evaluate(inputs, method="direct", params=params)
+    run = run_scenes(
+        {"parity": scene_path or SCENE}, RunOptions(**options),
+        methods=("direct",), reference=True, detrend_degree=DETREND_DEGREE, sigma_mm=sigma_mm,
+    )["parity"]
+    val = run.validations["direct"]
     direct = validation_record(val)
     record = {
-        "scene": scene.name,
-        "engine": inputs.engine,
-        "image_size": list(scene.camera.pixels),
-        "samples_per_pixel": scene.render.samples_per_pixel,
-        "seed": scene.render.seed,
-        "detrend_degree": DETREND_DEGREE,
-        "sigma_mm": float(sigma_mm),
-        "params": params.resolved(),
-        "paper": PAPER,
+        **run.entry(),
+        **settings_record(run, detrend_degree=DETREND_DEGREE, sigma_mm=sigma_mm, paper=PAPER),
+        "params": run.params.resolved(),
         "direct": direct,
-        "timings": inputs.timings,
+        "bounds": parity_bounds(direct),
     }
+    if ablation:
+        record["ablation"] = bandpass_ablation(run, direct)
+    inputs = run.inputs
+    figures = {"fig6_parity.png": lambda: parity_figure(val, inputs.distorted, inputs.reference)}
+    return ExperimentResult("parity", record, parity_table(record), figures)
+
+
+def parity_bounds(direct: dict) -> dict:
+    """Bound checks of the Direct run: each ratio Analyzer/model, the Procrustes scale and rotation."""
     r, pr = direct["ratios_vs_model"], direct["procrustes_vs_model"]
     bounds = {
         f"ratio_{k}": bound(v, BOUNDS["ratio"], target=1.0, paper=PAPER["ratio"], what=f"{k} ratio Analyzer/model")
@@ -125,21 +111,19 @@ def run_parity(
     bounds["procrustes_rotation_deg"] = bound(
         pr["rotation_deg"], BOUNDS["rotation_deg"], paper=PAPER["procrustes_rotation_deg"], what="Procrustes rotation, deg"
     )
-    record["bounds"] = bounds
-    abl_val = None
-    if ablation:
-        iso = params.model_copy(update={"isotropic_bandpass": True})
-        abl_val = evaluate(inputs, method="direct", params=iso)
-        a = validation_record(abl_val)
-        record["ablation"] = {
-            "isotropic_bandpass": a,
-            "anisotropic_bandpass": direct,
-            "bandpass_sigma_along": params.bandpass_sigma_along,
-            "bandpass_sigma_cross": params.bandpass_sigma_cross,
-        }
-    table = parity_table(record)
-    figures = {"fig6_parity.png": lambda: parity_figure(val, inputs.distorted, inputs.reference)}
-    return ExperimentResult("parity", record, table, figures)
+    return bounds
+
+
+def bandpass_ablation(run: SceneRun, direct: dict) -> dict:
+    """The same image analysed with an isotropic Gaussian bandpass around each carrier, next to
+    the default anisotropic run (``direct``, its :func:`validation_record`)."""
+    iso = run.params.model_copy(update={"isotropic_bandpass": True})
+    return {
+        "isotropic_bandpass": validation_record(evaluate(run.inputs, method="direct", params=iso)),
+        "anisotropic_bandpass": direct,
+        "bandpass_sigma_along": run.params.bandpass_sigma_along,
+        "bandpass_sigma_cross": run.params.bandpass_sigma_cross,
+    }
 
 
 def parity_table(record: dict) -> str:

@@ -19,27 +19,13 @@ removes the region's share of the spread.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 from scipy import ndimage
 
-from ..scene import load_scene
-from ..theory import analysis_params
-from ._common import (
-    ExperimentResult,
-    bound,
-    bounds_table,
-    evaluate,
-    map_panel,
-    region_stats,
-    relative_difference,
-    render_inputs,
-    scaled_scene,
-    share_fig_ax,
-    shared_limit,
-    validation_record,
-)
+from ._common import ExperimentResult, RunOptions, SceneRun, bound, bounds_table, common_region
+from ._common import relative_difference, run_scenes, settings_record, validation_record
+from ._common import map_panel, region_stats, share_fig_ax, shared_limit
 
 __all__ = ["PAPER", "SCENES", "SIGMA_MM", "run_pitch", "pitch_inputs_figure", "pitch_power_figure", "pitch_shear_figure"]
 
@@ -79,30 +65,17 @@ def _spread(values) -> float:
     return float(np.max(np.abs(v - v.mean())) / v.mean())
 
 
-def run_pitch(
-    *,
-    engine: str = "exact",
-    scale: float = 1.0,
-    spp: int | None = None,
-    sigma_mm: float = SIGMA_MM,
-    scenes: dict | None = None,
-    progress: Callable[[str, int, int], None] | None = None,
-) -> ExperimentResult:
+def run_pitch(*, sigma_mm: float = SIGMA_MM, scenes: dict | None = None, **options) -> ExperimentResult:
     """Run the grid-pitch experiment.
 
     Parameters
     ----------
-    engine : {'exact', 'cycles'}
-        Render engine.
-    scale : float
-        Image size relative to the scenes' (1024 x 768 px); the field of view is kept.
-    spp : int, optional
-        Samples per pixel (default: the scenes', 16).
     sigma_mm : float
         Reporting smoothing scale on the backdrop, mm, shared by all pitches.
     scenes : dict, optional
         ``{'coarse' | 'medium' | 'fine': scene path}`` (default :data:`SCENES`).
-    progress : callable(stage, done, total), optional
+    **options
+        ``engine``, ``scale``, ``spp``, ``progress``: see :class:`RunOptions`.
 
     Returns
     -------
@@ -120,79 +93,94 @@ def run_pitch(
     ----------
     Paper §3.2, Figs. 7, 8, 10.
     """
-    paths = dict(SCENES if scenes is None else scenes)
-    runs: dict = {}
-    images: dict = {}
-    for name, path in paths.items():
-        scene = scaled_scene(load_scene(path), scale=scale, spp=spp)
-        inputs = render_inputs(scene, engine=engine, reference=True, progress=progress)
-        params = analysis_params(scene, detrend_degree=DETREND_DEGREE, sigma_mm=sigma_mm)
-        runs[name] = {"scene": scene, "inputs": inputs, "params": params}
-        for method in METHODS:
-            runs[name][method] = evaluate(inputs, method=method, params=params)
-        images[name] = inputs.distorted
-    common = np.logical_and.reduce([runs[n][m].valid for n in runs for m in METHODS])
-    # Interior: the common region less a band of one smoothing scale along its border, where the
-    # region's edge cuts the smoothing kernel (normalised convolution) differently for image and truth.
-    sigma_px = float(sigma_mm) / runs[next(iter(runs))]["direct"].analysis.mm_per_px
-    interior = ndimage.distance_transform_edt(np.pad(common, 1))[1:-1, 1:-1] > sigma_px
-
+    runs = run_scenes(
+        dict(SCENES if scenes is None else scenes), RunOptions(**options),
+        methods=METHODS, reference=True, detrend_degree=DETREND_DEGREE, sigma_mm=sigma_mm,
+    )
+    first = next(iter(runs.values()))
+    common = common_region(runs)
+    interior = interior_region(common, float(sigma_mm) / first.validations["direct"].analysis.mm_per_px)
     record: dict = {
-        "engine": next(iter(runs.values()))["inputs"].engine,
-        "image_size": list(next(iter(runs.values()))["scene"].camera.pixels),
-        "samples_per_pixel": next(iter(runs.values()))["scene"].render.samples_per_pixel,
-        "detrend_degree": DETREND_DEGREE,
-        "sigma_mm": float(sigma_mm),
-        "paper": PAPER,
+        **settings_record(first, detrend_degree=DETREND_DEGREE, sigma_mm=sigma_mm, paper=PAPER),
         "common_region_fraction": float(common.mean()),
         "interior_region_fraction": float(interior.mean()),
-        "pitches": {},
+        "pitches": {name: pitch_entry(run, {"common_region": common, "interior_region": interior}) for name, run in runs.items()},
     }
-    means: dict = {reg: {who: {ch: {} for ch in CHANNELS} for who in ("direct", "comparative", "exact")} for reg in ("own", "common", "interior")}
-    for name, run in runs.items():
-        scene = run["scene"]
-        entry = {
-            "scene": scene.name,
-            "pitch_mm": scene.backdrop.pitch_mm,
-            "seed": scene.render.seed,
-            "timings": run["inputs"].timings,
-            "params": run["params"].resolved(),
-        }
-        for method in METHODS:
-            val = run[method]
-            entry[method] = validation_record(val)
-            for key, reg in (("common_region", common), ("interior_region", interior)):
-                entry[method][key] = {
-                    who: {ch: region_stats(getattr(src, f"{ch}_mD"), reg) for ch in CHANNELS}
-                    for who, src in (("analyzer", val.analysis), ("exact", val.exact))
-                }
-            for ch in CHANNELS:
-                means["own"][method][ch][name] = entry[method]["statistics"]["analyzer"][ch]["mean_abs"]
-                means["common"][method][ch][name] = entry[method]["common_region"]["analyzer"][ch]["mean_abs"]
-                means["interior"][method][ch][name] = entry[method]["interior_region"]["analyzer"][ch]["mean_abs"]
-        for ch in CHANNELS:  # truth on the Direct Method's region (own) and on the common region
-            means["own"]["exact"][ch][name] = entry["direct"]["statistics"]["exact"][ch]["mean_abs"]
-            means["common"]["exact"][ch][name] = entry["direct"]["common_region"]["exact"][ch]["mean_abs"]
-            means["interior"]["exact"][ch][name] = entry["direct"]["interior_region"]["exact"][ch]["mean_abs"]
-        record["pitches"][name] = entry
+    record["summary"] = pitch_summary(region_means(record["pitches"]))
+    record["bounds"] = pitch_bounds(record["summary"]["common"])
+    images = {n: run.inputs.distorted for n, run in runs.items()}
+    figures = {
+        "fig7_pitch_inputs.png": lambda: pitch_inputs_figure(images, {n: run.scene.backdrop.pitch_mm for n, run in runs.items()}),
+        "fig8_pitch_phi_eff.png": lambda: pitch_power_figure(runs, channel="phi_eff"),
+        "fig10_pitch_phi_shear_coarse.png": lambda: pitch_shear_figure(runs, pitch=next(iter(runs))),
+    }
+    return ExperimentResult("pitch", record, pitch_table(record), figures)
 
+
+def interior_region(common: np.ndarray, sigma_px: float) -> np.ndarray:
+    """The common region less a band of one smoothing scale along its border (bool, H x W).
+
+    There the region's edge cuts the smoothing kernel (normalised convolution)
+    differently for the image and the truth.
+    """
+    return ndimage.distance_transform_edt(np.pad(common, 1))[1:-1, 1:-1] > sigma_px
+
+
+def pitch_entry(run: SceneRun, regions: dict) -> dict:
+    """Record of one pitch: scene, settings and, per method, :func:`validation_record` plus
+    the analyzer's and the truth's statistics on each of ``regions`` (key -> bool mask)."""
+    entry = {**run.entry(), "pitch_mm": run.scene.backdrop.pitch_mm, "params": run.params.resolved()}
+    for method in METHODS:
+        val = run.validations[method]
+        entry[method] = validation_record(val)
+        for key, reg in regions.items():
+            entry[method][key] = {
+                who: {ch: region_stats(getattr(src, f"{ch}_mD"), reg) for ch in CHANNELS}
+                for who, src in (("analyzer", val.analysis), ("exact", val.exact))
+            }
+    return entry
+
+
+def region_means(pitches: dict) -> dict:
+    """Mean |phi| by region (own, common, interior), who (each method, exact truth), channel and pitch, mD.
+
+    The truth is taken on the Direct Method's region.
+    """
+    keys = {"own": "statistics", "common": "common_region", "interior": "interior_region"}
+    means: dict = {reg: {who: {ch: {} for ch in CHANNELS} for who in (*METHODS, "exact")} for reg in keys}
+    for name, entry in pitches.items():
+        for reg, key in keys.items():
+            for ch in CHANNELS:
+                for method in METHODS:
+                    means[reg][method][ch][name] = entry[method][key]["analyzer"][ch]["mean_abs"]
+                means[reg]["exact"][ch][name] = entry["direct"][key]["exact"][ch]["mean_abs"]
+    return means
+
+
+def pitch_summary(means: dict) -> dict:
+    """Per region: the means, each one's spread across pitches, Direct vs Comparative and Direct / truth."""
     summary: dict = {}
     for reg, m in means.items():
+        names = list(m["direct"][CHANNELS[0]])
         s = {"mean_abs_mD": m, "spread": {}, "direct_vs_comparative": {}, "direct_vs_exact": {}}
         for ch in CHANNELS:
             s["spread"][ch] = {who: _spread(m[who][ch].values()) for who in m}
             s["direct_vs_comparative"][ch] = {
-                n: relative_difference(m["direct"][ch][n], m["comparative"][ch][n]) for n in runs
+                n: relative_difference(m["direct"][ch][n], m["comparative"][ch][n]) for n in names
             }
-            s["direct_vs_exact"][ch] = {n: m["direct"][ch][n] / m["exact"][ch][n] for n in runs}
+            s["direct_vs_exact"][ch] = {n: m["direct"][ch][n] / m["exact"][ch][n] for n in names}
         summary[reg] = s
-    record["summary"] = summary
+    return summary
 
-    # Bounds on the region common to all six runs: each grid's own region differs (the image
-    # edge margin is a number of carrier periods), and there the exact truth itself moves by a
-    # few per cent with the region alone (the 'truth spread' column), which no analyzer can
-    # follow. The own-region figures stay in the tables.
-    common_s = summary["common"]
+
+def pitch_bounds(common_s: dict) -> dict:
+    """Bound checks on the region common to all six runs.
+
+    Each grid's own region differs (the image edge margin is a number of carrier
+    periods), and there the exact truth itself moves by a few per cent with the
+    region alone (the 'truth spread' column), which no analyzer can follow. The
+    own-region figures stay in the tables.
+    """
     bounds = {
         f"spread_direct_{ch}": bound(
             common_s["spread"][ch]["direct"], BOUNDS["spread"], paper=PAPER["direct_spread"] if ch == "phi_eff" else None,
@@ -201,20 +189,13 @@ def run_pitch(
         for ch in CHANNELS
     }
     for ch in CHANNELS:
-        for n in runs:
+        for n in common_s["direct_vs_comparative"][ch]:
             bounds[f"direct_vs_comparative_{ch}_{n}"] = bound(
                 common_s["direct_vs_comparative"][ch][n], BOUNDS["methods"],
                 paper=PAPER["direct_vs_comparative"].get(n) if ch == "phi_eff" else None,
                 what=f"{ch}, {n} grid, common region: abs(D - C) / max(D, C)",
             )
-    record["bounds"] = bounds
-    table = pitch_table(record)
-    figures = {
-        "fig7_pitch_inputs.png": lambda: pitch_inputs_figure(images, {n: runs[n]["scene"].backdrop.pitch_mm for n in runs}),
-        "fig8_pitch_phi_eff.png": lambda: pitch_power_figure(runs, channel="phi_eff"),
-        "fig10_pitch_phi_shear_coarse.png": lambda: pitch_shear_figure(runs, pitch=next(iter(runs))),
-    }
-    return ExperimentResult("pitch", record, table, figures)
+    return bounds
 
 
 def pitch_table(record: dict) -> str:
@@ -313,7 +294,7 @@ def pitch_power_figure(runs: dict, *, channel: str = "phi_eff", fig=None, ax=Non
     names = list(runs)
     panels = []
     for n in names:
-        c, d = runs[n]["comparative"], runs[n]["direct"]
+        c, d = runs[n].validations["comparative"], runs[n].validations["direct"]
         panels.append(
             [(getattr(c.analysis, key), c.valid, "Comparative"), (getattr(d.analysis, key), d.valid, "Direct"),
              (getattr(d.exact, key), d.valid, "exact truth")]
@@ -323,7 +304,7 @@ def pitch_power_figure(runs: dict, *, channel: str = "phi_eff", fig=None, ax=Non
     signed = channel == "phi_eff"
     fig, axes = share_fig_ax(fig, ax, nrows=len(names), ncols=3, figsize=(14, 3.4 * len(names)))
     for i, n in enumerate(names):
-        pitch = runs[n]["scene"].backdrop.pitch_mm
+        pitch = runs[n].scene.backdrop.pitch_mm
         for j, (m, reg, who) in enumerate(panels[i]):
             st = region_stats(m, reg)
             map_panel(
@@ -342,12 +323,12 @@ def pitch_shear_figure(runs: dict, *, pitch: str = "coarse", fig=None, ax=None):
     fig, axes
     """
     run = runs[pitch]
-    c, d = run["comparative"], run["direct"]
+    c, d = run.validations["comparative"], run.validations["direct"]
     panels = [(c.analysis.phi_shear_mD, c.valid, "Comparative"), (d.analysis.phi_shear_mD, d.valid, "Direct"),
               (d.exact.phi_shear_mD, d.valid, "exact truth")]
     lim = shared_limit([p[0] for p in panels], [p[1] for p in panels])
     fig, axes = share_fig_ax(fig, ax, nrows=1, ncols=3, figsize=(14, 3.6))
-    p_mm = run["scene"].backdrop.pitch_mm
+    p_mm = run.scene.backdrop.pitch_mm
     for a, (m, reg, who) in zip(np.ravel(axes), panels):
         st = region_stats(m, reg)
         map_panel(

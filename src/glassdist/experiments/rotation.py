@@ -13,25 +13,12 @@ exact landing-point truth through the same stack.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
-from ..scene import load_scene
-from ..theory import analysis_params
-from ._common import (
-    ExperimentResult,
-    bound,
-    bounds_table,
-    evaluate,
-    map_panel,
-    region_stats,
-    render_inputs,
-    scaled_scene,
-    share_fig_ax,
-    shared_limit,
-    validation_record,
-)
+from ._common import ExperimentResult, RunOptions, SceneRun, bound, bounds_table, common_region
+from ._common import run_scenes, settings_record, validation_record
+from ._common import map_panel, region_stats, share_fig_ax, shared_limit
 
 __all__ = ["PAPER", "SCENES", "SIGMA_MM", "run_rotation", "rotation_figure"]
 
@@ -51,30 +38,17 @@ DETREND_DEGREE = 2
 SIGMA_MM = 100.0
 
 
-def run_rotation(
-    *,
-    engine: str = "exact",
-    scale: float = 1.0,
-    spp: int | None = None,
-    sigma_mm: float = SIGMA_MM,
-    scenes: dict | None = None,
-    progress: Callable[[str, int, int], None] | None = None,
-) -> ExperimentResult:
+def run_rotation(*, sigma_mm: float = SIGMA_MM, scenes: dict | None = None, **options) -> ExperimentResult:
     """Run the grid-rotation experiment.
 
     Parameters
     ----------
-    engine : {'exact', 'cycles'}
-        Render engine.
-    scale : float
-        Image size relative to the scenes' (1024 x 768 px); the field of view is kept.
-    spp : int, optional
-        Samples per pixel (default: the scenes', 16).
     sigma_mm : float
         Reporting smoothing scale on the backdrop, mm.
     scenes : dict, optional
         ``{'aligned': path, 'rotated': path}`` (default :data:`SCENES`).
-    progress : callable(stage, done, total), optional
+    **options
+        ``engine``, ``scale``, ``spp``, ``progress``: see :class:`RunOptions`.
 
     Returns
     -------
@@ -89,59 +63,57 @@ def run_rotation(
     paths = dict(SCENES if scenes is None else scenes)
     if set(paths) != {"aligned", "rotated"}:
         raise ValueError("scenes must map 'aligned' and 'rotated' to scene files")
-    runs: dict = {}
-    for name, path in paths.items():
-        scene = scaled_scene(load_scene(path), scale=scale, spp=spp)
-        inputs = render_inputs(scene, engine=engine, reference=False, progress=progress)
-        params = analysis_params(scene, detrend_degree=DETREND_DEGREE, sigma_mm=sigma_mm)
-        runs[name] = {"scene": scene, "inputs": inputs, "params": params, "val": evaluate(inputs, method="direct", params=params)}
-    common = runs["aligned"]["val"].valid & runs["rotated"]["val"].valid
+    runs = run_scenes(
+        paths, RunOptions(**options), methods=("direct",), reference=False, detrend_degree=DETREND_DEGREE, sigma_mm=sigma_mm
+    )
+    common = common_region(runs)
     record: dict = {
-        "engine": runs["aligned"]["inputs"].engine,
-        "image_size": list(runs["aligned"]["scene"].camera.pixels),
-        "samples_per_pixel": runs["aligned"]["scene"].render.samples_per_pixel,
-        "detrend_degree": DETREND_DEGREE,
-        "sigma_mm": float(sigma_mm),
-        "paper": PAPER,
+        **settings_record(runs["aligned"], detrend_degree=DETREND_DEGREE, sigma_mm=sigma_mm, paper=PAPER),
         "common_region_fraction": float(common.mean()),
-        "runs": {},
+        "runs": {name: rotation_entry(run, common) for name, run in runs.items()},
     }
-    own_means, common_means, exact_means = {}, {}, {}
-    for name, run in runs.items():
-        val = run["val"]
-        e = validation_record(val)
-        e["scene"] = run["scene"].name
-        e["grid_rotation_deg"] = run["scene"].backdrop.rotation_deg
-        e["seed"] = run["scene"].render.seed
-        e["timings"] = run["inputs"].timings
-        e["common_region"] = {
+    record.update(rotation_summary(record["runs"], runs, common))
+    record["bounds"] = {
+        "ratio": bound(record["ratio"], BOUNDS["ratio"], target=1.0, paper=PAPER["ratio"], what="mean abs phi_eff ratio min/max"),
+    }
+    figures = {"fig9_rotation.png": lambda: rotation_figure(runs, record)}
+    return ExperimentResult("rotation", record, rotation_table(record), figures)
+
+
+def rotation_entry(run: SceneRun, common: np.ndarray) -> dict:
+    """Record of one grid orientation: :func:`validation_record` of its Direct run, the scene's
+    settings and the analyzer's and the truth's phi_eff statistics on the ``common`` region."""
+    val = run.validations["direct"]
+    return {
+        **validation_record(val),
+        **run.entry(),
+        "grid_rotation_deg": run.scene.backdrop.rotation_deg,
+        "common_region": {
             "analyzer": region_stats(val.analysis.phi_eff_mD, common),
             "exact": region_stats(val.exact.phi_eff_mD, common),
-        }
-        record["runs"][name] = e
-        own_means[name] = e["statistics"]["analyzer"]["phi_eff"]["mean_abs"]
-        common_means[name] = e["common_region"]["analyzer"]["mean_abs"]
-        exact_means[name] = e["statistics"]["exact"]["phi_eff"]["mean_abs"]
-    ratio = min(own_means.values()) / max(own_means.values())
-    a, r = runs["aligned"]["val"].analysis.phi_eff_mD, runs["rotated"]["val"].analysis.phi_eff_mD
-    d = (a - r)[common]
-    record.update(
-        {
-            "mean_abs_phi_eff_mD": own_means,
-            "ratio": ratio,
-            "relative_difference": 1.0 - ratio,
-            "ratio_common": min(common_means.values()) / max(common_means.values()),
-            "ratio_exact": min(exact_means.values()) / max(exact_means.values()),
-            "map_difference_rms_mD": float(np.sqrt(np.mean(d * d))),
-            "map_correlation": float(np.corrcoef(a[common], r[common])[0, 1]),
-        }
-    )
-    record["bounds"] = {
-        "ratio": bound(ratio, BOUNDS["ratio"], target=1.0, paper=PAPER["ratio"], what="mean abs phi_eff ratio min/max"),
+        },
     }
-    table = rotation_table(record)
-    figures = {"fig9_rotation.png": lambda: rotation_figure(runs, record)}
-    return ExperimentResult("rotation", record, table, figures)
+
+
+def rotation_summary(entries: dict, runs: dict, common: np.ndarray) -> dict:
+    """Mean |phi_eff| per orientation, the ratios min/max (own region, common region, truth) and the
+    agreement of the two phi_eff maps on the common region (rms difference, correlation)."""
+
+    def ratio(means: dict) -> float:
+        return min(means.values()) / max(means.values())
+
+    own = {n: e["statistics"]["analyzer"]["phi_eff"]["mean_abs"] for n, e in entries.items()}
+    a, r = (runs[n].validations["direct"].analysis.phi_eff_mD for n in ("aligned", "rotated"))
+    d = (a - r)[common]
+    return {
+        "mean_abs_phi_eff_mD": own,
+        "ratio": ratio(own),
+        "relative_difference": 1.0 - ratio(own),
+        "ratio_common": ratio({n: e["common_region"]["analyzer"]["mean_abs"] for n, e in entries.items()}),
+        "ratio_exact": ratio({n: e["statistics"]["exact"]["phi_eff"]["mean_abs"] for n, e in entries.items()}),
+        "map_difference_rms_mD": float(np.sqrt(np.mean(d * d))),
+        "map_correlation": float(np.corrcoef(a[common], r[common])[0, 1]),
+    }
 
 
 def rotation_table(record: dict) -> str:
@@ -186,8 +158,8 @@ def rotation_figure(runs: dict, record: dict, *, fig=None, ax=None):
     """
     panels = []
     for name in ("aligned", "rotated"):
-        v = runs[name]["val"]
-        rot = runs[name]["scene"].backdrop.rotation_deg
+        v = runs[name].validations["direct"]
+        rot = runs[name].scene.backdrop.rotation_deg
         panels.append([(v.analysis.phi_eff_mD, v.valid, f"Direct, grid {name} ({rot:g} deg)"),
                        (v.exact.phi_eff_mD, v.valid, f"exact truth, grid {name}")])
     flat = [p for row in panels for p in row]
