@@ -10,7 +10,8 @@ import pytest
 from scipy import ndimage
 
 from glassdist.analyzer import fourier as F
-from glassdist.analyzer.pipeline import _bspline_upsample, _erode
+from glassdist.analyzer.region import erode
+from glassdist.analyzer.resample import bspline_upsample
 
 
 @pytest.mark.parametrize("sigma", [(0.8, 0.8), (4.8, 3.1), (0.0, 2.0)])
@@ -39,7 +40,7 @@ def test_disc_erosion_equals_distance_transform(margin, edge):
     padded = np.pad(valid | band, 1, constant_values=True)  # outside the image: not an excluded area
     ref = valid & (ndimage.distance_transform_edt(padded, sampling=grid.step)[1:-1, 1:-1] > margin)
     ref &= (dy[:, None] > edge) & (dx[None, :] > edge)
-    assert np.array_equal(_erode(valid, margin, grid, edge), ref)
+    assert np.array_equal(erode(valid, margin, grid, edge), ref)
 
 
 def test_block_mean_equals_numpy():
@@ -65,7 +66,7 @@ def test_bspline_upsampling_reproduces_a_smooth_field(k):
     yc = np.arange(h) * S + (S - 1) / 2
     xc = np.arange(w) * S + (S - 1) / 2
     f = field(yc[:, None], xc[None, :]).astype(np.float32)
-    g = _bspline_upsample(_bspline_upsample(f, k, 0), k, 1)
+    g = bspline_upsample(bspline_upsample(f, k, 0), k, 1)
     s = S / k
     yf = np.arange(h * k) * s + (s - 1) / 2
     xf = np.arange(w * k) * s + (s - 1) / 2

@@ -4,12 +4,15 @@ from .fourier import Carrier, CarrierPair
 from .homography import HomographyFit
 from .metrics import Channels, channel_statistics, evaluate_displacement
 from .params import AnalyzerParams, default_params_path, load_params
-from .pipeline import AnalysisResult, ReferenceModel, analyze, prepare_reference
+from .pipeline import ReferenceModel, analyze, prepare_reference
+from .result import FIELDS, AnalysisResult, FieldSpec
 
 __all__ = [
     "analyze",
     "prepare_reference",
     "AnalysisResult",
+    "FIELDS",
+    "FieldSpec",
     "ReferenceModel",
     "AnalyzerParams",
     "load_params",

@@ -47,6 +47,7 @@ __all__ = [
     "block_mean",
     "smooth_complex",
     "gaussian_blur",
+    "check_image_size",
 ]
 
 _WORKERS = -1  # scipy.fft: use every core
@@ -257,33 +258,14 @@ def _spectral_peaks(work: np.ndarray, n: int) -> np.ndarray:
     return np.unique(np.array(out, dtype=np.int64))
 
 
-def find_carriers(spectrum: Spectrum, *, min_period_px: float = 3.0, max_peaks: int = 40) -> CarrierPair:
-    """F1: locate the two grid carriers in the 2-D spectrum, refined to sub-bin precision.
+def _carrier_band(spectrum: Spectrum, min_period_px: float) -> tuple[np.ndarray, np.ndarray]:
+    """Whitened magnitude of the band that can hold a carrier, and the signed row frequencies (bins).
 
-    ``k1`` is the strongest peak away from DC; ``k2`` the strongest peak more than
-    45 deg from ``k1`` that is not a cross-modulation term ``k_a +- k1`` of a
-    lower-frequency peak (paper §2.2 F1).
-
-    Parameters
-    ----------
-    spectrum : Spectrum
-        From :func:`compute_spectrum`.
-    min_period_px : float
-        Shortest carrier period accepted, px (finer peaks are ignored).
-
-    Returns
-    -------
-    CarrierPair
-        Oriented so that ``det([f1; f2]) > 0``.
-
-    Raises
-    ------
-    InputError
-        If no periodic pattern stands out of the spectral background.
+    Only bins below 1/min_period_px can hold a carrier: that block is cut out first (rows
+    fftshifted when cut, so that row r holds the signed frequency ky[r]); DC/illumination
+    (fewer than 4 periods across the image) and finer frequencies are zeroed.
     """
     H, W = spectrum.shape
-    # Only bins below 1/min_period_px can hold a carrier: cut that block out first
-    # (rows fftshifted when cut, so that row r holds the signed frequency ky[r]).
     ky_max = int(np.ceil(H / min_period_px))
     kx_max = min(W // 2, int(np.ceil(W / min_period_px)))
     rf = spectrum.rfft
@@ -298,7 +280,6 @@ def find_carriers(spectrum: Spectrum, *, min_period_px: float = 3.0, max_peaks: 
     fy = (ky / H).astype(np.float32)[:, None]
     fx = (np.arange(kx_max + 1) / W).astype(np.float32)[None, :]
     fr = np.sqrt(fx * fx + fy * fy)
-    # Ignore DC/illumination (fewer than 4 periods across the image) and finer than min_period_px.
     low = 4.0 / min(H, W)
     band = (fr > low) & (fr < 1.0 / min_period_px)
     # Column kx = 0 holds both +f and -f; keep one half-line so a peak is seen once.
@@ -315,9 +296,19 @@ def find_carriers(spectrum: Spectrum, *, min_period_px: float = 3.0, max_peaks: 
     work *= fr
     del fr
     work[~band] = 0.0
+    if not band.any():
+        raise InputError("the image has no periodic pattern (flat spectrum); photograph the grid through the glass")
+    return work, ky, band
+
+
+def _strongest_peaks(work: np.ndarray, band: np.ndarray, max_peaks: int):
+    """Up to ``max_peaks`` local maxima of ``work``, strongest first, with their strength over the background.
+
+    Returns ``(rows, cols, strengths)``.
+    """
     sub = work[::3, ::3][band[::3, ::3]]
     background = float(np.median(sub)) if sub.size else 0.0
-    peak = float(work.max()) if band.any() else 0.0
+    peak = float(work.max())
     background = max(background, 1e-9 * peak)  # a noise-free synthetic grid has an exactly empty background
     if background <= 0 or not np.isfinite(background):
         raise InputError("the image has no periodic pattern (flat spectrum); photograph the grid through the glass")
@@ -326,33 +317,35 @@ def find_carriers(spectrum: Spectrum, *, min_period_px: float = 3.0, max_peaks: 
         raise InputError("no grid pattern found in the image; check the photo shows the printed grid in focus")
     idx = idx[np.argsort(work.ravel()[idx])[::-1][:max_peaks]]
     rows, cols = np.unravel_index(idx, work.shape)
-    kys = ky[rows].astype(float)
-    kxs = cols.astype(float)
     strengths = work.ravel()[idx] / background
-    vecs = np.stack([kxs / W, kys / H], axis=1)  # (fx, fy) at integer bins
-
     if strengths[0] < 8.0:
         raise InputError(
             f"no grid pattern found in the image (strongest spectral peak only {strengths[0]:.1f}x the background); "
             "check the photo shows the printed grid in focus, and that at least 6 grid periods fit across it"
         )
-    def fundamental(i: int) -> int:
-        """A harmonic q = n p (n = 2, 3, 4) of a peak p of comparable strength is replaced by p."""
-        for j in range(len(vecs)):
-            if j != i and strengths[j] > 0.3 * strengths[i]:
-                for n in (2, 3, 4):
-                    for sign in (1.0, -1.0):
-                        if np.linalg.norm(n * sign * vecs[j] - vecs[i]) < (n + 1.5) / min(H, W):
-                            return fundamental(j)
-        return i
+    return rows, cols, strengths
 
-    i1 = fundamental(0)
+
+def _fundamental(i: int, vecs: np.ndarray, strengths: np.ndarray, size: int) -> int:
+    """A harmonic q = n p (n = 2, 3, 4) of a peak p of comparable strength is replaced by p."""
+    for j in range(len(vecs)):
+        if j != i and strengths[j] > 0.3 * strengths[i]:
+            for n in (2, 3, 4):
+                for sign in (1.0, -1.0):
+                    if np.linalg.norm(n * sign * vecs[j] - vecs[i]) < (n + 1.5) / size:
+                        return _fundamental(j, vecs, strengths, size)
+    return i
+
+
+def _pick_pair(vecs: np.ndarray, strengths: np.ndarray, size: int) -> tuple[int, int]:
+    """Indices of k1 (strongest fundamental) and k2 (> 45 deg from it, not a cross term k_a +- k1)."""
+    i1 = _fundamental(0, vecs, strengths, size)
     cand = [j for j in range(len(vecs)) if j != i1 and _angle_between(vecs[j], vecs[i1]) > 45.0]
     if not cand:
         raise InputError(
             "only one family of grid lines found; glassdist needs a crossed line grid or a checkerboard"
         )
-    i2 = fundamental(max(cand, key=lambda j: strengths[j]))
+    i2 = _fundamental(max(cand, key=lambda j: strengths[j]), vecs, strengths, size)
     # Reject cross terms q = p +- k1: prefer the lower-frequency peak p if it exists and is >45 deg from k1.
     for _ in range(2):
         q = vecs[i2]
@@ -363,7 +356,7 @@ def find_carriers(spectrum: Spectrum, *, min_period_px: float = 3.0, max_peaks: 
                 if j == i2:
                     continue
                 for sign in (1.0, -1.0):
-                    if np.linalg.norm(sign * vecs[j] - p) < 2.5 / min(H, W) and np.linalg.norm(p) < np.linalg.norm(q):
+                    if np.linalg.norm(sign * vecs[j] - p) < 2.5 / size and np.linalg.norm(p) < np.linalg.norm(q):
                         if strengths[j] > 0.25 * strengths[i2] and (better is None or strengths[j] > strengths[better]):
                             better = j
         if better is None:
@@ -373,20 +366,70 @@ def find_carriers(spectrum: Spectrum, *, min_period_px: float = 3.0, max_peaks: 
         raise InputError(
             "only one family of grid lines is visible; glassdist needs a crossed line grid or a checkerboard"
         )
+    return i1, i2
 
-    def refine(i: int) -> Carrier:
-        ky, kx = kys[i], kxs[i]
-        cy, cx = _spectral_centroid(spectrum, ky, kx)
-        if np.hypot(cy - ky, cx - kx) > 1.5:
-            # Strong distortion spreads the carrier into sidebands (frequency modulation) and
-            # the tallest bin can be one of them: the power centroid is the mean local frequency.
-            return Carrier(cx / W, cy / H, float(strengths[i]))
-        s = spectrum.full
-        dx = _jacobsen(s(ky, kx - 1), s(ky, kx), s(ky, kx + 1))
-        dy = _jacobsen(s(ky - 1, kx), s(ky, kx), s(ky + 1, kx))
-        return Carrier((kx + dx) / W, (ky + dy) / H, float(strengths[i]))
 
-    c1, c2 = refine(i1), refine(i2)
+def _refine_carrier(spectrum: Spectrum, ky: float, kx: float, strength: float) -> Carrier:
+    """Sub-bin frequency of the peak at bin (ky, kx): Jacobsen, or the power centroid for a spread carrier."""
+    H, W = spectrum.shape
+    cy, cx = _spectral_centroid(spectrum, ky, kx)
+    if np.hypot(cy - ky, cx - kx) > 1.5:
+        # Strong distortion spreads the carrier into sidebands (frequency modulation) and
+        # the tallest bin can be one of them: the power centroid is the mean local frequency.
+        return Carrier(cx / W, cy / H, strength)
+    s = spectrum.full
+    dx = _jacobsen(s(ky, kx - 1), s(ky, kx), s(ky, kx + 1))
+    dy = _jacobsen(s(ky - 1, kx), s(ky, kx), s(ky + 1, kx))
+    return Carrier((kx + dx) / W, (ky + dy) / H, strength)
+
+
+def find_carriers(spectrum: Spectrum, *, min_period_px: float = 3.0, max_peaks: int = 40) -> CarrierPair:
+    """F1: locate the two grid carriers in the 2-D spectrum, refined to sub-bin precision.
+
+    ``k1`` is the strongest peak away from DC; ``k2`` the strongest peak more than
+    45 deg from ``k1`` that is not a cross-modulation term ``k_a +- k1`` of a
+    lower-frequency peak (paper §2.2 F1).
+
+    Parameters
+    ----------
+    spectrum : Spectrum
+        From :func:`compute_spectrum`.
+    min_period_px : float
+        Shortest carrier period accepted, px (finer peaks are ignored).
+    max_peaks : int
+        Number of spectral peaks considered.
+
+    Returns
+    -------
+    CarrierPair
+        Oriented so that ``det([f1; f2]) > 0``.
+
+    Raises
+    ------
+    InputError
+        If no periodic pattern stands out of the spectral background.
+
+    Examples
+    --------
+    A crossed line grid of period 8 px along x and 10 px along y:
+
+    >>> import numpy as np
+    >>> from glassdist.analyzer.fourier import compute_spectrum, find_carriers
+    >>> y, x = np.mgrid[0:160, 0:200]
+    >>> img = 0.5 + 0.2 * np.cos(2 * np.pi * x / 8) + 0.2 * np.cos(2 * np.pi * y / 10)
+    >>> pair = find_carriers(compute_spectrum(img))
+    >>> sorted(round(c.period_px, 3) for c in (pair.k1, pair.k2))
+    [8.0, 10.0]
+    """
+    H, W = spectrum.shape
+    work, ky, band = _carrier_band(spectrum, min_period_px)
+    rows, cols, strengths = _strongest_peaks(work, band, max_peaks)
+    kys = ky[rows].astype(float)
+    kxs = cols.astype(float)
+    vecs = np.stack([kxs / W, kys / H], axis=1)  # (fx, fy) at integer bins
+    i1, i2 = _pick_pair(vecs, strengths, min(H, W))
+    c1 = _refine_carrier(spectrum, kys[i1], kxs[i1], float(strengths[i1]))
+    c2 = _refine_carrier(spectrum, kys[i2], kxs[i2], float(strengths[i2]))
     if np.linalg.det(np.array([c1.f, c2.f])) < 0:
         c2 = c2.negated()
     return CarrierPair(c1, c2)
@@ -604,7 +647,8 @@ def smooth_complex(z: np.ndarray, sigma_px: float, grid: SamplingGrid) -> np.nda
     return gaussian_blur(z, (sigma_px / sy, sigma_px / sx), truncate=3.5)
 
 
-def _check_size(shape, period_px: float) -> None:
+def check_image_size(shape, period_px: float) -> None:
+    """Raise :class:`InputError` unless at least 6 carrier periods fit across the image."""
     if min(shape) < 6.0 * period_px:
         raise InputError(
             f"the image ({shape[1]}x{shape[0]} px) is too small for the grid period ({period_px:.1f} px): "

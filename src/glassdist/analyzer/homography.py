@@ -19,8 +19,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import AnalysisError
+from . import fourier as F
+from .params import AnalyzerParams
+from .region import erode
 
-__all__ = ["HomographyFit", "logical_grid_points", "fit_homography", "apply_inverse", "inverse_jacobian"]
+__all__ = [
+    "HomographyFit", "logical_grid_points", "fit_homography", "fit_grid_homography", "apply_inverse", "inverse_jacobian",
+]
 
 
 @dataclass(frozen=True)
@@ -176,3 +181,49 @@ def inverse_jacobian(H: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     J[..., 1, 0] = (G[1, 0] - v * G[2, 0]) / w
     J[..., 1, 1] = (G[1, 1] - v * G[2, 1]) / w
     return J
+
+
+def _points_spacing(carriers: F.CarrierPair, grid: F.SamplingGrid) -> int:
+    period = min(carriers.k1.period_px, carriers.k2.period_px)
+    return max(1, int(round(period / min(grid.step))))
+
+
+def fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParams, warn: list[str]):
+    """I1 + I2 over all regions, aligning each region's free integer grid offset to the largest.
+
+    ``UV``: logical grid coordinates (carrier periods) on the demodulation grid ``(yy, xx)``;
+    ``labels``/``n``: the valid region's parts (:class:`~glassdist.analyzer.region.Region`).
+
+    Returns the fit and, per region label (index 0 unused), the integer offsets (periods)
+    subtracted from U and V.
+    """
+    U, V = UV
+    spacing = _points_spacing(carriers, grid)
+    period = max(carriers.k1.period_px, carriers.k2.period_px)
+    thr = p.ransac_threshold_periods * min(carriers.k1.period_px, carriers.k2.period_px)
+    # Grid points from the interior only: near the image edges the phase of a single photo
+    # is less certain (the Comparative Method cancels that against its reference, Block I
+    # cannot), and a homography tilted by them would leave a ramp in the displacement.
+    interior = erode(np.ones(grid.shape, bool), 0.0, grid, p.border_periods * period)
+    if (labels[interior] == 1).sum() < 0.5 * (labels == 1).sum():
+        interior = np.ones(grid.shape, bool)  # small images: keep every point
+    src, dst = logical_grid_points(U, V, yy, xx, (labels == 1) & interior, spacing)
+    fit = fit_homography(src, dst, threshold_px=thr, max_trials=p.ransac_max_trials, seed=p.ransac_seed)
+    offsets = np.zeros((n + 1, 2))
+    if n > 1:
+        U = U.copy()
+        V = V.copy()
+        u0, v0 = apply_inverse(fit.matrix, xx, yy)
+        for r in range(2, n + 1):
+            sel = labels == r
+            offsets[r] = np.round(np.median(U[sel] - u0[sel])), np.round(np.median(V[sel] - v0[sel]))
+            U[sel] -= offsets[r, 0]
+            V[sel] -= offsets[r, 1]
+        src, dst = logical_grid_points(U, V, yy, xx, (labels > 0) & interior, spacing)
+        fit = fit_homography(src, dst, threshold_px=thr, max_trials=p.ransac_max_trials, seed=p.ransac_seed)
+    if fit.inlier_fraction < 0.1:
+        warn.append(
+            f"only {100 * fit.inlier_fraction:.0f}% of grid points fit the homography; strong distortion or "
+            "lens distortion may bias the Direct Method's baseline"
+        )
+    return fit, offsets

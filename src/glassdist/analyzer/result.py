@@ -1,0 +1,202 @@
+"""The Analyzer's result: settings, carriers, homography, warnings and the measured fields.
+
+The fields are computed on the analysis grid (block means of the demodulation grid) and
+kept there; each is brought to the input image's pixel grid on first access and cached
+(:mod:`glassdist.analyzer.resample`). :data:`FIELDS` is the one list of the result's
+fields: writers, figures and exports iterate it rather than naming fields themselves.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .._version import __version__
+from . import fourier as F
+from .homography import HomographyFit
+from .metrics import channel_statistics
+from .params import AnalyzerParams
+from .resample import upsample_field, upsample_labels
+
+__all__ = ["AnalysisResult", "FieldSpec", "FIELDS", "CHANNELS"]
+
+
+@dataclass(frozen=True)
+class FieldSpec:
+    """One field of an :class:`AnalysisResult`.
+
+    Attributes
+    ----------
+    name : str
+        Attribute name, and key in ``result.npz`` (units in the name: ``_mm``, ``_mD``, ``_deg``).
+    unit : str
+        Unit of the values ('mm', 'mD', 'deg', '' for labels).
+    description : str
+        One line for file metadata and documentation.
+    components : int
+        1 for an (H, W) map, 2 for an (H, W, 2) vector field (``[..., 0]`` = x, ``[..., 1]`` = y).
+    kind : {'float', 'label'}
+        'float': float32, NaN where invalid, interpolated to the pixel grid; 'label': small
+        integers, brought to the pixel grid by nearest sample, defined everywhere.
+    """
+
+    name: str
+    unit: str
+    description: str
+    components: int = 1
+    kind: str = "float"
+
+
+#: The result's fields, in file order. A field listed here and present in the analysis
+#: (``AnalysisResult.field_specs()``) is written by every output of a run.
+FIELDS: tuple[FieldSpec, ...] = (
+    FieldSpec("displacement_mm", "mm", "delta: landing point on the backdrop with glass minus without; [...,0]=x (columns), [...,1]=y (rows)", 2),
+    FieldSpec("displacement_detrended_mm", "mm", "delta after the A2 detrend and metric smoothing (the field A3 differentiates)", 2),
+    FieldSpec("phi_eff_mD", "mD", "sphere-equivalent power tr(eps)/L; converging lens < 0"),
+    FieldSpec("phi_shear_mD", "mD", "cylinder-equivalent astigmatism (2/L) sqrt(((eps_xx - eps_yy)/2)^2 + eps_xy^2)"),
+    FieldSpec("phi_total_mD", "mD", "total power ||eps||_F / L"),
+    FieldSpec("axis_deg", "deg", "astigmatism principal axis (largest stretch), degrees from +x towards +y, in (-90, 90]"),
+)
+
+#: The power channels (mD) that statistics, specifications and heatmaps are about.
+CHANNELS: tuple[str, ...] = ("phi_eff_mD", "phi_shear_mD", "phi_total_mD")
+
+_SPECS = {f.name: f for f in FIELDS}
+
+
+class _ImageGridField:
+    """A result field kept on the analysis grid, upsampled to the image grid on first access and cached."""
+
+    def __init__(self, name: str):
+        self.name = name
+
+    def __get__(self, obj, objtype=None):
+        if obj is None:
+            return self
+        val = obj.pixel_field(self.name)
+        obj.__dict__[self.name] = val  # frozen dataclass: cache beside, not through, __setattr__
+        return val
+
+
+@dataclass(frozen=True)
+class AnalysisResult:
+    """Everything the Analyzer measured; fields on the input image's pixel grid on access.
+
+    Attributes
+    ----------
+    method : {'comparative', 'direct'}
+    displacement_mm : ndarray (H, W, 2) float32
+        delta (x, y) in backdrop mm, camera frame; NaN where invalid. Direct: relative
+        to the homography baseline. Comparative: relative to the reference photo.
+    displacement_detrended_mm : ndarray (H, W, 2) float32
+        delta_* after A2 detrend and metric smoothing (the field differentiated by A3).
+    phi_eff_mD, phi_shear_mD, phi_total_mD : ndarray (H, W) float32
+        A3 channels, mD; NaN where invalid.
+    axis_deg : ndarray (H, W) float32
+        Astigmatism principal axis, degrees from +x towards +y, in (-90, 90].
+    valid : ndarray (H, W) bool
+    mm_per_px : float
+        Isotropic scale ``p_c sqrt(|f1||f2|)``, backdrop mm per px.
+    sigma_mm, detrend_degree, pitch_mm, distance_m
+        The evaluation settings and the physical inputs.
+    carrier_period_mm : float
+        Carrier period on the backdrop (pitch for lines, pitch*sqrt(2) for checkerboards).
+    carriers : CarrierPair
+    homography : ndarray (3, 3) or None
+        Direct: ``H`` from logical grid (carrier periods) to pixels.
+    homography_fit : HomographyFit or None
+    params : AnalyzerParams
+    warnings : tuple of str
+    version : str
+    sampling_step_px : (float, float)
+        Spacing of the analysis grid, px.
+    n_regions : int
+        Connected parts of the valid region (analysed independently).
+    """
+
+    method: str
+    valid: np.ndarray
+    mm_per_px: float
+    sigma_mm: float
+    detrend_degree: int
+    pitch_mm: float
+    distance_m: float
+    carrier_period_mm: float
+    carriers: F.CarrierPair
+    homography: np.ndarray | None
+    homography_fit: HomographyFit | None
+    params: AnalyzerParams
+    warnings: tuple[str, ...]
+    version: str = __version__
+    sampling_step_px: tuple[float, float] = (1.0, 1.0)
+    n_regions: int = 1
+    _deferred: dict | None = field(default=None, repr=False, compare=False)
+
+    def field_specs(self) -> tuple[FieldSpec, ...]:
+        """The registered fields this result holds, in :data:`FIELDS` order."""
+        held = self._deferred["fields"] if self._deferred else {}
+        return tuple(f for f in FIELDS if f.name in held)
+
+    @property
+    def analysis_grid(self) -> F.SamplingGrid:
+        """The grid the fields are computed on (sample centres in image px, see :class:`SamplingGrid`)."""
+        return self._deferred["grid"]
+
+    def grid_field(self, name: str) -> np.ndarray:
+        """Field ``name`` on :attr:`analysis_grid` (float32, NaN outside the analysed region)."""
+        if self._deferred is None or name not in self._deferred["fields"]:
+            raise AttributeError(name)
+        return self._deferred["fields"][name]
+
+    def pixel_field(self, name: str) -> np.ndarray:
+        """Field ``name`` brought to the input's pixel grid (not cached; the attribute is)."""
+        f = self.grid_field(name)
+        d = self._deferred
+        if _SPECS[name].kind == "label":
+            return upsample_labels(f, d["grid"])
+        return upsample_field(f, d["idx"], d["grid"], ~self.valid)
+
+    @property
+    def valid_fraction(self) -> float:
+        return float(self.valid.mean())
+
+    def statistics(self) -> dict:
+        """Per-channel statistics over the valid region (see :func:`channel_statistics`)."""
+        return {name: channel_statistics(getattr(self, name), self.valid) for name in CHANNELS}
+
+    def summary(self) -> dict:
+        """JSON-serialisable record of the run (written as ``summary.json``)."""
+        return {
+            "glassdist_version": self.version,
+            "method": self.method,
+            "image_shape": list(self.valid.shape),
+            "pitch_mm": self.pitch_mm,
+            "pattern": self.params.pattern,
+            "carrier_period_mm": self.carrier_period_mm,
+            "distance_m": self.distance_m,
+            "mm_per_px": self.mm_per_px,
+            "sigma_mm": self.sigma_mm,
+            "sigma_px": self.sigma_mm / self.mm_per_px,
+            "detrend_degree": self.detrend_degree,
+            "carriers": self.carriers.to_dict(),
+            "homography": None if self.homography_fit is None else self.homography_fit.to_dict(),
+            "valid_fraction": self.valid_fraction,
+            "n_regions": self.n_regions,
+            "sampling_step_px": list(self.sampling_step_px),
+            "statistics": self.statistics(),
+            # the smoothing actually used (the default, null, means 2 carrier periods)
+            "parameters": {**self.params.resolved(), "sigma_mm": self.sigma_mm},
+            "warnings": list(self.warnings),
+            "conventions": {
+                "displacement": "landing point on the backdrop with glass minus without, mm; [...,0]=x (columns), [...,1]=y (rows)",
+                "phi_eff": "tr(sym grad delta)/L in mD, gradients w.r.t. backdrop mm; converging lens -> phi_eff < 0",
+                "axis_deg": "astigmatism principal axis, degrees from +x towards +y (down)",
+            },
+        }
+
+
+# One cached pixel-grid attribute per registered field.
+for _f in FIELDS:
+    setattr(AnalysisResult, _f.name, _ImageGridField(_f.name))
+del _f
