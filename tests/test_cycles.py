@@ -103,6 +103,75 @@ def test_slab_mesh_is_closed_with_outward_normals():
     assert np.all(np.einsum("ij,ij->i", geo, normals.mean(axis=1)) > 0)
 
 
+class _Socket:
+    """A node socket of :class:`_NodeTree`: a number or the output of a math node."""
+
+    def __init__(self, value=0.0, node=None):
+        self.default_value, self.node, self.link = value, node, None
+
+    @property
+    def value(self):
+        if self.node is not None:
+            return self.node.evaluate()
+        return self.link.value if self.link is not None else self.default_value
+
+
+class _MathNode:
+    """The ShaderNodeMath operations the worker uses, on NumPy arrays (Blender's definitions)."""
+
+    OPS = {
+        "ADD": lambda a, b, c: a + b, "SUBTRACT": lambda a, b, c: a - b, "MULTIPLY": lambda a, b, c: a * b,
+        "DIVIDE": lambda a, b, c: a / b, "MULTIPLY_ADD": lambda a, b, c: a * b + c,
+        "ABSOLUTE": lambda a, b, c: np.abs(a), "FLOOR": lambda a, b, c: np.floor(a),
+        "FRACT": lambda a, b, c: a - np.floor(a), "LESS_THAN": lambda a, b, c: (a < b).astype(float),
+        "MAXIMUM": lambda a, b, c: np.maximum(a, b), "FLOORED_MODULO": lambda a, b, c: a - np.floor(a / b) * b,
+    }
+
+    def __init__(self):
+        self.operation, self.label = None, ""
+        self.inputs = [_Socket() for _ in range(3)]
+        self.outputs = [_Socket(node=self)]
+
+    def evaluate(self):
+        return self.OPS[self.operation](*(i.value for i in self.inputs))
+
+
+class _NodeTree:
+    """Just enough of a Blender node tree to evaluate the worker's pattern math without Blender."""
+
+    class _Nodes:
+        def new(self, kind):
+            assert kind == "ShaderNodeMath", kind
+            return _MathNode()
+
+    class _Links:
+        def new(self, src, dst):
+            dst.link = src
+
+    nodes, links = _Nodes(), _Links()
+
+
+@pytest.mark.parametrize("rotation_deg", [0.0, 20.0])
+def test_pattern_nodes_draw_the_scene_pattern(rotation_deg):
+    """The worker's line and checkerboard node graphs give the scene's pattern (point samples)."""
+    from glassdist.scene import Backdrop, pattern_coordinates
+
+    rng = np.random.default_rng(7)
+    X, Y = rng.uniform(-500.0, 500.0, (2, 4000))
+    common = {"pitch_mm": 48.4, "rotation_deg": rotation_deg, "offset_mm": (3.0, -7.0), "distance_m": 10}
+    bd = Backdrop(pattern="lines", line_width_mm=12.1, **common)
+    x, y = pattern_coordinates(bd, X, Y)
+    p, w = bd.pitch_mm, bd.line_width_mm
+    in_line = np.maximum(np.mod(x + w / 2, p) < w, np.mod(y + w / 2, p) < w)
+    pat = {**common, "line_width_mm": w, "line_value": 0.05, "background_value": 0.95}
+    lines = worker._pattern_lines(_NodeTree(), _Socket(X), _Socket(Y), pat).value
+    assert np.allclose(lines, np.where(in_line, 0.05, 0.95), atol=1e-12)
+    odd = np.mod(np.floor(x / p) + np.floor(y / p), 2.0)
+    pat = {**common, "dark_value": 0.1, "light_value": 0.9}
+    checker = worker._pattern_checker(_NodeTree(), _Socket(X), _Socket(Y), pat).value
+    assert np.allclose(checker, np.where(odd == 1.0, 0.1, 0.9), atol=1e-12)
+
+
 def test_chunks_cover_the_samples_once():
     for total, n in [(16, 1), (16, 3), (64, 20), (5, 8)]:
         parts = worker._chunks(total, n)

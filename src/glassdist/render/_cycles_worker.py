@@ -235,17 +235,8 @@ def _build_glass(bpy, job, arrays, world_to_blender):
     # place in the Blender world directly (vertex positions in metres), so the object is unscaled
     rot = world_to_blender @ axes
     verts_w = MM * ((verts @ rot.T) + world_to_blender @ origin)
-    centre = 0.5 * (verts_w.min(axis=0) + verts_w.max(axis=0))
-    normals_w = normals @ rot.T
-    mesh = _build_mesh(bpy, "glass", verts_w - centre, quads, normals_w)
-    m = np.eye(4)
-    m[:3, 3] = centre
-    obj = _new_object(bpy, "glass", mesh, m)
-
-    mat = bpy.data.materials.new("glass")
-    nt = _node_tree(mat)
-    nt.nodes.clear()
-    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    obj = _placed_object(bpy, "glass", verts_w, quads, normals @ rot.T)
+    mat, nt, out = _new_material(bpy, "glass")
     kind = g.get("bsdf", "refraction")
     if kind == "refraction":
         bsdf = nt.nodes.new("ShaderNodeBsdfRefraction")
@@ -278,15 +269,8 @@ def _build_frame(bpy, frame, verts, quads, rot, origin_b):
     local = verts[used].copy()
     local[:, 2] -= float(frame.get("lift_mm", 0.01))  # towards the camera
     verts_w = MM * (local @ rot.T + origin_b)
-    centre_w = 0.5 * (verts_w.min(axis=0) + verts_w.max(axis=0))
-    mesh = _build_mesh(bpy, "frame", verts_w - centre_w, inverse.reshape(band.shape), None)
-    m = np.eye(4)
-    m[:3, 3] = centre_w
-    obj = _new_object(bpy, "frame", mesh, m)
-    mat = bpy.data.materials.new("frame")
-    nt = _node_tree(mat)
-    nt.nodes.clear()
-    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    obj = _placed_object(bpy, "frame", verts_w, inverse.reshape(band.shape), None)
+    mat, nt, out = _new_material(bpy, "frame")
     emit = nt.nodes.new("ShaderNodeEmission")
     val = float(frame["intensity"])
     emit.inputs["Color"].default_value = (val, val, val, 1.0)
@@ -294,6 +278,24 @@ def _build_frame(bpy, frame, verts, quads, rot, origin_b):
     nt.links.new(emit.outputs["Emission"], out.inputs["Surface"])
     obj.data.materials.append(mat)
     return obj
+
+
+def _placed_object(bpy, name, verts_w, faces, normals_w):
+    """An unscaled object from vertices placed in the Blender world (m): its mesh is centred on the
+    vertices' bounding box and the object moved there."""
+    centre = 0.5 * (verts_w.min(axis=0) + verts_w.max(axis=0))
+    mesh = _build_mesh(bpy, name, verts_w - centre, faces, normals_w)
+    m = np.eye(4)
+    m[:3, 3] = centre
+    return _new_object(bpy, name, mesh, m)
+
+
+def _new_material(bpy, name):
+    """A material whose node tree holds only its output node: ``(material, node tree, output node)``."""
+    mat = bpy.data.materials.new(name)
+    nt = _node_tree(mat)
+    nt.nodes.clear()
+    return mat, nt, nt.nodes.new("ShaderNodeOutputMaterial")
 
 
 def _node_tree(owner):
@@ -317,38 +319,40 @@ def _math(nt, op, *inputs, label=None):
     return node.outputs[0]
 
 
-def _pattern_lines(nt, u, v, pat):
-    """Sockets for a two-family line grid; returns the radiance socket."""
+def _pattern_axes(nt, u, v, pat):
+    """Sockets for the pattern coordinates of the two line families, in pitches.
+
+    ``Rot(-rotation_deg) (X - offset_mm) / pitch_mm``: family 1 along (cos, sin), family 2 along
+    (-sin, cos); ``scene.pattern_coordinates`` computes the same in NumPy.
+    """
     p = float(pat["pitch_mm"])
-    w = float(pat["line_width_mm"])
     th = math.radians(float(pat.get("rotation_deg", 0.0)))
     ou, ov = (float(t) for t in pat.get("offset_mm", (0.0, 0.0)))
     u0 = _math(nt, "SUBTRACT", u, ou)
     v0 = _math(nt, "SUBTRACT", v, ov)
     cos, sin = math.cos(th), math.sin(th)
+    return [
+        _math(nt, "ADD", _math(nt, "MULTIPLY", u0, cu / p), _math(nt, "MULTIPLY", v0, cv / p))
+        for cu, cv in ((cos, sin), (-sin, cos))
+    ]
+
+
+def _pattern_lines(nt, u, v, pat):
+    """Sockets for a two-family line grid; returns the radiance socket."""
+    half_width = 0.5 * float(pat["line_width_mm"]) / float(pat["pitch_mm"])  # in pitches
     in_line = []
-    # family 1: lines perpendicular to (cos, sin); family 2: perpendicular to (-sin, cos)
-    for cu, cv in ((cos, sin), (-sin, cos)):
-        s = _math(nt, "ADD", _math(nt, "MULTIPLY", u0, cu / p), _math(nt, "MULTIPLY", v0, cv / p))
+    for s in _pattern_axes(nt, u, v, pat):
         frac = _math(nt, "FRACT", _math(nt, "ADD", s, 0.5))
-        dist = _math(nt, "ABSOLUTE", _math(nt, "SUBTRACT", frac, 0.5))  # in pitches, 0..0.5
-        in_line.append(_math(nt, "LESS_THAN", dist, 0.5 * w / p))
+        dist = _math(nt, "ABSOLUTE", _math(nt, "SUBTRACT", frac, 0.5))  # distance to the nearest line, 0..0.5
+        in_line.append(_math(nt, "LESS_THAN", dist, half_width))
     mask = _math(nt, "MAXIMUM", in_line[0], in_line[1])
     lv, bv = float(pat.get("line_value", 0.0)), float(pat.get("background_value", 1.0))
     return _math(nt, "MULTIPLY_ADD", mask, lv - bv, bv)
 
 
 def _pattern_checker(nt, u, v, pat):
-    p = float(pat["pitch_mm"])
-    th = math.radians(float(pat.get("rotation_deg", 0.0)))
-    ou, ov = (float(t) for t in pat.get("offset_mm", (0.0, 0.0)))
-    u0 = _math(nt, "SUBTRACT", u, ou)
-    v0 = _math(nt, "SUBTRACT", v, ov)
-    cos, sin = math.cos(th), math.sin(th)
-    parity = []
-    for cu, cv in ((cos, sin), (-sin, cos)):
-        s = _math(nt, "ADD", _math(nt, "MULTIPLY", u0, cu / p), _math(nt, "MULTIPLY", v0, cv / p))
-        parity.append(_math(nt, "FLOORED_MODULO", _math(nt, "FLOOR", s), 2.0))
+    """Sockets for a checkerboard (cells one pitch wide); returns the radiance socket."""
+    parity = [_math(nt, "FLOORED_MODULO", _math(nt, "FLOOR", s), 2.0) for s in _pattern_axes(nt, u, v, pat)]
     odd = _math(nt, "FLOORED_MODULO", _math(nt, "ADD", parity[0], parity[1]), 2.0)
     dv, lv = float(pat.get("dark_value", 0.0)), float(pat.get("light_value", 1.0))
     return _math(nt, "MULTIPLY_ADD", odd, dv - lv, lv)
@@ -396,14 +400,11 @@ def _build_backdrop(bpy, job, arrays, world_to_blender):
     mesh = _build_mesh(bpy, "backdrop", verts, np.array([[0, 1, 2, 3]]), None)
     obj = _new_object(bpy, "backdrop", mesh, m)
 
-    mat = bpy.data.materials.new("backdrop")
+    mat, nt, out = _new_material(bpy, "backdrop")
     try:
         mat.emission_sampling = "NONE"  # reached only through specular paths: no light sampling
     except AttributeError:  # pragma: no cover - older builds
         pass
-    nt = _node_tree(mat)
-    nt.nodes.clear()
-    out = nt.nodes.new("ShaderNodeOutputMaterial")
     coord = nt.nodes.new("ShaderNodeTexCoord")
     sep = nt.nodes.new("ShaderNodeSeparateXYZ")
     nt.links.new(coord.outputs["Object"], sep.inputs[0])

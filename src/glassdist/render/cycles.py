@@ -319,8 +319,8 @@ def _visible_box(scene: Scene, margin_mm: float) -> tuple[float, float, float, f
     return float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])
 
 
-def _glass_arrays(scene: Scene, spacing_mm: float) -> tuple[dict, dict] | None:
-    """Sampled faces of the (cropped) pane and the job's ``glass`` section; None if not in view."""
+def _glass_arrays(scene: Scene, spacing_mm: float, bsdf: str) -> tuple[dict, dict | None]:
+    """Sampled faces of the (cropped) pane and the job's ``glass`` section; ``({}, None)`` if not in view."""
     pane = scene.pane
     d = pane.thickness_mm
     hw, hh = pane.size_mm[0] / 2, pane.size_mm[1] / 2
@@ -329,7 +329,7 @@ def _glass_arrays(scene: Scene, spacing_mm: float) -> tuple[dict, dict] | None:
     if box is not None:
         u0, u1, v0, v1 = max(u0, box[0]), min(u1, box[1]), max(v0, box[2]), min(v1, box[3])
         if u0 >= u1 or v0 >= v1:
-            return None
+            return {}, None
     fw = pane.frame.width_mm if pane.frame is not None else None
     ub = (-hw + fw, hw - fw) if fw else ()
     vb = (-hh + fw, hh - fw) if fw else ()
@@ -365,6 +365,7 @@ def _glass_arrays(scene: Scene, spacing_mm: float) -> tuple[dict, dict] | None:
             "inner_half_mm": [hw - fw, hh - fw],
             "lift_mm": _FRAME_LIFT_MM,
         },
+        "bsdf": bsdf,
     }
     return arrays, section
 
@@ -410,6 +411,31 @@ def _chunk_count(pixels: int, samples: int) -> int:
     about 4 million pixel-samples (3 to 6 s on two cores), and at most 20.
     """
     return int(max(1, min(samples, 20, round(pixels * samples / 4e6))))
+
+
+def _camera_section(scene: Scene) -> dict:
+    """The job's ``camera`` section: pinhole, world-frame position and rotation (columns right, down, optical axis)."""
+    cam = scene.camera
+    return {
+        "focal_mm": cam.focal_length_mm,
+        "sensor_width_mm": cam.sensor_width_mm,
+        "position_mm": list(cam.position_mm),
+        "rotation": cam.rotation.tolist(),
+        "principal_point_px": None,
+    }
+
+
+def _render_section(scene: Scene, *, samples: int | None, seed: int, threads: int) -> dict:
+    """The job's ``render`` section: samples per pixel (default the scene's), seed, threads, slices."""
+    H, W = scene.camera.shape
+    spp = int(samples if samples is not None else scene.render.samples_per_pixel)
+    return {
+        "samples": spp,
+        "seed": int(seed) % (2**31),
+        "threads": int(threads),
+        "max_bounces": 32,
+        "chunks": _chunk_count(W * H, spp),
+    }
 
 
 def write_job(
@@ -460,38 +486,19 @@ def write_job(
     if not spacing_mm > 0:
         raise InputError(f"spacing_mm must be positive, got {spacing_mm}")
     directory = Path(directory)
-    H, W = scene.camera.shape
-    cam = scene.camera
-    arrays: dict = {}
-    glass = None
-    if not reference:
-        g = _glass_arrays(scene, spacing_mm)
-        if g is not None:
-            arrays, glass = g
-            glass["bsdf"] = bsdf
+    arrays, glass = _glass_arrays(scene, spacing_mm, bsdf) if not reference else ({}, None)
     np.savez(directory / "arrays.npz", **(arrays or {"empty": np.zeros(1)}))
+    H, W = scene.camera.shape
     job = {
         "format": _JOB_FORMAT,
         "version": _JOB_VERSION,
         "scene_name": scene.name,
         "world_to_blender": [list(r) for r in WORLD_TO_BLENDER],
         "image": {"width": W, "height": H},
-        "camera": {
-            "focal_mm": cam.focal_length_mm,
-            "sensor_width_mm": cam.sensor_width_mm,
-            "position_mm": list(cam.position_mm),
-            "rotation": cam.rotation.tolist(),
-            "principal_point_px": None,
-        },
+        "camera": _camera_section(scene),
         "glass": glass,
         "backdrop": _backdrop_section(scene),
-        "render": {
-            "samples": int(samples if samples is not None else scene.render.samples_per_pixel),
-            "seed": int(seed) % (2**31),
-            "threads": int(threads),
-            "max_bounces": 32,
-            "chunks": _chunk_count(W * H, int(samples if samples is not None else scene.render.samples_per_pixel)),
-        },
+        "render": _render_section(scene, samples=samples, seed=seed, threads=threads),
         "outputs": {
             "npy": "render.npy",
             "exr": None if exr is None else str(Path(exr).resolve()),
