@@ -26,10 +26,10 @@ import numpy as np
 
 from .._version import __version__
 from ..errors import InputError
-from ..render import get_renderer, landing_points, render_scene
+from ..render import get_renderer, render_scene
 from ..scene import Scene, load_scene
-from ..theory import Prediction, analysis_params, predict_channels, predict_displacement
-from ..virtual import Validation, compare
+from ..theory import Prediction, analysis_params, predict_displacement
+from ..virtual import Validation, compare_with_scene, exact_truth
 
 __all__ = [
     "Inputs",
@@ -153,8 +153,7 @@ def render_inputs(
     t1 = time.perf_counter()
     model = predict_displacement(scene)
     t2 = time.perf_counter()
-    lp = landing_points(scene)
-    truth = Prediction(lp.displacement_mm, lp.status, model.incidence_deg, {})
+    truth = exact_truth(scene, model)
     t3 = time.perf_counter()
     log.info("%s: rendered in %.1f s, model %.1f s, truth %.1f s", scene.name, t1 - t0, t2 - t1, t3 - t2)
     return Inputs(
@@ -198,13 +197,7 @@ def evaluate(inputs: Inputs, *, method: str, params) -> Validation:
         params=params,
     )
     t1 = time.perf_counter()
-    settings = dict(
-        sigma_mm=result.sigma_mm, detrend_degree=result.detrend_degree, mm_per_px=result.mm_per_px,
-        valid=result.valid, projective=result.params.a1_mode == "projective",
-    )
-    _, analytical, region = predict_channels(scene, prediction=inputs.model, **settings)
-    _, exact, _ = predict_channels(scene, prediction=inputs.truth, **settings)
-    val = compare(result, analytical, region & result.valid, exact=exact)
+    val = compare_with_scene(result, scene, model=inputs.model, truth=inputs.truth)
     val.metrics["analyze_s"] = t1 - t0
     log.info("%s %s: analysed in %.2f s, evaluated in %.2f s", scene.name, method, t1 - t0, time.perf_counter() - t1)
     return val

@@ -7,6 +7,15 @@ same evaluation stack and reports the paper's Table 2 figures
 """
 
 from .figure import validation_figure
-from .validate import CHANNELS, Validation, compare, procrustes, validate_scene
+from .validate import CHANNELS, Validation, compare, compare_with_scene, exact_truth, procrustes, validate_scene
 
-__all__ = ["validate_scene", "compare", "procrustes", "Validation", "validation_figure", "CHANNELS"]
+__all__ = [
+    "validate_scene",
+    "compare",
+    "compare_with_scene",
+    "exact_truth",
+    "procrustes",
+    "Validation",
+    "validation_figure",
+    "CHANNELS",
+]

@@ -22,7 +22,7 @@ from ..render import get_renderer, landing_points, render_scene
 from ..scene import Scene
 from ..theory import Prediction, analysis_params, predict_channels, predict_displacement
 
-__all__ = ["Validation", "procrustes", "compare", "validate_scene", "CHANNELS"]
+__all__ = ["Validation", "procrustes", "compare", "compare_with_scene", "exact_truth", "validate_scene", "CHANNELS"]
 
 CHANNELS = ("phi_eff_mD", "phi_shear_mD", "phi_total_mD")
 _SHORT = {"phi_eff_mD": "phi_eff", "phi_shear_mD": "phi_shear", "phi_total_mD": "phi_total"}
@@ -124,6 +124,53 @@ def compare(analysis, analytical, valid: np.ndarray, exact=None) -> Validation:
     return Validation(analysis, analytical, exact, sel, m)
 
 
+def exact_truth(scene: Scene, model: Prediction) -> Prediction:
+    """The exact tracer's landing displacement on the camera pixel grid (the ground truth).
+
+    Parameters
+    ----------
+    scene : Scene
+    model : Prediction
+        The scene's :func:`glassdist.theory.predict_displacement` (lends its incidence angles).
+
+    Returns
+    -------
+    Prediction
+        ``displacement_mm`` and ``status`` of :func:`glassdist.render.landing_points`.
+    """
+    lp = landing_points(scene)
+    return Prediction(lp.displacement_mm, lp.status, model.incidence_deg, {})
+
+
+def compare_with_scene(result, scene: Scene, *, model: Prediction, truth: Prediction | None = None) -> Validation:
+    """Pass the model (and the truth) through the evaluation stack with the analyzer's settings and compare.
+
+    Parameters
+    ----------
+    result : AnalysisResult
+        The analyzer's run on an image of ``scene``.
+    scene : Scene
+    model : Prediction
+        The Optical Theoretical Model on the camera pixel grid.
+    truth : Prediction, optional
+        The exact landing displacement (:func:`exact_truth`).
+
+    Returns
+    -------
+    Validation
+        :func:`compare` on the model's region within the analyzer's valid region; the
+        stack runs with the analyzer's ``sigma_mm``, ``detrend_degree``, ``mm_per_px``,
+        valid region and A1 mode.
+    """
+    settings = dict(
+        sigma_mm=result.sigma_mm, detrend_degree=result.detrend_degree, mm_per_px=result.mm_per_px,
+        valid=result.valid, projective=result.params.a1_mode == "projective",
+    )
+    _, analytical, region = predict_channels(scene, prediction=model, **settings)
+    exact = None if truth is None else predict_channels(scene, prediction=truth, **settings)[1]
+    return compare(result, analytical, region & result.valid, exact=exact)
+
+
 def validate_scene(
     scene: Scene,
     *,
@@ -160,13 +207,8 @@ def validate_scene(
     p = analysis_params(scene) if params is None else params
     eng = get_renderer(engine)
     timings = {}
-
-    def stage(name):
-        return None if progress is None else (lambda done, total: progress(name, done, total))
-
     t0 = time.perf_counter()
-    distorted = render_scene(scene, engine=eng, progress=stage("render distorted"))
-    reference = render_scene(scene, engine=eng, reference=True, progress=stage("render reference"))
+    distorted, reference = _render_pair(scene, eng, progress)
     timings["render_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     result = analyze(
@@ -178,23 +220,37 @@ def validate_scene(
     )
     timings["analyze_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    projective = result.params.a1_mode == "projective"
-    settings = dict(
-        sigma_mm=result.sigma_mm, detrend_degree=result.detrend_degree, mm_per_px=result.mm_per_px,
-        valid=result.valid, projective=projective,
-    )
-    pred, analytical, region = predict_channels(scene, prediction=predict_displacement(scene), **settings)
+    model = predict_displacement(scene)
     timings["model_s"] = time.perf_counter() - t0
-    # ground truth: the exact tracer's landing displacement through the same stack
-    lp = landing_points(scene)
-    exact_pred = Prediction(lp.displacement_mm, lp.status, pred.incidence_deg, {})
-    _, exact, _ = predict_channels(scene, prediction=exact_pred, **settings)
-    val = compare(result, analytical, region & result.valid, exact=exact)
+    val = compare_with_scene(result, scene, model=model, truth=exact_truth(scene, model))
     record = {
+        **_validation_record(scene, result, getattr(eng, "name", engine)),
+        **val.metrics,
+        "timings": timings,
+        "_distorted": distorted,
+        "_reference": reference,
+    }
+    return val, record
+
+
+def _render_pair(scene: Scene, engine, progress) -> tuple[np.ndarray, np.ndarray]:
+    """The distorted and the glass-less image of a scene, progress reported per image."""
+
+    def stage(name):
+        return None if progress is None else (lambda done, total: progress(name, done, total))
+
+    distorted = render_scene(scene, engine=engine, progress=stage("render distorted"))
+    reference = render_scene(scene, engine=engine, reference=True, progress=stage("render reference"))
+    return distorted, reference
+
+
+def _validation_record(scene: Scene, result, engine: str) -> dict:
+    """The settings part of ``validation.json``: scene, method, engine, image size and the analyzer's run."""
+    return {
         "glassdist_version": __version__,
         "scene": scene.name,
         "method": result.method,
-        "engine": getattr(eng, "name", engine),
+        "engine": engine,
         "samples_per_pixel": scene.render.samples_per_pixel,
         "seed": scene.render.seed,
         "image_size": list(scene.camera.pixels),
@@ -207,9 +263,4 @@ def validate_scene(
             "warnings": list(result.warnings),
             "params": result.params.resolved(),
         },
-        **val.metrics,
-        "timings": timings,
-        "_distorted": distorted,
-        "_reference": reference,
     }
-    return val, record
