@@ -64,6 +64,22 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
     ------
     InputError
         If the file is missing, unreadable, or not a 2-D image.
+
+    Examples
+    --------
+    A 16-bit PNG reads back as floats in [0, 1]:
+
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> import numpy as np
+    >>> from glassdist.io import read_image, write_png16
+    >>> folder = tempfile.TemporaryDirectory()
+    >>> path = Path(folder.name) / "ramp.png"
+    >>> write_png16(path, np.linspace(0.0, 1.0, 64)[None, :].repeat(48, axis=0))
+    >>> image = read_image(path)
+    >>> image.shape, image.dtype, float(image[0, 0]), float(image[0, -1])
+    ((48, 64), dtype('float64'), 0.0, 1.0)
+    >>> folder.cleanup()
     """
     p = Path(path)
     if not p.exists():

@@ -146,6 +146,19 @@ def load_params(source: str | Path | dict | None = None, **overrides) -> Analyze
     ------
     InputError
         Unreadable file, invalid JSON, unknown key or out-of-range value.
+
+    Examples
+    --------
+    Defaults, overridden by a mapping (or a JSON file) and then by keywords:
+
+    >>> from glassdist import load_params
+    >>> params = load_params({"detrend_degree": 3, "sigma_mm": 20.0}, sigma_mm=40.0)
+    >>> params.detrend_degree, params.sigma_mm
+    (3, 40.0)
+    >>> load_params({"sigma": 40.0})
+    Traceback (most recent call last):
+    ...
+    glassdist.errors.InputError: ...sigma...
     """
     data: dict = {}
     label = "parameters"

@@ -94,6 +94,27 @@ def render_scene(
     The distorted image uses ``default_rng([seed, 0])`` and the reference
     ``default_rng([seed, 1])`` (``seed`` defaults to ``scene.render.seed``), so the
     two never share jitter or noise and every run is reproducible.
+
+    Examples
+    --------
+    A flat slab turned 30 deg in front of a checkerboard, 64 x 48 px at 4 samples per pixel:
+
+    >>> import numpy as np
+    >>> from glassdist.render import render_scene
+    >>> from glassdist.scene import scene_from_dict
+    >>> scene = scene_from_dict({
+    ...     "pane": {"size_mm": [1400, 1000], "thickness_mm": 20, "refractive_index": 1.52, "yaw_deg": 30},
+    ...     "backdrop": {"pattern": "checkerboard", "pitch_mm": 100, "distance_m": 10},
+    ...     "camera": {"focal_length_mm": 300, "sensor_width_mm": 36, "pixels": [64, 48], "position_mm": [0, 0, -4000]},
+    ...     "render": {"samples_per_pixel": 4, "seed": 7}})
+    >>> distorted = render_scene(scene)
+    >>> reference = render_scene(scene, reference=True)
+    >>> distorted.shape, bool(distorted.min() >= 0.0 and distorted.max() <= 1.0)
+    ((48, 64), True)
+    >>> bool(np.array_equal(distorted, render_scene(scene)))  # seeded: reproducible
+    True
+    >>> bool(np.abs(distorted - reference).max() > 0.1)  # the slab shifts the pattern
+    True
     """
     eng = get_renderer(engine) if isinstance(engine, str) else engine
     seed = scene.render.seed if seed is None else seed

@@ -71,6 +71,7 @@ Paper §3.1.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -135,6 +136,55 @@ def slab_shift(alpha_rad, thickness_mm: float, n: float):
     return s, ds, tr
 
 
+class _Sight(NamedTuple):
+    """Lines of sight through the nominal (flat) pane, in pane coordinates (u, v along the faces)."""
+
+    tu: np.ndarray  # unit in-plane direction of the ray (its plane of incidence), u component
+    tv: np.ndarray  # ... v component
+    sa: np.ndarray  # sin(alpha), alpha the angle of incidence
+    ca: np.ndarray  # cos(alpha)
+    sb: np.ndarray  # sin(beta) = sin(alpha) / n, beta the angle of refraction
+    cb: np.ndarray  # cos(beta)
+    tb: np.ndarray  # tan(beta)
+    pfu: np.ndarray  # entry point on the nominal front face w = -d/2, mm
+    pfv: np.ndarray
+    pbu: np.ndarray  # exit point on the nominal back face w = +d/2, mm
+    pbv: np.ndarray
+
+
+def _sight_through_pane(scene: Scene, a: np.ndarray) -> _Sight:
+    """Incidence, refraction and the entry and exit points of world directions ``a`` (..., 3) from the camera."""
+    pane = scene.pane
+    R = pane.rotation
+    d, n = pane.thickness_mm, pane.refractive_index
+    o = (np.asarray(scene.camera.position_mm, float) - np.asarray(pane.center_mm, float)) @ R
+    al = a @ R
+    ca = al[..., 2]
+    sa = np.hypot(al[..., 0], al[..., 1])
+    tiny = sa < 1e-14
+    safe = np.where(tiny, 1.0, sa)
+    tu = np.where(tiny, 1.0, al[..., 0] / safe)
+    tv = np.where(tiny, 0.0, al[..., 1] / safe)
+    sb = sa / n
+    cb = np.sqrt(1 - sb * sb)
+    tb = sb / cb
+    tf = (-d / 2 - o[2]) / ca
+    pfu, pfv = o[0] + tf * al[..., 0], o[1] + tf * al[..., 1]
+    pbu, pbv = pfu + d * tb * tu, pfv + d * tb * tv
+    return _Sight(tu, tv, sa, ca, sb, cb, tb, pfu, pfv, pbu, pbv)
+
+
+def _sight_status(pane, pfu: np.ndarray, pfv: np.ndarray) -> np.ndarray:
+    """Status per line of sight from its front-face entry point: misses the pane, through the glass, frame."""
+    hw, hh = pane.size_mm[0] / 2, pane.size_mm[1] / 2
+    inside = (np.abs(pfu) <= hw) & (np.abs(pfv) <= hh)
+    status = np.where(inside, GLASS, NO_GLASS).astype(np.int8)
+    if pane.frame is not None:
+        fw = pane.frame.width_mm
+        status[inside & ((np.abs(pfu) > hw - fw) | (np.abs(pfv) > hh - fw))] = BLOCKED
+    return status
+
+
 def predict_displacement(scene: Scene, col=None, row=None) -> Prediction:
     """Evaluate the analytical forward model (module docstring) per pixel.
 
@@ -147,6 +197,25 @@ def predict_displacement(scene: Scene, col=None, row=None) -> Prediction:
     Returns
     -------
     Prediction
+
+    Examples
+    --------
+    A 0.3 mm roller wave on a 20 mm slab turned 30 deg (64 x 48 px), model against exact tracer:
+
+    >>> import numpy as np
+    >>> from glassdist.render import landing_points
+    >>> from glassdist.scene import scene_from_dict
+    >>> from glassdist.theory import predict_displacement
+    >>> scene = scene_from_dict({
+    ...     "pane": {"size_mm": [1400, 1000], "thickness_mm": 20, "refractive_index": 1.52, "yaw_deg": 30,
+    ...              "deformation": {"both": [{"kind": "roller_wave", "amplitude_mm": 0.3, "wavelength_mm": 200}]}},
+    ...     "backdrop": {"pattern": "lines", "pitch_mm": 72.6, "line_width_mm": 18, "distance_m": 10},
+    ...     "camera": {"focal_length_mm": 300, "sensor_width_mm": 36, "pixels": [64, 48], "position_mm": [0, 0, -4000]}})
+    >>> model = predict_displacement(scene)
+    >>> model.displacement_mm.shape, sorted(model.terms_mm)
+    ((48, 64, 2), ['prism', 'slab', 'thickness', 'tilt'])
+    >>> bool(np.abs(model.displacement_mm - landing_points(scene).displacement_mm).max() < 0.2)  # mm
+    True
     """
     cam, pane = scene.camera, scene.pane
     if col is None:
@@ -155,28 +224,9 @@ def predict_displacement(scene: Scene, col=None, row=None) -> Prediction:
     R = pane.rotation
     c = np.asarray(pane.center_mm, float)
     d, n = pane.thickness_mm, pane.refractive_index
-    o = (np.asarray(cam.position_mm, float) - c) @ R
-    al = a @ R
-    ca = al[..., 2]
-    sa = np.hypot(al[..., 0], al[..., 1])
-    tiny = sa < 1e-14
-    safe = np.where(tiny, 1.0, sa)
-    tu = np.where(tiny, 1.0, al[..., 0] / safe)
-    tv = np.where(tiny, 0.0, al[..., 1] / safe)
+    tu, tv, sa, ca, sb, cb, tb, pfu, pfv, pbu, pbv = _sight_through_pane(scene, a)
     su, sv = -tv, tu
-    sb = sa / n
-    cb = np.sqrt(1 - sb * sb)
-    tb = sb / cb
-    tf = (-d / 2 - o[2]) / ca
-    pfu, pfv = o[0] + tf * al[..., 0], o[1] + tf * al[..., 1]
-    pbu, pbv = pfu + d * tb * tu, pfv + d * tb * tv
-
-    hw, hh = pane.size_mm[0] / 2, pane.size_mm[1] / 2
-    inside = (np.abs(pfu) <= hw) & (np.abs(pfv) <= hh)
-    status = np.where(inside, GLASS, NO_GLASS).astype(np.int8)
-    if pane.frame is not None:
-        fw = pane.frame.width_mm
-        status[inside & ((np.abs(pfu) > hw - fw) | (np.abs(pfv) > hh - fw))] = BLOCKED
+    status = _sight_status(pane, pfu, pfv)
 
     front, back = pane.deformation.front_shape, pane.deformation.back_shape
     gfu, gfv = front.gradient(pfu, pfv)
