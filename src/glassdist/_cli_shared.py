@@ -1,4 +1,4 @@
-"""What the sub-command registrations share: the render options and a terminal progress bar.
+"""What the sub-command registrations share: scene commands, their options and a terminal progress bar.
 
 Private to the package: the ``_cli`` modules of the subpackages import it; nothing else should.
 """
@@ -7,8 +7,9 @@ from __future__ import annotations
 
 import contextlib
 import sys
+from pathlib import Path
 
-__all__ = ["progress_reporter", "apply_render_overrides", "add_render_options"]
+__all__ = ["progress_reporter", "apply_render_overrides", "add_render_options", "add_scene_command", "add_analysis_options"]
 
 
 @contextlib.contextmanager
@@ -46,3 +47,19 @@ def add_render_options(p) -> None:
     p.add_argument("--spp", "--samples", dest="spp", type=int, help="samples per pixel (default: the scene's render.samples_per_pixel)")
     p.add_argument("--seed", type=int, help="random seed (default: the scene's render.seed)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def add_scene_command(subparsers, name: str, run, *, help: str, description: str):
+    """Add a sub-command that reads a scene file and writes into ``--out DIR``; returns its parser."""
+    p = subparsers.add_parser(name, help=help, description=description)
+    p.add_argument("scene", type=Path, help="scene file (YAML or JSON)")
+    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
+    p.set_defaults(func=run)
+    return p
+
+
+def add_analysis_options(p) -> None:
+    """Options shared by predict and validate: analyzer parameters over the scene's ``analysis`` block."""
+    p.add_argument("--params", type=Path, metavar="PARAMS.json", help="analyzer parameters overriding the scene's 'analysis'")
+    p.add_argument("--sigma-mm", type=float, help="reporting smoothing scale on the backdrop, mm")
+    p.add_argument("--detrend-degree", type=int, help="total degree of the polynomial detrend")

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._cli_shared import add_render_options, apply_render_overrides, progress_reporter
+from .._cli_shared import add_render_options, add_scene_command, apply_render_overrides, progress_reporter
 from .._version import __version__
 from ..errors import InputError
 from ..io import prepare_output_dir, write_png16
@@ -22,20 +22,17 @@ __all__ = ["register", "run"]
 
 def register(subparsers):
     """Add the ``render`` sub-command."""
-    p = subparsers.add_parser(
-        "render",
+    p = add_scene_command(
+        subparsers, "render", run,
         help="render a scene: distorted.png and reference.png (16-bit)",
         description="Render the scene's camera view through the glass (distorted.png) and without it "
         "(reference.png), 16-bit linear PNG; --displacement also writes the exact per-pixel landing "
         "displacement (displacement_mm.npy, H x W x 2, backdrop mm).",
     )
-    p.add_argument("scene", type=Path, help="scene file (YAML or JSON)")
-    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
     add_render_options(p)
     p.add_argument("--no-reference", action="store_true", help="skip the glass-less reference image")
     p.add_argument("--displacement", action="store_true", help="also write the exact displacement field")
     p.add_argument("--save-blend", type=Path, metavar="FILE", help="with --engine cycles: also save the Blender scene")
-    p.set_defaults(func=run)
     return p
 
 

@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 
+from .._cli_shared import add_analysis_options, add_scene_command
 from .._version import __version__
 from ..io import prepare_output_dir
 from ..scene import load_scene
@@ -16,20 +16,15 @@ __all__ = ["register", "run"]
 
 def register(subparsers):
     """Add the ``predict`` sub-command."""
-    p = subparsers.add_parser(
-        "predict",
+    p = add_scene_command(
+        subparsers, "predict", run,
         help="analytical model: displacement and power channels on the camera pixel grid",
         description="Evaluate the Optical Theoretical Model (first-order Snell forward model) for every "
         "camera pixel and pass it through the evaluation stack (detrend, smoothing, channels). Writes "
         "prediction.npz (displacement_mm, displacement_detrended_mm, phi_eff_mD, phi_shear_mD, "
         "phi_total_mD, axis_deg, valid, incidence_deg, the additive terms) and prediction.json.",
     )
-    p.add_argument("scene", type=Path, help="scene file (YAML or JSON)")
-    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
-    p.add_argument("--params", type=Path, metavar="PARAMS.json", help="analyzer parameters (sigma_mm, detrend_degree)")
-    p.add_argument("--sigma-mm", type=float, help="reporting smoothing scale on the backdrop, mm")
-    p.add_argument("--detrend-degree", type=int, help="total degree of the polynomial detrend")
-    p.set_defaults(func=run)
+    add_analysis_options(p)
     return p
 
 

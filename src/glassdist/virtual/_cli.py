@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 
+from .._cli_shared import add_analysis_options, add_render_options, add_scene_command
+from .._cli_shared import apply_render_overrides, progress_reporter
 from ..io import prepare_output_dir, write_png16
-from .._cli_shared import add_render_options, apply_render_overrides, progress_reporter
 from ..scene import load_scene
 
 __all__ = ["register", "run"]
@@ -16,22 +16,17 @@ __all__ = ["register", "run"]
 
 def register(subparsers):
     """Add the ``validate`` sub-command."""
-    p = subparsers.add_parser(
-        "validate",
+    p = add_scene_command(
+        subparsers, "validate", run,
         help="render + analyse a scene and compare with the analytical model (validation.json, validation.png)",
         description="Run both branches of the Virtual Pipeline: render the scene and analyse the image "
         "(Direct or Comparative Method), evaluate the analytical model, pass it through the same "
         "evaluation stack and write DIR/validation.json (magnitude ratios Analyzer/analytical, map "
         "correlations, Procrustes rotation and scale), validation.png, distorted.png and reference.png.",
     )
-    p.add_argument("scene", type=Path, help="scene file (YAML or JSON)")
     p.add_argument("--method", choices=["direct", "comparative"], default="direct", help="analyzer method (default direct)")
-    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
-    p.add_argument("--params", type=Path, metavar="PARAMS.json", help="analyzer parameters overriding the scene's 'analysis'")
-    p.add_argument("--sigma-mm", type=float, help="reporting smoothing scale on the backdrop, mm")
-    p.add_argument("--detrend-degree", type=int, help="total degree of the polynomial detrend")
+    add_analysis_options(p)
     add_render_options(p)
-    p.set_defaults(func=run)
     return p
 
 
