@@ -30,7 +30,26 @@ from ..scene import load_scene
 from ..theory import analysis_params, carrier_period_mm
 from ._common import ExperimentResult, RunOptions, evaluate, render_inputs, validation_record
 
-__all__ = ["BOUNDS", "SCENES", "run_accuracy", "accuracy_markdown"]
+__all__ = [
+    "BOUNDS",
+    "SCENES",
+    "run_accuracy",
+    "accuracy_markdown",
+    "example",
+    "wavy_edge_mid_image",
+    "flat_noisy",
+    "igu_flat",
+    "lens_p64_noisy",
+    "wavy_uneven_light",
+    "wavy_amplitude",
+    "checks",
+    "against_truth",
+    "edge_margin_ceiling",
+    "measure",
+    "results_table",
+    "criteria_list",
+    "notes",
+]
 
 log = logging.getLogger(__name__)
 

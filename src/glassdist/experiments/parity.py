@@ -21,7 +21,7 @@ from pathlib import Path
 from ._common import ExperimentResult, RunOptions, SceneRun, bound, bounds_table, evaluate
 from ._common import run_scenes, settings_record, validation_record
 
-__all__ = ["PAPER", "SCENE", "run_parity", "parity_figure"]
+__all__ = ["PAPER", "SCENE", "run_parity", "parity_figure", "parity_bounds", "bandpass_ablation", "parity_table"]
 
 #: The scene of §3.1 (shipped with the examples).
 SCENE = Path(__file__).resolve().parents[3] / "examples" / "scenes" / "wavy_slab.yaml"

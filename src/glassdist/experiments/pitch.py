@@ -27,7 +27,21 @@ from ._common import ExperimentResult, RunOptions, SceneRun, bound, bounds_table
 from ._common import relative_difference, run_scenes, settings_record, validation_record
 from ._common import map_panel, region_stats, share_fig_ax, shared_limit
 
-__all__ = ["PAPER", "SCENES", "SIGMA_MM", "run_pitch", "pitch_inputs_figure", "pitch_power_figure", "pitch_shear_figure"]
+__all__ = [
+    "PAPER",
+    "SCENES",
+    "SIGMA_MM",
+    "run_pitch",
+    "pitch_inputs_figure",
+    "pitch_power_figure",
+    "pitch_shear_figure",
+    "interior_region",
+    "pitch_entry",
+    "region_means",
+    "pitch_summary",
+    "pitch_bounds",
+    "pitch_table",
+]
 
 _SCENES_DIR = Path(__file__).resolve().parents[3] / "examples" / "scenes"
 

@@ -20,7 +20,16 @@ from ._common import ExperimentResult, RunOptions, SceneRun, bound, bounds_table
 from ._common import run_scenes, settings_record, validation_record
 from ._common import map_panel, region_stats, share_fig_ax, shared_limit
 
-__all__ = ["PAPER", "SCENES", "SIGMA_MM", "run_rotation", "rotation_figure"]
+__all__ = [
+    "PAPER",
+    "SCENES",
+    "SIGMA_MM",
+    "run_rotation",
+    "rotation_figure",
+    "rotation_entry",
+    "rotation_summary",
+    "rotation_table",
+]
 
 _SCENES_DIR = Path(__file__).resolve().parents[3] / "examples" / "scenes"
 

@@ -84,6 +84,7 @@ __all__ = [
     "write_job",
     "run_job",
     "register",
+    "main",
 ]
 
 log = logging.getLogger("glassdist.render.cycles")

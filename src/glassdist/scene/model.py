@@ -26,6 +26,7 @@ __all__ = [
     "Scene",
     "load_scene",
     "scene_from_dict",
+    "rotation_yaw_pitch",
 ]
 
 _FROZEN = ConfigDict(extra="forbid", frozen=True)
