@@ -21,6 +21,7 @@ from .analyzer import (
     AnalysisResult,
     AnalyzerParams,
     analyze,
+    analyze_captures,
     channel_statistics,
     evaluate_displacement,
     load_params,
@@ -32,6 +33,7 @@ from .io import read_image, read_mask
 __all__ = [
     "__version__",
     "analyze",
+    "analyze_captures",
     "prepare_reference",
     "AnalysisResult",
     "AnalyzerParams",

@@ -75,7 +75,9 @@ def _register_analyze(sub) -> None:
         description="Comparative Method with --reference (glass-less photo), Direct Method without it. "
         "Writes result.npz, summary.json and heatmaps to --out.",
     )
-    p.add_argument("image", type=Path, help="photo of the grid through the glass (PNG/TIFF/BMP/JPEG, 8/16-bit)")
+    p.add_argument("image", type=Path, nargs="+",
+                   help="photo of the grid through the glass (PNG/TIFF/BMP/JPEG, 8/16-bit); several photos of one set-up "
+                   "(repeated exposures, small camera moves) are registered and averaged into one map")
     p.add_argument("--pitch-mm", type=_positive, required=True, help="grid pitch on the backdrop, mm (line spacing, or square size)")
     p.add_argument("--distance-m", type=_positive, required=True, help="glass-to-grid distance L, m")
     p.add_argument("--reference", type=Path, help="glass-less photo from the same camera position (Comparative Method)")
@@ -111,6 +113,8 @@ def write_analysis(result, out_dir: Path, *, inputs: dict | None = None, outputs
         "axis_deg": result.axis_deg,
         "valid": result.valid,
     }
+    if any(f.name == "capture_count" for f in result.field_specs()):  # several captures averaged
+        arrays["capture_count"] = result.capture_count
     npz = atomic_write(out_dir / "result.npz", lambda fh: np.savez(fh, **arrays))
     summary = result.summary()
     if inputs:
@@ -121,14 +125,22 @@ def write_analysis(result, out_dir: Path, *, inputs: dict | None = None, outputs
 
 
 def _run_analyze(args) -> int:
-    from .analyzer import analyze, load_params, prepare_reference
+    from .analyzer import analyze, analyze_captures, load_params, prepare_reference
     from .io import prepare_output_dir, read_image, read_mask, recorded_outputs, remove_outputs
     from .report.figures import save_channel_heatmaps
     from .report.workflow import file_sha256, finish_analysis
 
     # Validate every input before any work or any write.
     params = load_params(args.params, pattern=args.pattern, detrend_degree=args.detrend_degree, sigma_mm=args.sigma_mm)
-    image = read_image(args.image)
+    paths = list(args.image)
+    images = [read_image(path) for path in paths]
+    image = images[0]
+    for path, other in zip(paths[1:], images[1:]):
+        if other.shape != image.shape:
+            raise InputError(
+                f"the image '{path}' is {other.shape[1]}x{other.shape[0]} px but '{paths[0]}' is "
+                f"{image.shape[1]}x{image.shape[0]} px; captures of one set-up come from the same camera"
+            )
     reference = read_image(args.reference) if args.reference is not None else None
     if reference is not None and reference.shape != image.shape:
         raise InputError(
@@ -145,18 +157,22 @@ def _run_analyze(args) -> int:
 
     if reference is not None:
         reference = prepare_reference(reference, params=params)
-    result = analyze(image, pitch_mm=args.pitch_mm, distance_m=args.distance_m, reference=reference, params=params, mask=mask)
+    kw = dict(pitch_mm=args.pitch_mm, distance_m=args.distance_m, reference=reference, params=params, mask=mask)
+    result = analyze(image, **kw) if len(images) == 1 else analyze_captures(images, **kw)
+    del images, image
     inputs = {
-        "image": str(args.image),
-        "image_sha256": file_sha256(args.image),
+        "image": str(paths[0]),
+        "image_sha256": file_sha256(paths[0]),
         "reference": None if args.reference is None else str(args.reference),
         "reference_sha256": None if args.reference is None else file_sha256(args.reference),
         "mask": None if args.mask is None else str(args.mask),
     }
+    if len(paths) > 1:
+        inputs["captures"] = [{"image": str(path), "sha256": file_sha256(path)} for path in paths]
     written = write_analysis(result, out, inputs=inputs, outputs=previous)
     written += list(save_channel_heatmaps(result, out))
     code = finish_analysis(
-        result, out_dir=out, image_path=args.image, reference_path=args.reference, spec_path=args.spec,
+        result, out_dir=out, image_path=paths[0], reference_path=args.reference, spec_path=args.spec,
         report=args.report, exports=args.export, written=written,
     )
     # the earlier run's files that this one did not write again (e.g. its report, masks of its spec)

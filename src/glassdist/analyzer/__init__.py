@@ -1,5 +1,6 @@
 """The Distortion Analyzer (paper §2.2): Block F (fourier, unwrap), Block I (homography), Block A (metrics)."""
 
+from .captures import analyze_captures
 from .fourier import Carrier, CarrierPair
 from .homography import HomographyFit
 from .metrics import Channels, channel_statistics, evaluate_displacement
@@ -9,6 +10,7 @@ from .result import FIELDS, AnalysisResult, FieldSpec
 
 __all__ = [
     "analyze",
+    "analyze_captures",
     "prepare_reference",
     "AnalysisResult",
     "FIELDS",

@@ -580,46 +580,91 @@ def analyze(
     """
     warn: list[str] = []
     with _routed_warnings(warn):
-        inp = _checked_inputs(image, pitch_mm, distance_m, reference, params, mask, pattern, warn)
-        p, p_c = inp.params, inp.carrier_period_mm
-        demod = _demodulate(inp.image, inp.reference, p)
-        carriers = demod.carriers
-        ks = (carriers.k1, carriers.k2)
-        wrapped = [np.angle(z) for z in demod.signals]
-        region = valid_region(wrapped, demod.coherences, demod.mods, carriers, demod.grid, p, inp.mask, warn)
-        del wrapped
-        _check_region(region, demod.mods, warn)
-        phases = _unwrapped_phases(demod, region, p)  # F4
-        fit = _direct_baseline(phases, demod, region, p, warn) if demod.method == "direct" else None
-        H_jac = fit.matrix if fit is not None else inp.reference.homography.matrix
-        phases[~region.valid] = np.nan
-        mm_per_px = p_c * float(np.sqrt(carriers.k1.norm * carriers.k2.norm))
-        sigma_mm, blur = _smoothing_mm(demod, p, p_c, mm_per_px, warn)
-        ag = _to_analysis_grid(phases, region, demod.grid, sigma_mm / mm_per_px, blur, p)
-        del phases, demod
-        if fit is not None:
-            ag = replace(ag, phases=_direct_pass2(ag, carriers, fit))
-        _warn_deviation(ag, ks, "direct" if fit is not None else "comparative", warn)
-        delta_cam, ch = _channels(ag, ks, H_jac, p, p_c, mm_per_px, sigma_mm, float(distance_m))
-        fields = _result_fields(delta_cam, ch)
-        valid_full, idx = _reported_region(fields, ag, inp.mask, warn)
+        meas = _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn)
+        evaluated = _evaluate(meas, meas.ag, warn)
+    return _result(meas, evaluated, warn)
+
+
+@dataclass(frozen=True)
+class _Measurement:
+    """One photo measured up to the Block A grid (everything A1-A3 needs)."""
+
+    inputs: _Inputs
+    carriers: F.CarrierPair
+    fit: HomographyFit | None
+    baseline: np.ndarray
+    mm_per_px: float
+    sigma_mm: float
+    ag: _AnalysisGrid
+    n_regions: int
+    pitch_mm: float
+    distance_m: float
+
+
+def _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn: list[str]) -> _Measurement:
+    """Inputs, F1-F4, Block I (Direct) and the Block A grid with its phases (pass 2 applied).
+
+    ``baseline``: the homography the phases are relative to in the logical frame (Direct:
+    the fit; Comparative: the reference's own grid, which also gives the A1 Jacobian).
+    """
+    inp = _checked_inputs(image, pitch_mm, distance_m, reference, params, mask, pattern, warn)
+    p, p_c = inp.params, inp.carrier_period_mm
+    demod = _demodulate(inp.image, inp.reference, p)
+    carriers = demod.carriers
+    wrapped = [np.angle(z) for z in demod.signals]
+    region = valid_region(wrapped, demod.coherences, demod.mods, carriers, demod.grid, p, inp.mask, warn)
+    del wrapped
+    _check_region(region, demod.mods, warn)
+    phases = _unwrapped_phases(demod, region, p)  # F4
+    fit = _direct_baseline(phases, demod, region, p, warn) if demod.method == "direct" else None
+    H_jac = fit.matrix if fit is not None else inp.reference.homography.matrix
+    phases[~region.valid] = np.nan
+    mm_per_px = p_c * float(np.sqrt(carriers.k1.norm * carriers.k2.norm))
+    sigma_mm, blur = _smoothing_mm(demod, p, p_c, mm_per_px, warn)
+    ag = _to_analysis_grid(phases, region, demod.grid, sigma_mm / mm_per_px, blur, p)
+    del phases, demod
+    if fit is not None:
+        ag = replace(ag, phases=_direct_pass2(ag, carriers, fit))
+    inp = replace(inp, image=None)  # several captures are held at once: not their photos
+    return _Measurement(inp, carriers, fit, H_jac, mm_per_px, sigma_mm, ag, region.n, float(pitch_mm), float(distance_m))
+
+
+def _evaluate(meas: _Measurement, ag: _AnalysisGrid, warn: list[str]):
+    """A1-A3 on the phases of ``ag`` (the measurement's own, or an average of several).
+
+    Returns ``(ag, fields, valid_full, idx)`` for :func:`_result`.
+    """
+    p, p_c, carriers = meas.inputs.params, meas.inputs.carrier_period_mm, meas.carriers
+    ks = (carriers.k1, carriers.k2)
+    _warn_deviation(ag, ks, "direct" if meas.fit is not None else "comparative", warn)
+    delta_cam, ch = _channels(ag, ks, meas.baseline, p, p_c, meas.mm_per_px, meas.sigma_mm, meas.distance_m)
+    fields = _result_fields(delta_cam, ch)
+    valid_full, idx = _reported_region(fields, ag, meas.inputs.mask, warn)
+    return ag, fields, valid_full, idx
+
+
+def _result(meas: _Measurement, evaluated, warn: list[str], *, extra_fields: dict | None = None,
+            n_regions: int | None = None) -> AnalysisResult:
+    """The :class:`AnalysisResult` of :func:`_evaluate`'s output (``extra_fields``: more registered fields)."""
+    ag, fields, valid_full, idx = evaluated
+    p = meas.inputs.params
     for w in warn:
         log.warning(w)
     return AnalysisResult(
-        method="direct" if fit is not None else "comparative",
+        method="direct" if meas.fit is not None else "comparative",
         valid=valid_full,
-        mm_per_px=mm_per_px,
-        sigma_mm=sigma_mm,
+        mm_per_px=meas.mm_per_px,
+        sigma_mm=meas.sigma_mm,
         detrend_degree=p.detrend_degree,
-        pitch_mm=float(pitch_mm),
-        distance_m=float(distance_m),
-        carrier_period_mm=p_c,
-        carriers=carriers,
-        homography=None if fit is None else fit.matrix,
-        homography_fit=fit,
+        pitch_mm=meas.pitch_mm,
+        distance_m=meas.distance_m,
+        carrier_period_mm=meas.inputs.carrier_period_mm,
+        carriers=meas.carriers,
+        homography=None if meas.fit is None else meas.fit.matrix,
+        homography_fit=meas.fit,
         params=p,
         warnings=tuple(warn),
         sampling_step_px=ag.grid.step,
-        n_regions=region.n,
-        _deferred={"fields": fields, "idx": idx, "grid": ag.grid},
+        n_regions=meas.n_regions if n_regions is None else n_regions,
+        _deferred={"fields": {**fields, **(extra_fields or {})}, "idx": idx, "grid": ag.grid},
     )

@@ -57,6 +57,7 @@ FIELDS: tuple[FieldSpec, ...] = (
     FieldSpec("phi_shear_mD", "mD", "cylinder-equivalent astigmatism (2/L) sqrt(((eps_xx - eps_yy)/2)^2 + eps_xy^2)"),
     FieldSpec("phi_total_mD", "mD", "total power ||eps||_F / L"),
     FieldSpec("axis_deg", "deg", "astigmatism principal axis (largest stretch), degrees from +x towards +y, in (-90, 90]"),
+    FieldSpec("capture_count", "", "number of captures averaged at each sample (several captures only)", kind="label"),
 )
 
 #: The power channels (mD) that statistics, specifications and heatmaps are about.
@@ -113,6 +114,10 @@ class AnalysisResult:
         Spacing of the analysis grid, px.
     n_regions : int
         Connected parts of the valid region (analysed independently).
+    captures : tuple of dict
+        Several captures averaged (:func:`~glassdist.analyzer.captures.analyze_captures`): per
+        capture its grid offset, carrier permutation, largest shift (px) and valid fraction
+        on the first capture's grid; empty for one photo.
     """
 
     method: str
@@ -131,6 +136,7 @@ class AnalysisResult:
     version: str = __version__
     sampling_step_px: tuple[float, float] = (1.0, 1.0)
     n_regions: int = 1
+    captures: tuple = ()
     _deferred: dict | None = field(default=None, repr=False, compare=False)
 
     def field_specs(self) -> tuple[FieldSpec, ...]:
@@ -188,6 +194,7 @@ class AnalysisResult:
             # the smoothing actually used (the default, null, means 2 carrier periods)
             "parameters": {**self.params.resolved(), "sigma_mm": self.sigma_mm},
             "warnings": list(self.warnings),
+            **({"captures": list(self.captures)} if self.captures else {}),
             "conventions": {
                 "displacement": "landing point on the backdrop with glass minus without, mm; [...,0]=x (columns), [...,1]=y (rows)",
                 "phi_eff": "tr(sym grad delta)/L in mD, gradients w.r.t. backdrop mm; converging lens -> phi_eff < 0",
