@@ -8,6 +8,7 @@ import sys
 import time
 from pathlib import Path
 
+from ..distributed import add_scheduler_options, open_executor
 from ..io import prepare_output_dir
 from .._cli_shared import progress_reporter
 
@@ -36,7 +37,8 @@ def register(subparsers):
         "DIR/NAME.json (numbers, settings, bound checks), DIR/NAME.md (tables next to the paper's) and the "
         "paper's figures re-made from the data. parity: §3.1 (Table 2, Fig. 6, bandpass ablation); "
         "pitch: §3.2 (Figs. 7, 8, 10); rotation: §3.3 (Fig. 9); accuracy: both methods against the exact "
-        "ray-traced truth on 13 scenes (docs/accuracy.md).",
+        "ray-traced truth on 13 scenes (docs/accuracy.md). With --workers N or --scheduler ADDRESS the "
+        "scenes render in parallel on Dask workers.",
     )
     p.add_argument("name", choices=["parity", "pitch", "rotation", "accuracy"], help="experiment to run")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder (created if needed)")
@@ -46,6 +48,7 @@ def register(subparsers):
     p.add_argument("--sigma-mm", type=_positive_float, help="reporting smoothing scale on the backdrop, mm (default: the experiment's)")
     p.add_argument("--scenes", help="accuracy only: comma-separated subset of its scenes")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_scheduler_options(p)
     p.set_defaults(func=run)
     return p
 
@@ -80,8 +83,8 @@ def run(args) -> int:
             raise InputError(f"--scenes applies to the accuracy experiment only, not to {args.name}")
         kwargs["scenes"] = args.scenes.split(",")
     t0 = time.perf_counter()
-    with progress_reporter(not args.no_progress) as report:
-        result = EXPERIMENTS[args.name](progress=report, **kwargs)
+    with open_executor(args.scheduler, args.workers) as executor, progress_reporter(not args.no_progress) as report:
+        result = EXPERIMENTS[args.name](progress=report, executor=executor, **kwargs)
     result.record["wall_s"] = time.perf_counter() - t0
     written = write_experiment(result, out, command=_command(args))
     print(result.table)

@@ -216,13 +216,16 @@ class RunOptions:
     spp : int, optional
         Samples per pixel (default: the scenes', 16).
     progress : callable(stage, done, total), optional
-        Called while rendering.
+        Called while rendering (when the scenes render in this process).
+    executor : glassdist.distributed.Executor, optional
+        Renders the scenes as parallel jobs (e.g. on a Dask cluster); default: here, in turn.
     """
 
     engine: str = "exact"
     scale: float = 1.0
     spp: int | None = None
     progress: Callable[[str, int, int], None] | None = None
+    executor: object = None
 
     def prepare(self, scene: Scene) -> Scene:
         """The scene at this image scale and sample count (:func:`scaled_scene`)."""
@@ -231,6 +234,23 @@ class RunOptions:
     def render(self, scene: Scene, *, reference: bool = True) -> Inputs:
         """Render a prepared scene and its predictions (:func:`render_inputs`)."""
         return render_inputs(scene, engine=self.engine, reference=reference, progress=self.progress)
+
+    def render_each(self, scenes: list, *, reference: bool = True):
+        """Render prepared scenes; yields ``(index, Inputs)`` in order here, as they finish on an executor.
+
+        Raises the first render's exception.
+        """
+        if self.executor is None or not self.executor.distributed:
+            for i, scene in enumerate(scenes):
+                yield i, self.render(scene, reference=reference)
+            return
+        from functools import partial
+
+        job = partial(render_inputs, engine=self.engine, reference=reference)
+        for done in self.executor.as_completed(job, list(scenes)):
+            if done.error is not None:
+                raise done.error
+            yield done.index, done.value
 
 
 @dataclass(frozen=True)
@@ -288,13 +308,13 @@ def run_scenes(
     dict of str -> SceneRun
         In the order of ``scenes``.
     """
-    runs = {}
-    for name, path in scenes.items():
-        scene = options.prepare(load_scene(path))
-        inputs = options.render(scene, reference=reference)
+    prepared = {name: options.prepare(load_scene(path)) for name, path in scenes.items()}
+    names, runs = list(prepared), {}
+    for i, inputs in options.render_each(list(prepared.values()), reference=reference):
+        scene = prepared[names[i]]
         params = analysis_params(scene, detrend_degree=detrend_degree, sigma_mm=sigma_mm)
-        runs[name] = SceneRun(scene, inputs, params, {m: evaluate(inputs, method=m, params=params) for m in methods})
-    return runs
+        runs[names[i]] = SceneRun(scene, inputs, params, {m: evaluate(inputs, method=m, params=params) for m in methods})
+    return {name: runs[name] for name in names}
 
 
 def common_region(runs: dict) -> np.ndarray:

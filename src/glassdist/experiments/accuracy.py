@@ -28,7 +28,7 @@ from ..errors import InputError
 from ..render.tracer import GLASS
 from ..scene import load_scene
 from ..theory import analysis_params, carrier_period_mm
-from ._common import ExperimentResult, RunOptions, evaluate, render_inputs, validation_record
+from ._common import ExperimentResult, RunOptions, evaluate, validation_record
 
 __all__ = [
     "BOUNDS",
@@ -222,7 +222,7 @@ def run_accuracy(*, sigma_mm: float | None = None, scenes=None, **options) -> Ex
     scenes : sequence of str, optional
         Subset of :data:`SCENES` (default: all of them, in that order).
     **options
-        ``engine``, ``scale``, ``spp``, ``progress``: see :class:`RunOptions`; ``progress``
+        ``engine``, ``scale``, ``spp``, ``progress``, ``executor``: see :class:`RunOptions`; ``progress``
         is called once per scene (stage ``"accuracy scenes"``).
 
     Returns
@@ -243,11 +243,11 @@ def run_accuracy(*, sigma_mm: float | None = None, scenes=None, **options) -> Ex
     opts = RunOptions(**options)
     overrides = {} if sigma_mm is None else {"sigma_mm": sigma_mm}
     t0 = time.perf_counter()
-    entries = []
-    for k, name in enumerate(names):
-        kind, build, what = SCENES[name]
-        scene = opts.prepare(build())
-        inputs = render_inputs(scene, engine=opts.engine, reference=True)
+    entries = {}
+    prepared = [opts.prepare(SCENES[name][1]()) for name in names]
+    for k, (i, inputs) in enumerate(opts.render_each(prepared, reference=True)):
+        name, scene = names[i], prepared[i]
+        kind, _, what = SCENES[name]
         params = analysis_params(scene, **overrides)
         entry = {"name": name, "kind": kind, "scene": what, "definition": scene.model_dump(mode="json"),
                  "timings": inputs.timings, "runs": {}}
@@ -255,9 +255,10 @@ def run_accuracy(*, sigma_mm: float | None = None, scenes=None, **options) -> Ex
             run = measure(inputs, method, params, kind)
             entry["runs"][method] = run
             log.info("%s %s: %s", name, method, _summary_line(run))
-        entries.append(entry)
+        entries[name] = entry
         if opts.progress is not None:
             opts.progress("accuracy scenes", k + 1, len(names))
+    entries = [entries[name] for name in names]
     record = {"engine": opts.engine, "image_size": list(scene.camera.pixels),
               "samples_per_pixel": scene.render.samples_per_pixel, "criteria": BOUNDS, "scenes": entries}
     record["wall_s"] = time.perf_counter() - t0

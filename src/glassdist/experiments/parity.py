@@ -59,7 +59,7 @@ def run_parity(
     ablation : bool
         Also run the isotropic-bandpass ablation.
     **options
-        ``engine``, ``scale``, ``spp``, ``progress``: see :class:`RunOptions`.
+        ``engine``, ``scale``, ``spp``, ``progress``, ``executor``: see :class:`RunOptions`.
 
     Returns
     -------

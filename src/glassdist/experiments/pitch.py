@@ -89,7 +89,7 @@ def run_pitch(*, sigma_mm: float = SIGMA_MM, scenes: dict | None = None, **optio
     scenes : dict, optional
         ``{'coarse' | 'medium' | 'fine': scene path}`` (default :data:`SCENES`).
     **options
-        ``engine``, ``scale``, ``spp``, ``progress``: see :class:`RunOptions`.
+        ``engine``, ``scale``, ``spp``, ``progress``, ``executor``: see :class:`RunOptions`.
 
     Returns
     -------

@@ -57,7 +57,7 @@ def run_rotation(*, sigma_mm: float = SIGMA_MM, scenes: dict | None = None, **op
     scenes : dict, optional
         ``{'aligned': path, 'rotated': path}`` (default :data:`SCENES`).
     **options
-        ``engine``, ``scale``, ``spp``, ``progress``: see :class:`RunOptions`.
+        ``engine``, ``scale``, ``spp``, ``progress``, ``executor``: see :class:`RunOptions`.
 
     Returns
     -------

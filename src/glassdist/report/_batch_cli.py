@@ -5,6 +5,7 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
+from ..distributed import add_scheduler_options, open_executor
 from .batch import pane_defaults, panes_from_folder, read_manifest, run_batch
 
 logger = logging.getLogger(__name__)
@@ -13,6 +14,8 @@ _HELP = """Analyse many panes: SOURCE is a manifest CSV (one row per pane: image
 distance_m, ... ; relative paths from the manifest's folder) or a folder of photographs sharing the
 options below. Each pane goes to OUT/panes/<id>/; OUT/index.csv and OUT/index.html list every pane.
 Run the same command again to resume: finished panes are kept, failed and missing ones are (re)done.
+Panes run one after the other in this process unless --workers N (a local Dask cluster) or
+--scheduler ADDRESS (a running one; inputs and OUT on a shared filesystem) is given.
 Exit status: 0 all panes analysed and passed (or no spec), 3 all analysed but some FAILED their
 specification, 4 some panes could not be analysed (see OUT/failed/), 2 bad input."""
 
@@ -34,6 +37,7 @@ def register(subparsers):
     p.add_argument("--sigma-mm", type=float, help="smoothing scale, mm, by default")
     p.add_argument("--detrend-degree", type=int, help="detrend polynomial degree by default")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_scheduler_options(p)
     p.set_defaults(func=run)
     return p
 
@@ -53,7 +57,9 @@ def run(args):
         panes = read_manifest(source, defaults)
     else:
         raise InputError(f"'{source}' is neither a folder nor a .csv manifest")
-    code = run_batch(panes, args.out, report=args.report, export=args.export, progress=not args.no_progress)
+    with open_executor(args.scheduler, args.workers) as executor:
+        code = run_batch(panes, args.out, report=args.report, export=args.export, progress=not args.no_progress,
+                         executor=executor)
     out = Path(args.out)
     print(f"index: {out / 'index.html'} ({out / 'index.csv'})")
     return code

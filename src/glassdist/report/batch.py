@@ -11,7 +11,7 @@ settings, runs ``glassdist analyze`` on each one in its own process, and writes:
 
 Resuming
 --------
-Each pane is analysed into ``OUT/panes/.tmp-<id>-<pid>/`` and renamed to
+Each pane is analysed into ``OUT/panes/.tmp-<id>-<pid>-<random>/`` and renamed to
 ``OUT/panes/<id>/`` only once complete, so an interrupted batch (killed, power
 cut) never leaves a half-written pane. Running the same command again skips every
 pane whose folder exists and whose fingerprint (settings, SHA-256 of the input
@@ -42,6 +42,7 @@ import json
 import logging
 import os
 import re
+import secrets
 import shutil
 import subprocess
 import sys
@@ -62,6 +63,7 @@ __all__ = [
     "read_manifest",
     "panes_from_folder",
     "run_batch",
+    "run_glassdist",
     "subprocess_runner",
     "write_index",
     "pane_defaults",
@@ -72,7 +74,6 @@ logger = logging.getLogger(__name__)
 #: exit status of ``glassdist batch`` when at least one pane could not be analysed
 EXIT_PANE_ERRORS = 4
 
-_MARKER = ".glassdist-batch"
 _IMAGE_SUFFIXES = {".png", ".tif", ".tiff", ".bmp", ".jpg", ".jpeg"}
 _ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")
 
@@ -244,27 +245,48 @@ def _check_unique(panes, where):
 
 # ---------------------------------------------------------------- running panes
 
-def subprocess_runner(pane, out_dir, *, report=False, export=False):
-    """Run ``glassdist analyze`` for ``pane`` in a child process writing into ``out_dir``.
+def run_glassdist(args, *, cwd=None):
+    """Run ``python -m glassdist ARGS`` in a child process (this interpreter, this glassdist).
+
+    Parameters
+    ----------
+    args : list of str
+        Command-line arguments after ``glassdist``.
+    cwd : path, optional
+        Working folder of the child (default: this process's).
 
     Returns
     -------
     PaneOutcome
-        Exit code, combined output, and the error line (last line of stderr) on failure.
+        Exit code, the command and its combined output, and the error line (last
+        line of stderr) when the exit code is neither 0 nor 3 (spec FAIL).
     """
     import glassdist
 
     env = dict(os.environ)
     src = str(Path(glassdist.__file__).resolve().parent.parent)
     env["PYTHONPATH"] = src + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-    cmd = [sys.executable, "-m", "glassdist", *pane.analyze_args(out_dir, report=report, export=export)]
-    proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    cmd = [sys.executable, "-m", "glassdist", *args]
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=cwd)
     log = f"$ {' '.join(cmd)}\n{proc.stdout}{proc.stderr}"
     error = ""
     if proc.returncode not in (0, EXIT_SPEC_FAIL):
         lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
-        error = lines[-1] if lines else f"analyze exited with status {proc.returncode}"
+        error = lines[-1] if lines else f"glassdist exited with status {proc.returncode}"
     return PaneOutcome(proc.returncode, log, error)
+
+
+def subprocess_runner(pane, out_dir, *, report=False, export=False, cwd=None):
+    """Run ``glassdist analyze`` for ``pane`` in a child process writing into ``out_dir``.
+
+    ``cwd``: the child's working folder (relative paths of the pane are read from it).
+
+    Returns
+    -------
+    PaneOutcome
+        Exit code, combined output, and the error line (last line of stderr) on failure.
+    """
+    return run_glassdist(pane.analyze_args(out_dir, report=report, export=export), cwd=cwd)
 
 
 def _read_json(path):
@@ -274,25 +296,27 @@ def _read_json(path):
         return None
 
 
-def _prepare_out(out):
+def _prepare_out(out, *, command="batch", folders=("panes", "failed")):
+    """Create (or accept to resume) a job folder of ``glassdist COMMAND``, marked ``.glassdist-COMMAND``."""
     out = Path(out)
+    marker = f".glassdist-{command}"
     if out.exists() and not out.is_dir():
         raise InputError(f"output path '{out}' is an existing file; give --out a folder path (new or existing)")
-    if out.is_dir() and any(out.iterdir()) and not (out / _MARKER).exists():
-        raise InputError(f"output folder '{out}' is not empty and was not made by 'glassdist batch'; "
+    if out.is_dir() and any(out.iterdir()) and not (out / marker).exists():
+        raise InputError(f"output folder '{out}' is not empty and was not made by 'glassdist {command}'; "
                          "choose a new or empty folder so that no file of yours is replaced")
     try:
-        (out / "panes").mkdir(parents=True, exist_ok=True)
-        (out / "failed").mkdir(exist_ok=True)
-        (out / _MARKER).touch()
+        for name in folders:
+            (out / name).mkdir(parents=True, exist_ok=True)
+        (out / marker).touch()
     except OSError as exc:
         raise InputError(f"cannot create output folder '{out}': {exc.strerror}; choose a writable location") from None
     return out
 
 
-def _lock(out):
-    """Hold an exclusive lock on the batch folder (returns the open file), or raise InputError."""
-    fh = open(out / _MARKER, "a+")  # noqa: SIM115 - kept open for the batch's duration
+def _lock(out, *, command="batch"):
+    """Hold an exclusive lock on the job folder (returns the open file), or raise InputError."""
+    fh = open(out / f".glassdist-{command}", "a+")  # noqa: SIM115 - kept open for the batch's duration
     try:
         import fcntl
 
@@ -301,24 +325,41 @@ def _lock(out):
         pass
     except OSError:
         fh.close()
-        raise InputError(f"another 'glassdist batch' is writing to '{out}'; wait for it or choose another --out")
+        raise InputError(f"another 'glassdist {command}' is writing to '{out}'; wait for it or choose another --out")
     return fh
 
 
-def _run_one(pane, out, runner, report, export):
-    final = out / "panes" / pane.id
-    tmp = out / "panes" / f".tmp-{pane.id}-{os.getpid()}"
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir()
+def _execute_pane(job):
+    """Run one pane into a new temporary folder, wherever this runs (here or on a Dask worker).
+
+    ``job`` is ``(pane, panes_dir, runner, report, export, cwd)``; returns
+    ``(tmp, PaneOutcome, seconds)``. The folder's name is new for every attempt, so
+    that a retry after a worker was lost never shares it with the lost attempt's
+    still-running child.
+    """
+    pane, panes_dir, runner, report, export, cwd = job
+    tmp = Path(panes_dir) / f".tmp-{pane.id}-{os.getpid()}-{secrets.token_hex(3)}"
+    here = tmp if cwd is None else Path(cwd) / tmp
+    here.mkdir()
     t0 = time.monotonic()
     try:
-        outcome = runner(pane, tmp, report=report, export=export)
+        outcome = runner(pane, tmp, report=report, export=export, **({} if cwd is None else {"cwd": cwd}))
     except (KeyboardInterrupt, SystemExit):
-        shutil.rmtree(tmp, ignore_errors=True)
+        shutil.rmtree(here, ignore_errors=True)
         raise
     except Exception as exc:  # noqa: BLE001 - a pane that breaks is recorded and the batch goes on
         outcome = PaneOutcome(1, repr(exc), f"{type(exc).__name__}: {exc}")
-    seconds = time.monotonic() - t0
+    return tmp, outcome, time.monotonic() - t0
+
+
+def _run_one(pane, out, runner, report, export):
+    tmp, outcome, seconds = _execute_pane((pane, out / "panes", runner, report, export, None))
+    return _record_pane(pane, out, tmp, outcome, seconds, report, export)
+
+
+def _record_pane(pane, out, tmp, outcome, seconds, report, export):
+    """Move a finished pane to ``panes/<id>/`` (or record its failure); returns its record."""
+    final = out / "panes" / pane.id
     failed_json, failed_log = out / "failed" / f"{pane.id}.json", out / "failed" / f"{pane.id}.log"
     if outcome.exit_code not in (0, EXIT_SPEC_FAIL):
         shutil.rmtree(tmp, ignore_errors=True)
@@ -338,16 +379,21 @@ def _run_one(pane, out, runner, report, export):
     }
     (tmp / "analyze.log").write_text(outcome.log, encoding="utf-8")
     (tmp / "pane.json").write_text(json.dumps(record, indent=2) + "\n", encoding="utf-8")
-    if final.exists():  # stale result of other settings: swap it out, then delete it
-        old = out / "panes" / f".tmp-old-{pane.id}-{os.getpid()}"
+    _place(tmp, final)
+    failed_json.unlink(missing_ok=True)
+    failed_log.unlink(missing_ok=True)
+    return record
+
+
+def _place(tmp, final):
+    """Rename a complete temporary folder to its final name, replacing a stale result of other settings."""
+    if final.exists():  # swap it out, then delete it
+        old = final.parent / f".tmp-old-{final.name}-{os.getpid()}"
         os.rename(final, old)
         os.rename(tmp, final)
         shutil.rmtree(old, ignore_errors=True)
     else:
         os.rename(tmp, final)
-    failed_json.unlink(missing_ok=True)
-    failed_log.unlink(missing_ok=True)
-    return record
 
 
 def _done_record(pane, out, report, export):
@@ -357,7 +403,7 @@ def _done_record(pane, out, report, export):
     return None
 
 
-def run_batch(panes, out, *, report=False, export=False, runner=None, progress=True, echo=print):
+def run_batch(panes, out, *, report=False, export=False, runner=None, progress=True, echo=print, executor=None):
     """Analyse every pane not already done, then write the index.
 
     Parameters
@@ -369,11 +415,18 @@ def run_batch(panes, out, *, report=False, export=False, runner=None, progress=T
         Passed to ``glassdist analyze`` as ``--report`` / ``--export``.
     runner : callable, optional
         ``runner(pane, out_dir, report=, export=) -> PaneOutcome``; default
-        :func:`subprocess_runner`.
+        :func:`subprocess_runner`. With a distributed executor and relative paths it
+        also receives ``cwd=`` (this process's working folder).
     progress : bool
         Show a progress bar (on stderr).
     echo : callable
         Receives one line per pane.
+    executor : glassdist.distributed.Executor, optional
+        Where the panes run (default: here, one after the other). On a Dask
+        cluster each pane runs on a worker, which writes its temporary folder;
+        this process checks first that every worker sees the inputs and ``out``,
+        then moves finished panes into place and rewrites the index as the
+        futures complete, so outputs, resuming and exit codes are the same.
 
     Returns
     -------
@@ -401,18 +454,41 @@ def run_batch(panes, out, *, report=False, export=False, runner=None, progress=T
         if records:
             echo(f"resuming: {len(records)} pane(s) already done, {len(todo)} to analyse")
         write_index(panes, out)
+        cwd = None
+        if executor is not None and executor.distributed and todo:
+            paths = [out] + [p for pane in todo for p in _input_paths(pane)]
+            cwd = os.getcwd() if any(not Path(p).is_absolute() for p in paths) else None
+            executor.check_paths(files=[p for p in paths[1:] if Path(p).is_file()], folders=[out / "panes"], cwd=cwd)
+            echo(f"analysing {len(todo)} pane(s) on the {executor.description}")
         columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
         with Progress(*columns, console=Console(stderr=True), disable=not progress, transient=True) as bar:
             task = bar.add_task("batch", total=len(panes), completed=len(records))
-            for pane in todo:
-                bar.update(task, description=f"analysing {pane.id}")
-                rec = _run_one(pane, out, runner, report, export)
+
+            def finished(pane, rec):
                 records[pane.id] = rec
                 label = rec.get("verdict") or ("analysed" if rec["status"] == "done" else "ERROR")
                 tail = f": {rec['error']}" if rec["status"] == "error" else ""
                 echo(f"[{len(records)}/{len(panes)}] {pane.id}  {label}  ({rec['seconds']:.1f} s){tail}")
                 write_index(panes, out)
                 bar.advance(task)
+
+            if executor is None or not executor.distributed:
+                for pane in todo:
+                    bar.update(task, description=f"analysing {pane.id}")
+                    finished(pane, _run_one(pane, out, runner, report, export))
+            else:
+                bar.update(task, description="analysing")
+                jobs = [(pane, out / "panes", runner, report, export, cwd) for pane in todo]
+                for done in executor.as_completed(_execute_pane, jobs):
+                    pane = todo[done.index]
+                    if done.error is None:
+                        tmp, outcome, seconds = done.value
+                    else:  # the job itself was lost (e.g. its worker died more often than allowed)
+                        tmp, seconds = out / "panes" / f".tmp-{pane.id}-lost", 0.0
+                        outcome = PaneOutcome(1, repr(done.error), f"{type(done.error).__name__}: {done.error}")
+                    finished(pane, _record_pane(pane, out, tmp, outcome, seconds, report, export))
+                for stale in (out / "panes").glob(".tmp-*"):  # of attempts lost with their worker
+                    shutil.rmtree(stale, ignore_errors=True)
     finally:
         lock.close()
     n_err = sum(r["status"] == "error" for r in records.values())
@@ -424,6 +500,10 @@ def run_batch(panes, out, *, report=False, export=False, runner=None, progress=T
     if "FAIL" in verdicts:
         return EXIT_SPEC_FAIL
     return 0
+
+
+def _input_paths(pane):
+    return [p for p in (pane.image, pane.reference, pane.mask, pane.spec, pane.params) if p is not None]
 
 
 # ---------------------------------------------------------------- the index
@@ -460,17 +540,22 @@ def _round(v):
     return "" if v is None else f"{float(v):.4g}"
 
 
-def write_index(panes, out):
-    """Write ``OUT/index.csv`` and ``OUT/index.html`` listing every pane with its status and statistics."""
-    out = Path(out)
-    rows = _index_rows(panes, out)
+def _write_csv(path, rows):
+    """Write rows (dicts with the same keys) as a CSV file, atomically."""
     import io
 
     buf = io.StringIO()
     writer = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
     writer.writeheader()
     writer.writerows(rows)
-    atomic_write_text(out / "index.csv", buf.getvalue())
+    return atomic_write_text(path, buf.getvalue())
+
+
+def write_index(panes, out):
+    """Write ``OUT/index.csv`` and ``OUT/index.html`` listing every pane with its status and statistics."""
+    out = Path(out)
+    rows = _index_rows(panes, out)
+    _write_csv(out / "index.csv", rows)
     atomic_write_text(out / "index.html", _index_html(rows, out))
     return out / "index.csv", out / "index.html"
 

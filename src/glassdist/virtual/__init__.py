@@ -3,10 +3,12 @@
 :func:`validate_scene` renders the scene, runs the Distortion Analyzer, evaluates
 the Optical Theoretical Model on the camera pixel grid, passes it through the
 same evaluation stack and reports the paper's Table 2 figures
-(:class:`Validation`).
+(:class:`Validation`). :func:`run_sweep` runs it on every combination of varied
+scene values (``glassdist sweep``).
 """
 
 from .figure import validation_figure
+from .sweep import Variant, expand_variants, parse_vary, run_sweep, write_sweep_index
 from .validate import CHANNELS, Validation, compare, compare_with_scene, exact_truth, procrustes, validate_scene
 
 __all__ = [
@@ -18,4 +20,9 @@ __all__ = [
     "Validation",
     "validation_figure",
     "CHANNELS",
+    "Variant",
+    "parse_vary",
+    "expand_variants",
+    "run_sweep",
+    "write_sweep_index",
 ]
