@@ -66,6 +66,11 @@ def parse_vary(texts) -> dict:
     ------
     InputError
         Missing ``=``, empty key or value list, a key given twice.
+
+    Examples
+    --------
+    >>> parse_vary(["backdrop.pitch_mm=24.2,48.4", "analysis.detrend_degree=2"])
+    {'backdrop.pitch_mm': [24.2, 48.4], 'analysis.detrend_degree': [2]}
     """
     import yaml
 
