@@ -35,6 +35,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy import ndimage
 
+from ..analyzer.captures import sample_field
 from ..analyzer.metrics import _derivative
 
 __all__ = [
@@ -364,8 +365,8 @@ class LineProfile:
     x_mm, y_mm : ndarray (n,)
         Sample positions, mm (frame of ``origin_mm``).
     values : ndarray (n,) or (n, c)
-        Bilinear samples of the field; NaN where any of the four neighbours is invalid
-        or the point lies outside the field.
+        Cubic-spline samples of the field (:func:`~glassdist.analyzer.captures.sample_field`);
+        NaN where any of the four nearest samples is invalid or the point lies outside the field.
     """
 
     s_mm: np.ndarray
@@ -407,13 +408,7 @@ def line_profile(field: np.ndarray, *, step_mm, start_mm, end_mm, spacing_mm: fl
     y = p0[1] + t * (p1[1] - p0[1])
     rows, cols = (y - origin_mm[1]) / sy, (x - origin_mm[0]) / sx
     planes = [f] if f.ndim == 2 else [f[..., c] for c in range(f.shape[2])]
-    out = []
-    for p in planes:
-        bad = ~np.isfinite(p)
-        v = ndimage.map_coordinates(np.where(bad, 0.0, p), [rows, cols], order=1, mode="constant", cval=np.nan)
-        # Any invalid neighbour makes the sample invalid (bilinear weights > 0 on it).
-        b = ndimage.map_coordinates(bad.astype(float), [rows, cols], order=1, mode="constant", cval=1.0)
-        out.append(np.where(b > 1e-9, np.nan, v))
+    out = [sample_field(p, rows, cols) for p in planes]
     vals = out[0] if f.ndim == 2 else np.stack(out, axis=-1)
     return LineProfile(s, x, y, vals)
 
@@ -693,11 +688,10 @@ class StandardMeasures:
 def standard_measures(result, *, gauge_mm: float = 4.0, directions_deg=(0.0, 90.0)) -> StandardMeasures:
     """All standard measures of an :class:`~glassdist.analyzer.AnalysisResult`.
 
-    They are computed from ``result.displacement_detrended_mm`` (the field the power
-    channels differentiate: after the degree-N detrend and the sigma smoothing, so
-    relative to the Direct Method's homography baseline or the Comparative reference and
-    to the degree-N trend), sampled at the analysis grid step with the isotropic
-    ``mm_per_px``.
+    They are computed from the field ``displacement_detrended_mm`` on the result's analysis
+    grid (the field the power channels differentiate: after the degree-N detrend and the sigma
+    smoothing, so relative to the Direct Method's homography baseline or the Comparative
+    reference and to the degree-N trend), with the isotropic ``mm_per_px``.
 
     Parameters
     ----------
@@ -707,11 +701,10 @@ def standard_measures(result, *, gauge_mm: float = 4.0, directions_deg=(0.0, 90.
     directions_deg : sequence of float
         Grid-line directions for the grid-line slope.
     """
-    k = max(1, int(round(min(result.sampling_step_px))))
-    off = k // 2
-    d = np.asarray(result.displacement_detrended_mm[off::k, off::k], dtype=float)
-    phi = result.phi_eff_mD[off::k, off::k]
-    step = (k * result.mm_per_px, k * result.mm_per_px)
+    d = np.asarray(result.grid_field("displacement_detrended_mm"), dtype=float)
+    phi = result.grid_field("phi_eff_mD")
+    sy, sx = result.analysis_grid.step
+    step = (sy * result.mm_per_px, sx * result.mm_per_px)
     L = result.distance_m
     return StandardMeasures(
         roll_wave=roll_wave(d, step_mm=step, distance_m=L),
@@ -720,7 +713,7 @@ def standard_measures(result, *, gauge_mm: float = 4.0, directions_deg=(0.0, 90.
         equivalent_power=equivalent_power(phi),
         step_mm=step,
         field=(
-            f"displacement_detrended_mm (degree-{result.detrend_degree} detrend, sigma_mm = {result.sigma_mm:.4g}), "
-            f"sampled every {k} px"
+            f"displacement_detrended_mm (degree-{result.detrend_degree} detrend, sigma_mm = {result.sigma_mm:.4g}) "
+            "on the analysis grid"
         ),
     )
