@@ -245,7 +245,7 @@ def _check_unique(panes, where):
 
 # ---------------------------------------------------------------- running panes
 
-def run_glassdist(args, *, cwd=None):
+def run_glassdist(args, *, cwd=None, timeout_s=None):
     """Run ``python -m glassdist ARGS`` in a child process (this interpreter, this glassdist).
 
     Parameters
@@ -254,6 +254,8 @@ def run_glassdist(args, *, cwd=None):
         Command-line arguments after ``glassdist``.
     cwd : path, optional
         Working folder of the child (default: this process's).
+    timeout_s : float, optional
+        Stop the child after this many seconds (an error outcome).
 
     Returns
     -------
@@ -267,7 +269,11 @@ def run_glassdist(args, *, cwd=None):
     src = str(Path(glassdist.__file__).resolve().parent.parent)
     env["PYTHONPATH"] = src + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
     cmd = [sys.executable, "-m", "glassdist", *args]
-    proc = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=cwd)
+    try:
+        proc = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=cwd, timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        return PaneOutcome(1, f"$ {' '.join(cmd)}\n(stopped after {timeout_s:g} s)",
+                           f"glassdist: error: the analysis took longer than {timeout_s:g} s and was stopped")
     log = f"$ {' '.join(cmd)}\n{proc.stdout}{proc.stderr}"
     error = ""
     if proc.returncode not in (0, EXIT_SPEC_FAIL):

@@ -1,0 +1,173 @@
+"""The FastAPI application: server-rendered pages (Jinja2), one job per upload, a status endpoint."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import logging
+import sys
+import zipfile
+from pathlib import Path
+
+from fastapi import FastAPI, Request, UploadFile
+from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, RedirectResponse, Response
+from fastapi.templating import Jinja2Templates
+
+from .._version import __version__
+from ..errors import InputError
+from ._jobs import ROLES, JobStore, display_name, stored_name
+
+__all__ = ["create_app", "serve"]
+
+logger = logging.getLogger(__name__)
+
+_TEMPLATES = Jinja2Templates(directory=str(Path(__file__).with_name("templates")))
+#: Figures shown on the result page, in this order, when the analysis wrote them.
+_FIGURES = (("phi_eff.png", "phi_eff (mD)"), ("phi_shear.png", "phi_shear (mD)"), ("axis.png", "astigmatism axis"),
+            ("input_region.png", "photo, analysed region outlined"), ("histograms.png", "histograms"))
+_DOWNLOADS = (("report.html", "HTML report"), ("fields.npz", "fields (NPZ)"), ("statistics.csv", "statistics (CSV)"),
+              ("summary.json", "summary (JSON)"), ("result.npz", "result.npz"))
+
+
+class UploadTooLarge(InputError):
+    """An upload over the size limit."""
+
+
+async def _save_upload(store: JobStore, job, role: str, upload: UploadFile) -> None:
+    head = await upload.read(16)
+    if not head:
+        return  # the field was left empty
+    name = stored_name(role, head, upload.filename)
+    job.names[role], job.display[role] = name, display_name(upload.filename, role)
+    size, chunk = 0, head
+    with open(job.folder / name, "wb") as fh:
+        while chunk:
+            size += len(chunk)
+            if size > store.max_upload_bytes:
+                raise UploadTooLarge(f"'{job.display[role]}' is larger than the {store.max_upload_bytes / 2**20:g} MB "
+                                     "upload limit; send a smaller file (or start the server with a larger --max-upload-mb)")
+            fh.write(chunk)
+            chunk = await upload.read(1 << 20)
+
+
+def create_app(*, public_host: str | None = None, **store_options) -> FastAPI:
+    """The application; ``store_options`` go to :class:`JobStore`.
+
+    ``public_host``: the address the server listens on when it is not local (a warning on every page).
+    """
+    store = JobStore(**store_options)
+
+    @contextlib.asynccontextmanager
+    async def lifespan(app):
+        yield
+        store.close()  # every job folder is removed when the server stops
+
+    app = FastAPI(title="glassdist", version=__version__, lifespan=lifespan, docs_url=None, redoc_url=None)
+    app.state.store = store
+    # several files per request, plus the form itself
+    max_request = len(ROLES) * store.max_upload_bytes + (1 << 20)
+
+    def page(request, name, status_code=200, **context):
+        context.update(version=__version__, public_host=public_host, max_upload_mb=store.max_upload_bytes / 2**20)
+        return _TEMPLATES.TemplateResponse(request, name, context, status_code=status_code)
+
+    def index(request, *, error="", status_code=200, form=None):
+        return page(request, "index.html", status_code, jobs=store.recent(), error=error, form=form or {})
+
+    @app.get("/", response_class=HTMLResponse)
+    async def home(request: Request):
+        return index(request)
+
+    @app.post("/jobs")
+    async def create_job(request: Request):
+        length = request.headers.get("content-length")
+        if length and length.isdigit() and int(length) > max_request:
+            return index(request, status_code=413, error=f"the upload is larger than the {store.max_upload_bytes / 2**20:g} "
+                                                        "MB limit per file; send smaller files")
+        form = await request.form()
+        fields = {k: v for k, v in form.items() if isinstance(v, str)}
+        job = store.new_job()
+        try:
+            for role in ROLES:
+                upload = form.get(role)
+                if upload is not None and not isinstance(upload, str):
+                    await _save_upload(store, job, role, upload)
+            store.submit(job, fields)
+        except InputError as exc:
+            store.discard(job)
+            return index(request, status_code=413 if isinstance(exc, UploadTooLarge) else 400, error=str(exc),
+                         form=fields)
+        finally:
+            await form.close()
+        return RedirectResponse(f"/jobs/{job.id}", status_code=303)
+
+    def get_job(job_id):
+        job = store.get(job_id)
+        if job is None:
+            raise _NotFound()
+        return job
+
+    @app.get("/jobs/{job_id}", response_class=HTMLResponse)
+    async def job_page(request: Request, job_id: str):
+        job = get_job(job_id)
+        outputs = set(job.outputs())
+        summary = job.summary() if job.state == "done" else {}
+        return page(request, "job.html", job=job, summary=summary, verdict=summary.get("verdict"),
+                    statistics=(summary.get("a4") or {}).get("statistics") or summary.get("statistics") or {},
+                    figures=[(f, t) for f, t in _FIGURES if f in outputs],
+                    downloads=[(f, t) for f, t in _DOWNLOADS if f in outputs],
+                    masks=sorted(f for f in outputs if f.startswith("mask_") and f.endswith(".png")))
+
+    @app.get("/jobs/{job_id}/status")
+    async def job_status(job_id: str):
+        return JSONResponse(get_job(job_id).status())
+
+    @app.get("/jobs/{job_id}/files/{name:path}")
+    async def job_file(job_id: str, name: str, download: bool = False):
+        path = get_job(job_id).output_path(name)
+        if path is None:
+            raise _NotFound()
+        kind = "attachment" if download else "inline"
+        return FileResponse(path, filename=Path(name).name, content_disposition_type=kind)
+
+    @app.get("/jobs/{job_id}/outputs.zip")
+    async def job_zip(job_id: str):
+        job = get_job(job_id)
+        if job.state != "done":
+            raise _NotFound()
+        buf = io.BytesIO()
+        with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:
+            for name in job.outputs():
+                path = job.output_path(name)
+                if path is not None:
+                    zf.write(path, name)
+        headers = {"Content-Disposition": f'attachment; filename="glassdist-{job.id}.zip"'}
+        return Response(buf.getvalue(), media_type="application/zip", headers=headers)
+
+    @app.exception_handler(_NotFound)
+    async def not_found(request: Request, exc):
+        return page(request, "index.html", 404, jobs=store.recent(), form={},
+                    error="no such job or file (jobs are kept until the server stops or newer ones replace them)")
+
+    return app
+
+
+class _NotFound(Exception):
+    pass
+
+
+def serve(host: str = "127.0.0.1", port: int = 8000, **options) -> None:
+    """Run the application with uvicorn until interrupted; warns on stderr when not bound to this machine only."""
+    import uvicorn
+
+    from . import LOCAL_HOSTS
+
+    public = host not in LOCAL_HOSTS
+    if public:
+        print(f"glassdist serve: warning: listening on {host}:{port}, reachable from other machines; anyone who "
+              "can reach it can upload photos and run analyses (there is no login). Use --host 127.0.0.1 to keep "
+              "it on this machine.", file=sys.stderr)
+    app = create_app(public_host=f"{host}:{port}" if public else None, **options)
+    print(f"glassdist {__version__}: open http://{'localhost' if not public else host}:{port}/ (Ctrl-C stops)",
+          file=sys.stderr)
+    uvicorn.run(app, host=host, port=port, log_level="warning")

@@ -1,0 +1,240 @@
+"""Web jobs: each one runs ``glassdist analyze`` in its own process inside a private temporary folder."""
+
+from __future__ import annotations
+
+import json
+import logging
+import re
+import shutil
+import tempfile
+import threading
+import time
+import uuid
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..errors import InputError
+
+__all__ = ["Job", "JobStore", "ROLES"]
+
+logger = logging.getLogger(__name__)
+
+#: Uploads a job takes, and the ``glassdist analyze`` option each becomes (the photo is the positional argument).
+ROLES = {"image": None, "reference": "--reference", "mask": "--mask", "spec": "--spec"}
+
+#: Form fields passed to ``glassdist analyze`` as ``--option=value`` (checked there, as on the command line).
+FIELDS = {"pitch_mm": "--pitch-mm", "distance_m": "--distance-m", "pattern": "--pattern",
+          "detrend_degree": "--detrend-degree", "sigma_mm": "--sigma-mm"}
+
+# The first bytes of the formats analyze reads; an upload is stored under a name of our own with the
+# suffix its content shows (client file names never become paths).
+_MAGIC = ((b"\x89PNG\r\n\x1a\n", ".png"), (b"BM", ".bmp"), (b"\xff\xd8\xff", ".jpg"), (b"II*\x00", ".tif"),
+          (b"MM\x00*", ".tif"), (b"II+\x00", ".tif"), (b"MM\x00+", ".tif"))
+_SAFE_SUFFIX = re.compile(r"^\.[A-Za-z0-9]{1,5}$")
+
+
+def display_name(client_name: str | None, role: str) -> str:
+    """A client's file name for display only: its last component, printable, at most 80 characters."""
+    name = (client_name or "").replace("\\", "/").rsplit("/", 1)[-1]
+    name = "".join(ch for ch in name if ch.isprintable()).strip()
+    return name[:80] or f"the {role} upload"
+
+
+def stored_name(role: str, head: bytes, client_name: str | None) -> str:
+    """The file name an upload is stored under in its job folder: the role and a suffix.
+
+    Images get the suffix their first bytes show; a specification is ``spec.json``;
+    anything else keeps a plain alphanumeric suffix of the client's name (so that
+    ``glassdist analyze`` can say what is wrong with it), else ``.bin``.
+    """
+    if role == "spec":
+        return "spec.json"
+    for magic, suffix in _MAGIC:
+        if head.startswith(magic):
+            return role + suffix
+    suffix = Path(display_name(client_name, role)).suffix
+    return role + (suffix.lower() if _SAFE_SUFFIX.match(suffix) else ".bin")
+
+
+@dataclass
+class Job:
+    """One analysis requested from the web page.
+
+    Attributes
+    ----------
+    id : str
+        Random identifier (URL-safe).
+    folder : Path
+        Private temporary folder holding the uploads and ``out/`` (analyze's ``--out``).
+    names : dict
+        Role (``image``, ``reference``, ``mask``, ``spec``) -> stored file name.
+    display : dict
+        Role -> the client's file name, for display and error lines only.
+    args : list of str
+        The ``glassdist analyze`` arguments (paths relative to ``folder``).
+    state : str
+        ``queued``, ``running``, ``done`` (analysed; exit status 0 or 3) or ``failed``.
+    exit_code : int or None
+        Exit status of ``glassdist analyze``.
+    error : str
+        Its one-line error (failed jobs), with the client's file names.
+    """
+
+    id: str
+    folder: Path
+    names: dict = field(default_factory=dict)
+    display: dict = field(default_factory=dict)
+    args: list = field(default_factory=list)
+    created: float = field(default_factory=time.time)
+    started: float | None = None
+    finished: float | None = None
+    state: str = "queued"
+    exit_code: int | None = None
+    error: str = ""
+    log: str = ""
+
+    @property
+    def out(self) -> Path:
+        """The analysis output folder."""
+        return self.folder / "out"
+
+    @property
+    def seconds(self) -> float:
+        """Seconds since the job started (or its run time once finished)."""
+        if self.started is None:
+            return 0.0
+        return (self.finished or time.time()) - self.started
+
+    def summary(self) -> dict:
+        """``summary.json`` of the analysis (empty until done)."""
+        try:
+            return json.loads((self.out / "summary.json").read_text(encoding="utf-8"))
+        except (OSError, json.JSONDecodeError):
+            return {}
+
+    def outputs(self) -> list[str]:
+        """Files the analysis wrote (relative to ``out``), as listed in its summary, and the summary."""
+        if self.state != "done":
+            return []
+        return sorted(set(self.summary().get("outputs") or {}) | {"summary.json"})
+
+    def output_path(self, name: str) -> Path | None:
+        """The path of one listed output, or None (a name not listed, or outside the folder)."""
+        if name not in self.outputs():
+            return None
+        path = (self.out / name).resolve()
+        return path if path.is_file() and path.is_relative_to(self.out.resolve()) else None
+
+    def status(self) -> dict:
+        """JSON-able state for the status endpoint."""
+        return {"id": self.id, "state": self.state, "seconds": round(self.seconds, 1), "exit_code": self.exit_code,
+                "error": self.error, "image": self.display.get("image", "")}
+
+
+class JobStore:
+    """Jobs of one server: private folders, a bounded history and a worker thread pool.
+
+    Parameters
+    ----------
+    root : path, optional
+        Where the job folders go (default: a new private temporary folder, removed by :meth:`close`).
+    max_jobs : int
+        Jobs kept; the oldest finished ones (and their folders) are removed beyond it.
+    max_upload_mb : float
+        Largest accepted upload, MB (the image-size limit in pixels is analyze's own).
+    concurrent : int
+        Analyses running at once.
+    timeout_s : float
+        An analysis running longer is stopped and reported as failed.
+    """
+
+    def __init__(self, root=None, *, max_jobs: int = 20, max_upload_mb: float = 64.0, concurrent: int = 1,
+                 timeout_s: float = 600.0):
+        self._own_root = root is None
+        self.root = Path(tempfile.mkdtemp(prefix="glassdist-web-") if root is None else root)
+        self.root.mkdir(parents=True, exist_ok=True)
+        self.root.chmod(0o700)
+        self.max_jobs = max_jobs
+        self.max_upload_bytes = int(max_upload_mb * 1024 * 1024)
+        self.timeout_s = timeout_s
+        self._jobs: dict[str, Job] = {}
+        self._lock = threading.Lock()
+        self._pool = ThreadPoolExecutor(max_workers=concurrent, thread_name_prefix="glassdist-job")
+
+    def new_job(self) -> Job:
+        """A job with its own private folder (not yet listed)."""
+        folder = Path(tempfile.mkdtemp(prefix="job-", dir=self.root))
+        return Job(id=uuid.uuid4().hex[:12], folder=folder)
+
+    def discard(self, job: Job) -> None:
+        """Remove a job that was never submitted (bad upload) and its folder."""
+        shutil.rmtree(job.folder, ignore_errors=True)
+
+    def submit(self, job: Job, form: dict) -> Job:
+        """Build the analyze arguments from the uploads and form fields, list the job and start it."""
+        if "image" not in job.names:
+            raise InputError("choose a photo of the grid to analyse (PNG, TIFF, BMP or JPEG)")
+        args = ["analyze"]
+        for key, option in FIELDS.items():
+            value = (form.get(key) or "").strip()
+            if value:
+                args.append(f"{option}={value}")  # one token: a value can never become an option
+        for role, option in ROLES.items():
+            if option and role in job.names:
+                args += [option, job.names[role]]
+        args += ["--report", "--export", "--out", "out", job.names["image"]]
+        job.args = args
+        with self._lock:
+            self._jobs[job.id] = job
+            self._evict()
+        self._pool.submit(self._run, job)
+        return job
+
+    def _run(self, job: Job) -> None:
+        from ..report.batch import run_glassdist
+        from ..report.workflow import EXIT_SPEC_FAIL
+
+        job.state, job.started = "running", time.time()
+        try:
+            outcome = run_glassdist(job.args, cwd=job.folder, timeout_s=self.timeout_s)
+            job.exit_code, job.log = outcome.exit_code, outcome.log
+            job.error = self._client_names(job, outcome.error)
+            job.state = "done" if outcome.exit_code in (0, EXIT_SPEC_FAIL) else "failed"
+        except Exception as exc:  # noqa: BLE001 - shown on the job's page, the server goes on
+            logger.exception("job %s", job.id)
+            job.state, job.error = "failed", f"internal error: {type(exc).__name__}: {exc}"
+        finally:
+            job.finished = time.time()
+
+    @staticmethod
+    def _client_names(job: Job, line: str) -> str:
+        for role, name in job.names.items():
+            line = line.replace(f"'{name}'", f"'{job.display.get(role, name)}'")
+        return line
+
+    def _evict(self) -> None:
+        finished = [j for j in self._jobs.values() if j.state in ("done", "failed")]
+        while len(self._jobs) > self.max_jobs and finished:
+            old = min(finished, key=lambda j: j.created)
+            finished.remove(old)
+            del self._jobs[old.id]
+            shutil.rmtree(old.folder, ignore_errors=True)
+
+    def get(self, job_id: str) -> Job | None:
+        """The job of this id, or None."""
+        return self._jobs.get(job_id)
+
+    def recent(self) -> list[Job]:
+        """Listed jobs, newest first."""
+        return sorted(self._jobs.values(), key=lambda j: j.created, reverse=True)
+
+    def close(self) -> None:
+        """Stop taking jobs, wait for the running one, and remove every job folder."""
+        self._pool.shutdown(wait=True, cancel_futures=True)
+        with self._lock:
+            for job in self._jobs.values():
+                shutil.rmtree(job.folder, ignore_errors=True)
+            self._jobs.clear()
+        if self._own_root:
+            shutil.rmtree(self.root, ignore_errors=True)
