@@ -227,3 +227,82 @@ def test_region_thresholds_from_spec_or_default_and_csv():
     text = regions_csv(found)
     assert text.splitlines()[0].startswith("channel,number,threshold_mD,centroid_x_mm")
     assert text.splitlines()[1].startswith("phi_eff,1,5,")
+
+
+# ----------------------------------------------------------------- through the command line
+
+@pytest.fixture(scope="module")
+def lens_photos(tmp_path_factory):
+    """A small synthetic pane (a converging lens) and its reference; a spec pinning the protocol, with two zones."""
+    import json
+
+    from glassdist.io import write_png16
+    from glassdist.synthetic import lens_displacement, synthetic_capture
+
+    root = tmp_path_factory.mktemp("lens")
+    cap = synthetic_capture((160, 160), pitch_mm=2.0, mm_per_px=0.25,
+                            displacement=lens_displacement(0.05, 1.0, radius_mm=7.0), rng=0)
+    write_png16(root / "pane.png", cap.image)
+    write_png16(root / "reference.png", cap.reference)
+    spec = {
+        "name": "zoned",
+        "protocol": {"method": "comparative", "pitch_mm": 2.0, "distance_m": 1.0, "sigma_mm": 1.5,
+                     "detrend_degree": 2},
+        "pane": {"corners_px": [[-0.5, -0.5], [159.5, -0.5], [159.5, 159.5], [-0.5, 159.5]], "size_mm": [40, 40]},
+        "zones": [{"name": "edge", "edge_band_mm": 5}, {"name": "vision", "inset_mm": 5, "min_valid_percent": 50}],
+        "criteria": [{"channel": "phi_eff", "statistic": "max_abs", "max_mD": 1000, "zone": "vision"},
+                     {"channel": "phi_shear", "statistic": "p95_abs", "max_mD": 1000, "zone": "edge"}],
+    }
+    (root / "spec.json").write_text(json.dumps(spec))
+    (root / "coarse.json").write_text(json.dumps(dict(spec, protocol={"min_px_per_period": 20})))
+    return root
+
+
+def _main(capsys, *argv):
+    from glassdist.cli import main
+
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_spec_pins_the_protocol_and_records_it_per_zone(lens_photos, tmp_path, capsys):
+    import json
+
+    out = tmp_path / "o"
+    code, stdout, err = _main(capsys, "analyze", lens_photos / "pane.png", "--reference", lens_photos / "reference.png",
+                              "--spec", lens_photos / "spec.json", "--pane-id", "P-7", "--site", "line 2",
+                              "--report", "--out", out)
+    assert code == 0, err
+    s = json.loads((out / "summary.json").read_text())
+    assert s["protocol"]["resolved"] == {"method": "comparative", "pitch_mm": 2.0, "distance_m": 1.0,
+                                         "pattern": "lines", "detrend_degree": 2, "sigma_mm": 1.5}
+    assert s["protocol"]["sources"]["distance_m"] == "spec" and s["protocol"]["used"]["sigma_mm"] == 1.5
+    assert s["parameters"]["sigma_mm"] == 1.5 and s["distance_m"] == 1.0
+    assert s["pane"]["source"] == "spec" and s["pane"]["area_mm2"] == pytest.approx(1600.0)
+    assert s["zones"]["edge"]["area_mm2"] == pytest.approx(1600 - 30 * 30, abs=1.0)
+    assert set(s["zones"]["vision"]["statistics"]) >= {"phi_eff", "phi_shear"}
+    assert s["metadata"]["pane_id"] == "P-7" and s["metadata"]["camera"] is None
+    assert "zone vision:" in stdout and "worst_regions.csv" in s["outputs"]
+    html = (out / "report.html").read_text()
+    assert "P-7" in html and 'id="zones"' in html and 'id="worst-regions"' in html
+
+
+def test_contradicting_option_exits_2_and_writes_nothing(lens_photos, tmp_path, capsys):
+    out = tmp_path / "o"
+    code, stdout, err = _main(capsys, "analyze", lens_photos / "pane.png", "--reference", lens_photos / "reference.png",
+                              "--spec", lens_photos / "spec.json", "--distance-m", 3, "--out", out)
+    assert code == 2 and stdout == ""
+    assert err.strip().splitlines() == [err.strip()] and "--distance-m 3 contradicts" in err and "leave" in err
+    assert not out.exists()
+    code, _, err = _main(capsys, "analyze", lens_photos / "pane.png", "--spec", lens_photos / "spec.json",
+                         "--out", out)
+    assert code == 2 and "requires the comparative method" in err
+
+
+def test_capture_limit_refuses_the_photo(lens_photos, tmp_path, capsys):
+    out = tmp_path / "o"
+    code, _, err = _main(capsys, "analyze", lens_photos / "pane.png", "--reference", lens_photos / "reference.png",
+                         "--pitch-mm", 2, "--distance-m", 1, "--spec", lens_photos / "coarse.json", "--out", out)
+    assert code == 2 and "px per grid carrier period" in err and "at least 20" in err
+    assert not (out / "summary.json").exists()

@@ -78,8 +78,8 @@ def _register_analyze(sub) -> None:
     p.add_argument("image", type=Path, nargs="+",
                    help="photo of the grid through the glass (PNG/TIFF/BMP/JPEG, 8/16-bit); several photos of one set-up "
                    "(repeated exposures, small camera moves) are registered and averaged into one map")
-    p.add_argument("--pitch-mm", type=_positive, required=True, help="grid pitch on the backdrop, mm (line spacing, or square size)")
-    p.add_argument("--distance-m", type=_positive, required=True, help="glass-to-grid distance L, m")
+    p.add_argument("--pitch-mm", type=_positive, help="grid pitch on the backdrop, mm (line spacing, or square size); required unless the --spec protocol pins pitch_mm")
+    p.add_argument("--distance-m", type=_positive, help="glass-to-grid distance L, m; required unless the --spec protocol pins distance_m")
     p.add_argument("--reference", type=Path, help="glass-less photo from the same camera position (Comparative Method)")
     p.add_argument("--pattern", choices=["lines", "checkerboard"], help="backdrop pattern (default: from --params, else lines)")
     p.add_argument("--detrend-degree", type=int, help="A2 polynomial detrend total degree N (default 2)")
@@ -87,10 +87,13 @@ def _register_analyze(sub) -> None:
     p.add_argument("--params", type=Path, help="JSON file of analyzer parameters (unknown keys are errors)")
     p.add_argument("--mask", type=Path, help="image whose non-zero pixels mark the region to analyse")
     p.add_argument("--out", type=Path, required=True, help="output folder (created if needed)")
-    p.add_argument("--spec", type=Path, help="acceptance specification JSON: prints PASS/FAIL, exit 3 on FAIL")
+    p.add_argument("--spec", type=Path, help="acceptance specification JSON: prints PASS/FAIL, exit 3 on FAIL; its protocol supplies omitted options and refuses contradicting ones (exit 2)")
+    p.add_argument("--pane-id", help="pane identifier, stated in the report and summary.json")
+    p.add_argument("--site", help="where the pane was measured (factory line, building), for the report")
+    p.add_argument("--operator", help="who took the photo, for the report")
     p.add_argument("--report", action="store_true", help="also write a self-contained HTML report")
     p.add_argument("--export", action="store_true", help="also export the fields as NPZ and 32-bit TIFF (statistics.csv is always written)")
-    p.set_defaults(func=_run_analyze)
+    p.set_defaults(func=_run_analyze, parser=p)
 
 
 def write_analysis(result, out_dir: Path, *, inputs: dict | None = None, outputs: dict | None = None) -> list[Path]:
@@ -127,11 +130,21 @@ def write_analysis(result, out_dir: Path, *, inputs: dict | None = None, outputs
 def _run_analyze(args) -> int:
     from .analyzer import analyze, analyze_captures, load_params, prepare_reference
     from .io import prepare_output_dir, read_image, read_mask, recorded_outputs, remove_outputs
-    from .report.figures import save_channel_heatmaps
+    from .report.spec import check_capture, load_spec, resolve_protocol
     from .report.workflow import file_sha256, finish_analysis
 
-    # Validate every input before any work or any write.
-    params = load_params(args.params, pattern=args.pattern, detrend_degree=args.detrend_degree, sigma_mm=args.sigma_mm)
+    # Validate every input before any work or any write; the spec's protocol fills omitted options.
+    if args.spec is None:
+        missing = [opt for opt, v in (("--pitch-mm", args.pitch_mm), ("--distance-m", args.distance_m)) if v is None]
+        if missing:
+            args.parser.error(f"the following arguments are required: {', '.join(missing)}")
+    spec = load_spec(args.spec) if args.spec is not None else None
+    protocol = resolve_protocol(
+        spec[0].protocol if spec else None, reference_given=args.reference is not None, pitch_mm=args.pitch_mm,
+        distance_m=args.distance_m, pattern=args.pattern, sigma_mm=args.sigma_mm, detrend_degree=args.detrend_degree,
+        params=load_params(args.params) if args.params is not None else None,
+        spec_label=f"the specification '{args.spec}'")
+    params = load_params(args.params, **protocol.params_overrides)
     paths = list(args.image)
     images = [read_image(path) for path in paths]
     image = images[0]
@@ -148,18 +161,16 @@ def _run_analyze(args) -> int:
             f"{image.shape[1]}x{image.shape[0]} px; both photos must come from the same camera, same size"
         )
     mask = read_mask(args.mask, image.shape) if args.mask is not None else None
-    if args.spec is not None:
-        from .report.spec import load_spec
-
-        load_spec(args.spec)
     out = prepare_output_dir(args.out)
     previous = recorded_outputs(out)  # files of an earlier run into this folder
 
     if reference is not None:
         reference = prepare_reference(reference, params=params)
-    kw = dict(pitch_mm=args.pitch_mm, distance_m=args.distance_m, reference=reference, params=params, mask=mask)
+    kw = dict(pitch_mm=protocol.pitch_mm, distance_m=protocol.distance_m, reference=reference, params=params, mask=mask)
     result = analyze(image, **kw) if len(images) == 1 else analyze_captures(images, **kw)
     del images, image
+    if spec is not None:  # a capture outside the protocol is not judged (exit 2), nothing written
+        check_capture(spec[0].protocol, result, spec_label=f"the specification '{args.spec}'")
     inputs = {
         "image": str(paths[0]),
         "image_sha256": file_sha256(paths[0]),
@@ -170,10 +181,10 @@ def _run_analyze(args) -> int:
     if len(paths) > 1:
         inputs["captures"] = [{"image": str(path), "sha256": file_sha256(path)} for path in paths]
     written = write_analysis(result, out, inputs=inputs, outputs=previous)
-    written += list(save_channel_heatmaps(result, out))
     code = finish_analysis(
         result, out_dir=out, image_path=paths[0], reference_path=args.reference, spec_path=args.spec,
-        report=args.report, exports=args.export, written=written,
+        report=args.report, exports=args.export, written=written, spec=spec, protocol=protocol, mask=mask,
+        metadata={"pane_id": args.pane_id, "site": args.site, "operator": args.operator},
     )
     # the earlier run's files that this one did not write again (e.g. its report, masks of its spec)
     removed, problems = remove_outputs(out, sorted(set(previous) - set(recorded_outputs(out))))

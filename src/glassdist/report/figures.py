@@ -65,9 +65,9 @@ def _new_ax(ax, figsize=(6.4, 5.2)):
     return fig, fig.add_subplot()
 
 
-def _label_image_axes(ax, title):
-    ax.set_xlabel("x (px, columns)")
-    ax.set_ylabel("y (px, rows)")
+def _label_image_axes(ax, title, units="px"):
+    ax.set_xlabel(f"x ({units}, columns)" if units == "px" else f"x ({units})")
+    ax.set_ylabel(f"y ({units}, rows)" if units == "px" else f"y ({units})")
     if title:
         ax.set_title(title)
 
@@ -106,7 +106,8 @@ def shared_limit(*fields, valid=None, percentile=99.0):
     return best if best > 0 else 1.0
 
 
-def plot_channel(field, valid=None, *, signed=True, vmax=None, cmap=None, title=None, ax=None, colorbar=True):
+def plot_channel(field, valid=None, *, signed=True, vmax=None, cmap=None, title=None, ax=None, colorbar=True,
+                 extent=None, axis_units="px"):
     """Heatmap of one power channel, in mD, over the valid region.
 
     Parameters
@@ -125,6 +126,10 @@ def plot_channel(field, valid=None, *, signed=True, vmax=None, cmap=None, title=
     ax : matplotlib Axes, optional
     colorbar : bool
         Draw a colour bar labelled in mD.
+    extent : (float, float, float, float), optional
+        ``imshow`` extent (left, right, bottom, top) in ``axis_units`` (e.g. mm); default pixels.
+    axis_units : str
+        Label of the axes' unit.
 
     Returns
     -------
@@ -138,8 +143,8 @@ def plot_channel(field, valid=None, *, signed=True, vmax=None, cmap=None, title=
         vmax = shared_limit(field, valid=valid)
     cmap_obj = matplotlib.colormaps[cmap or ("RdBu_r" if signed else "viridis")].with_extremes(bad=_INVALID_RGBA)
     norm = Normalize(-vmax, vmax) if signed else Normalize(0.0, vmax)
-    im = ax.imshow(data, cmap=cmap_obj, norm=norm, interpolation="nearest")
-    _label_image_axes(ax, title)
+    im = ax.imshow(data, cmap=cmap_obj, norm=norm, interpolation="nearest", extent=extent)
+    _label_image_axes(ax, title, axis_units)
     if colorbar:
         fig.colorbar(im, ax=ax, label="mD", extend="both" if signed else "max", shrink=0.9)
     return fig, ax

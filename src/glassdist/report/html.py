@@ -132,7 +132,57 @@ def _input_rows(label, info):
     ]
 
 
-def render_report(result, *, stats, figures, inputs, verdict=None, valid_percent=None, generated=None):
+def _acceptance_sections(acc):
+    """Pane metadata, protocol, zones and worst-region tables (HTML) of an Acceptance."""
+    from .acceptance import metadata_rows
+
+    meta = _kv_table([(k, escape(v)) for k, v in metadata_rows(acc.metadata)])
+    proto = ""
+    if acc.protocol:
+        used = acc.protocol.get("used", {})
+        pinned = acc.protocol.get("pinned", {})
+        sources = acc.protocol.get("sources", {})
+        rows = "".join(f"<tr><th>{escape(k)}</th><td>{_num(v)}</td><td>{_num(pinned.get(k))}</td>"
+                       f"<td>{escape(str(sources.get(k, '')))}</td></tr>" for k, v in used.items())
+        extra = "".join(f"<tr><th>{escape(k)}</th><td>—</td><td>{_num(v)}</td><td>capture limit</td></tr>"
+                        for k, v in pinned.items() if k not in used)
+        proto = ('<table id="protocol"><tr><th>setting</th><th>used</th><th>pinned by the specification</th>'
+                 f"<th>from</th></tr>{rows}{extra}</table>")
+    f = acc.frame
+    pane = (f"<p>Pane outline: <b>{escape(f.source.replace('_', ' '))}</b>; millimetres "
+            f"{'on the pane' if f.units == 'pane_mm' else 'on the backdrop (through mm per px)'}"
+            + (f"; size {f.size_mm[0]:.4g} × {f.size_mm[1]:.4g} mm" if f.size_mm else "") + ".</p>"
+            + (f'<p class="warn">{escape(f.warning)}</p>' if f.warning and acc.zones else ""))
+    zrows = ""
+    for name, z in acc.zones.items():
+        e, s_ = z["statistics"].get("phi_eff", {}), z["statistics"].get("phi_shear", {})
+        zrows += (f"<tr><th>{escape(name)}</th><td>{escape(z['definition'])}</td><td class='num'>{_num(z['area_mm2'])}</td>"
+                  f"<td class='num'>{_num(z['coverage_percent'])}</td><td class='num'>{_num(e.get('mean_abs'))}</td>"
+                  f"<td class='num'>{_num(e.get('p95_abs'))}</td><td class='num'>{_num(s_.get('p95_abs'))}</td></tr>")
+    zones = ('<table id="zones"><tr><th>zone</th><th>definition</th><th>area (mm²)</th><th>analysed (% of zone)</th>'
+             f"<th>mean |φ_eff| (mD)</th><th>p95 |φ_eff| (mD)</th><th>p95 φ_shear (mD)</th></tr>{zrows}</table>"
+             if zrows else "<p>No zones in the specification: statistics are over the whole analysed region.</p>")
+    rrows = ""
+    for ch, e in acc.regions.items():
+        for r in e["regions"]:
+            rrows += (f"<tr><td>{escape(ch)}</td><td class='num'>{r.number}</td>"
+                      f"<td class='num'>{_num(r.centroid_mm[0])}, {_num(r.centroid_mm[1])}</td>"
+                      f"<td class='num'>{_num(r.extent_mm[0])}–{_num(r.extent_mm[1])} × "
+                      f"{_num(r.extent_mm[2])}–{_num(r.extent_mm[3])}</td><td class='num'>{_num(r.area_mm2)}</td>"
+                      f"<td class='num'>{_num(r.peak_mD)}</td><td class='num'>{_num(r.mean_abs_mD)}</td></tr>")
+    thresholds = "; ".join(f"{escape(ch)} over {_num(e['threshold_mD'])} mD ({escape(e['threshold_source'])})"
+                           for ch, e in acc.regions.items())
+    regions = (f"<p>Connected regions {thresholds}; numbered on the heatmaps, worst peak first; coordinates in "
+               f"{'pane' if f.units == 'pane_mm' else 'backdrop'} mm from the pane frame's origin.</p>"
+               '<table id="worst-regions"><tr><th>channel</th><th>#</th><th>centroid x, y (mm)</th>'
+               "<th>extent x × y (mm)</th><th>area (mm²)</th><th>peak (mD)</th><th>mean |φ| (mD)</th></tr>"
+               f"{rrows}</table>")
+    return meta, f"<h2>Protocol</h2>{proto or '<p>No protocol pinned.</p>'}", \
+        f"<h2>Pane and zones</h2>{pane}{zones}<h2>Worst regions</h2>{regions}"
+
+
+def render_report(result, *, stats, figures, inputs, verdict=None, valid_percent=None, generated=None,
+                  acceptance=None):
     """HTML text of the report.
 
     Parameters
@@ -149,6 +199,9 @@ def render_report(result, *, stats, figures, inputs, verdict=None, valid_percent
         Analysed area, percent of the image.
     generated : datetime, optional
         Time stamp written in the report (default: now, UTC).
+    acceptance : Acceptance, optional
+        Pane metadata, protocol, zones and worst regions
+        (:func:`glassdist.report.acceptance.assess`).
 
     Returns
     -------
@@ -168,6 +221,9 @@ def render_report(result, *, stats, figures, inputs, verdict=None, valid_percent
     warnings = tuple(getattr(result, "warnings", ()) or ())
     image_name = inputs["image"]["name"]
     title = f"Glass distortion report: {image_name}"
+    pane_id = (acceptance.metadata.get("pane_id") if acceptance is not None else None)
+    if pane_id:
+        title = f"Glass distortion report: pane {pane_id} ({image_name})"
 
     geometry = [
         ("grid pitch", f"{_num(result.pitch_mm)} mm"),
@@ -195,6 +251,9 @@ def render_report(result, *, stats, figures, inputs, verdict=None, valid_percent
         "valid_percent": valid_percent, "verdict": verdict.to_dict() if verdict is not None else None,
         "statistics": stats, "parameters": params, "homography_fit": fit_facts, "warnings": list(warnings),
     }
+    meta_html, proto_html, zones_html = _acceptance_sections(acceptance) if acceptance is not None else ("", "", "")
+    if acceptance is not None:
+        data.update({k: v for k, v in acceptance.summary().items() if k in ("metadata", "protocol", "zones", "worst_regions")})
     data_json = json.dumps(to_jsonable(data), allow_nan=False).replace("</", "<\\/")
     warn_html = "".join(f'<p class="warn">{escape(w)}</p>' for w in warnings) or "<p>None.</p>"
     fig_html = "".join(_img(png, fid, cap) for fid, cap, png in figures)
@@ -205,8 +264,10 @@ def render_report(result, *, stats, figures, inputs, verdict=None, valid_percent
 <h2>1. Identification</h2>
 {_kv_table(_input_rows('input image', inputs['image']) + _input_rows('reference image', inputs.get('reference'))
            + [('glassdist version', f'<code id="version">{escape(version)}</code>'), ('method', escape(method))])}
+<div id="pane-metadata">{meta_html}</div>
 <h2>2. Capture geometry</h2>
 {_kv_table(geometry)}
+{proto_html}
 <details><summary>carriers detected in the photograph</summary><pre>{escape(json.dumps(to_jsonable(carriers), indent=1))}</pre></details>
 <h2>3. Method</h2>
 <p>{escape(METHOD_TEXT.get(method, method))}</p>
@@ -214,6 +275,7 @@ def render_report(result, *, stats, figures, inputs, verdict=None, valid_percent
 <details><summary>all analysis parameters (resolved)</summary><pre>{escape(json.dumps(to_jsonable(params), indent=1))}</pre></details>
 <h2>4. Results</h2>
 {_stats_table(stats)}
+{zones_html}
 <div class="figs">{fig_html}</div>
 <h2>5. Warnings</h2>
 {warn_html}

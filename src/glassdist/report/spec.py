@@ -43,13 +43,13 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from ..errors import InputError
 from .stats import format_limit, valid_percent
 
 __all__ = [
-    "Criterion", "Protocol", "Pane", "Zone", "WorstRegions", "Spec", "Check", "Verdict", "ResolvedProtocol",
+    "Criterion", "Protocol", "Pane", "Zone", "WorstRegions", "Figures", "Spec", "Check", "Verdict", "ResolvedProtocol",
     "load_spec", "evaluate_spec", "spec_limits", "resolve_protocol", "check_capture", "px_per_period",
 ]
 
@@ -212,6 +212,27 @@ class WorstRegions(BaseModel):
     min_area_mm2: float = Field(0.0, ge=0, allow_inf_nan=False)
 
 
+class Figures(BaseModel):
+    """How the heatmaps are drawn.
+
+    ``colour_limit``: ``"auto"`` (default: the 99th percentile of ``|phi|``, shared by the
+    two channels), ``"spec"`` (each channel's colour scale ends at its smallest limit in
+    the specification, so every pixel over the limit shows in the top colour), or a
+    number in mD.
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    colour_limit: Literal["auto", "spec"] | float = "auto"
+
+    @field_validator("colour_limit")
+    @classmethod
+    def _positive(cls, v):
+        if not isinstance(v, str) and not (math.isfinite(v) and v > 0):
+            raise ValueError("'colour_limit' must be 'auto', 'spec' or a positive number of mD")
+        return v
+
+
 class Spec(BaseModel):
     """An acceptance specification (see the module docstring for the JSON form)."""
 
@@ -225,6 +246,7 @@ class Spec(BaseModel):
     pane: Pane | None = None
     zones: tuple[Zone, ...] = ()
     worst_regions: WorstRegions = WorstRegions()
+    figures: Figures = Figures()
 
     @model_validator(mode="after")
     def _check_zones(self):
@@ -479,14 +501,14 @@ def resolve_protocol(protocol=None, *, reference_given, pitch_mm=None, distance_
     >>> resolve_protocol(p, reference_given=True, distance_m=3.0)
     Traceback (most recent call last):
     ...
-    glassdist.errors.InputError: --distance-m 3 contradicts the specification's protocol (distance_m = 1 m); leave --distance-m out to use the specification's value, or use a specification written for this setting
+    glassdist.errors.InputError: --distance-m 3 contradicts the protocol of the specification (distance_m = 1 m); leave --distance-m out to use the specification's value, or use a specification written for this setting
     """
     protocol = protocol or Protocol()
     pinned = protocol.model_dump(exclude_none=True)
     method = "comparative" if reference_given else "direct"
     if protocol.method is not None and protocol.method != method:
         fix = "give --reference REF (the glass-less photo)" if protocol.method == "comparative" else "leave --reference out"
-        raise InputError(f"{spec_label}'s protocol requires the {protocol.method} method; {fix}")
+        raise InputError(f"the protocol of {spec_label} requires the {protocol.method} method; {fix}")
     given = {"pitch_mm": pitch_mm, "distance_m": distance_m, "pattern": pattern, "sigma_mm": sigma_mm,
              "detrend_degree": detrend_degree}
     from_file = {}
@@ -499,7 +521,7 @@ def resolve_protocol(protocol=None, *, reference_given, pitch_mm=None, distance_
         if given[key] is not None:
             if pin is not None and not _same(given[key], pin):
                 raise InputError(
-                    f"{opt} {_text(given[key])} contradicts {spec_label}'s protocol ({key} = {_text(pin)}"
+                    f"{opt} {_text(given[key])} contradicts the protocol of {spec_label} ({key} = {_text(pin)}"
                     f"{_UNIT.get(key, '')}); leave {opt} out to use the specification's value, or use a specification "
                     "written for this setting")
             values[key], sources[key] = given[key], "option"
@@ -509,7 +531,7 @@ def resolve_protocol(protocol=None, *, reference_given, pitch_mm=None, distance_
             values[key], sources[key] = from_file[key], "params"
     for key in ("pattern", "sigma_mm", "detrend_degree"):
         if pinned.get(key) is not None and key in from_file and not _same(from_file[key], pinned[key]):
-            raise InputError(f"the --params file sets {key} = {from_file[key]} but {spec_label}'s protocol pins "
+            raise InputError(f"the --params file sets {key} = {from_file[key]} but the protocol of {spec_label} pins "
                              f"{key} = {pinned[key]}; remove '{key}' from the parameter file")
     for key in ("pitch_mm", "distance_m"):
         if key not in values:
@@ -526,7 +548,7 @@ def resolve_protocol(protocol=None, *, reference_given, pitch_mm=None, distance_
         have = values.get("sigma_mm")
         if have is not None and not _same(float(have), want):
             via = "--sigma-mm" if sources["sigma_mm"] == "option" else "the --params file's sigma_mm"
-            raise InputError(f"{via} {have:g} contradicts {spec_label}'s protocol (sigma_periods = "
+            raise InputError(f"{via} {have:g} contradicts the protocol of {spec_label} (sigma_periods = "
                              f"{protocol.sigma_periods:g}, i.e. {want:.4g} mm at this pitch and pattern); leave it out "
                              "to use the specification's value")
         values["sigma_mm"], sources["sigma_mm"] = want, "spec"
@@ -545,10 +567,11 @@ def resolve_protocol(protocol=None, *, reference_given, pitch_mm=None, distance_
 
 def px_per_period(result):
     """Shortest carrier period of the photo in px (the capture limit ``min_px_per_period`` is on it)."""
-    carriers = getattr(result, "carriers", None)
-    if carriers is not None:
-        return float(min(carriers.k1.period_px, carriers.k2.period_px))
-    return float(result.carrier_period_mm / result.mm_per_px)
+    try:
+        return float(min(result.carriers.k1.period_px, result.carriers.k2.period_px))
+    except AttributeError:
+        period = getattr(result, "carrier_period_mm", None)
+        return float(period / result.mm_per_px) if period else float("nan")
 
 
 def check_capture(protocol, result, *, spec_label="the specification"):
@@ -565,7 +588,7 @@ def check_capture(protocol, result, *, spec_label="the specification"):
     got = px_per_period(result)
     if got < protocol.min_px_per_period:
         raise InputError(
-            f"the photo has {got:.3g} px per grid carrier period but {spec_label}'s protocol requires at least "
+            f"the photo has {got:.3g} px per grid carrier period but the protocol of {spec_label} requires at least "
             f"{protocol.min_px_per_period:g} (min_px_per_period); photograph the grid closer, with a longer focal "
             "length or a coarser grid")
 
