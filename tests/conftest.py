@@ -39,3 +39,18 @@ def agreement(measured, truth, valid):
     ok = np.isfinite(a) & np.isfinite(b)
     a, b = a[ok], b[ok]
     return float(np.mean(np.abs(a)) / np.mean(np.abs(b))), float(np.corrcoef(a, b)[0, 1])
+
+
+def write_lens_pair(root):
+    """A small synthetic pane (a converging lens, -100 mD at its centre) and its reference as 16-bit PNGs.
+
+    Writes ``root/pane.png`` and ``root/reference.png`` (160 x 160 px, 2 mm pitch, 0.25 mm per px).
+    """
+    from glassdist.io import write_png16
+    from glassdist.synthetic import lens_displacement, synthetic_capture
+
+    cap = synthetic_capture((160, 160), pitch_mm=2.0, mm_per_px=0.25,
+                            displacement=lens_displacement(0.05, 1.0, radius_mm=7.0), rng=0)
+    write_png16(root / "pane.png", cap.image)
+    write_png16(root / "reference.png", cap.reference)
+    return root

@@ -236,14 +236,9 @@ def lens_photos(tmp_path_factory):
     """A small synthetic pane (a converging lens) and its reference; a spec pinning the protocol, with two zones."""
     import json
 
-    from glassdist.io import write_png16
-    from glassdist.synthetic import lens_displacement, synthetic_capture
+    from conftest import write_lens_pair
 
-    root = tmp_path_factory.mktemp("lens")
-    cap = synthetic_capture((160, 160), pitch_mm=2.0, mm_per_px=0.25,
-                            displacement=lens_displacement(0.05, 1.0, radius_mm=7.0), rng=0)
-    write_png16(root / "pane.png", cap.image)
-    write_png16(root / "reference.png", cap.reference)
+    root = write_lens_pair(tmp_path_factory.mktemp("lens"))
     spec = {
         "name": "zoned",
         "protocol": {"method": "comparative", "pitch_mm": 2.0, "distance_m": 1.0, "sigma_mm": 1.5,

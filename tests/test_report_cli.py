@@ -32,14 +32,9 @@ def glassdist(*args, cwd=None):
 @pytest.fixture(scope="module")
 def photos(tmp_path_factory):
     """A small synthetic pane (a converging lens, -100 mD at its centre) and its reference."""
-    from glassdist.io import write_png16
-    from glassdist.synthetic import lens_displacement, synthetic_capture
+    from conftest import write_lens_pair
 
-    root = tmp_path_factory.mktemp("photos")
-    cap = synthetic_capture((160, 160), pitch_mm=2.0, mm_per_px=0.25,
-                            displacement=lens_displacement(0.05, 1.0, radius_mm=7.0), rng=0)
-    write_png16(root / "pane.png", cap.image)
-    write_png16(root / "reference.png", cap.reference)
+    root = write_lens_pair(tmp_path_factory.mktemp("photos"))
     spec = {"criteria": [{"channel": "phi_eff", "statistic": "max_abs", "max_mD": 1000},
                          {"channel": "phi_shear", "statistic": "p95_abs", "max_mD": 1000}]}
     (root / "pass.json").write_text(json.dumps(dict(spec, name="lenient")))
