@@ -22,6 +22,7 @@ import filecmp
 import json
 import os
 import platform
+import re
 import shutil
 import subprocess
 import sys
@@ -45,14 +46,26 @@ def _glassdist(*args):
     return seconds, r.returncode
 
 
+_STAMP = re.compile(rb"\d{4}-\d\d-\d\d[T ]\d\d:\d\d:\d\d(\+00:00)?")
+
+
 def _same(serial: Path, parallel: Path) -> list[str]:
-    """Files that differ between the two runs, other than logs, records with timings and the HTML index."""
+    """Files that differ between the two runs, other than logs, records with timings and the HTML index.
+
+    A report's time of generation is left out of its comparison (it differs between any two runs).
+    """
     skip = ("analyze.log", "validate.log", "pane.json", "variant.json", "index.html", "index.csv", "index.json",
             "validation.json")
     differ = []
     for p in sorted(serial.rglob("*")):
         rel = p.relative_to(serial)
-        if p.is_file() and p.name not in skip and not filecmp.cmp(p, parallel / rel, shallow=False):
+        if not p.is_file() or p.name in skip:
+            continue
+        if p.name == "report.html":
+            same = _STAMP.sub(b"", p.read_bytes()) == _STAMP.sub(b"", (parallel / rel).read_bytes())
+        else:
+            same = filecmp.cmp(p, parallel / rel, shallow=False)
+        if not same:
             differ.append(str(rel))
     return differ
 
@@ -84,6 +97,7 @@ def main(argv=None):
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--pixels", type=int, nargs=2, default=(512, 384), metavar=("W", "H"), help="sweep image size")
     ap.add_argument("--spp", type=int, default=4, help="sweep samples per pixel")
+    ap.add_argument("--runs", nargs="+", choices=["batch", "sweep"], default=["batch", "sweep"])
     args = ap.parse_args(argv)
     work = Path(tempfile.mkdtemp(prefix="bench-distributed-"))
     try:
@@ -91,8 +105,9 @@ def main(argv=None):
         scene = _scene(work, args.pixels, args.spp)
         vary = ["--vary", "backdrop.pitch_mm=24.2,36.3,48.4", "--vary", "analysis.sigma_mm=40,80"]
         runs = {}
-        for what, cmd in (("batch_8_panes", ["batch", manifest, "--report", "--no-progress"]),
-                          ("sweep_6_variants", ["sweep", scene, *vary, "--no-progress"])):
+        commands = {"batch": ("batch_8_panes", ["batch", manifest, "--report", "--no-progress"]),
+                    "sweep": ("sweep_6_variants", ["sweep", scene, *vary, "--no-progress"])}
+        for what, cmd in (commands[r] for r in args.runs):
             serial_s, code_s = _glassdist(*cmd, "--out", work / f"{what}_serial")
             dask_s, code_d = _glassdist(*cmd, "--out", work / f"{what}_dask", "--workers", args.workers)
             runs[what] = {

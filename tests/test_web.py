@@ -137,3 +137,21 @@ def test_upload_result_and_report_in_headless_chromium(server, tmp_path):
             assert "\n" not in error.strip() and "'notes.txt' has an unsupported extension '.txt'" in error
         finally:
             browser.close()
+
+
+@pytest.mark.filterwarnings("ignore:Using `httpx` with `starlette.testclient`")
+def test_a_server_reachable_from_elsewhere_says_so(capsys, monkeypatch):
+    from fastapi.testclient import TestClient
+
+    import glassdist.web._app as web_app
+
+    with TestClient(create_app(public_host="0.0.0.0:8000")) as client:
+        assert 'id="public-warning"' in client.get("/").text
+    with TestClient(create_app()) as client:
+        assert 'id="public-warning"' not in client.get("/").text
+    monkeypatch.setattr("uvicorn.run", lambda app, **kw: None)  # serve() without serving
+    web_app.serve("0.0.0.0", 8123)
+    err = capsys.readouterr().err
+    assert "warning: listening on 0.0.0.0:8123, reachable from other machines" in err
+    web_app.serve("127.0.0.1", 8123)
+    assert "warning" not in capsys.readouterr().err

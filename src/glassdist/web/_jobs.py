@@ -183,7 +183,7 @@ class JobStore:
         for role, option in ROLES.items():
             if option and role in job.names:
                 args += [option, job.names[role]]
-        args += ["--report", "--export", "--out", "out", job.names["image"]]
+        args += ["--report", "--export", "--out", "out", "--", job.names["image"]]
         job.args = args
         with self._lock:
             self._jobs[job.id] = job
