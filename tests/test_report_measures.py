@@ -247,3 +247,31 @@ def test_standard_measures_of_an_analysis_find_the_roll_wave():
     summary = json.loads(json.dumps(m.to_dict(), allow_nan=True))
     assert set(summary) >= {"roll_wave", "angular_deviation", "grid_line_slope", "equivalent_power", "field"}
     assert summary["angular_deviation"]["gauge_mm"] == 4.0
+
+
+def test_result_profile_in_backdrop_and_pane_mm():
+    import glassdist
+    from glassdist.report.measures import result_profile
+    from glassdist.report.zones import pane_frame_from_corners
+    from glassdist.synthetic import synthetic_capture
+
+    pitch, mmpx, L = 5.0, 0.625, 2.0
+    H, W = 256, 320
+    cap = synthetic_capture((H, W), pitch_mm=pitch, mm_per_px=mmpx, displacement=wave_displacement(0.3, 60.0, 0.0))
+    res = glassdist.analyze(cap.image, pitch_mm=pitch, distance_m=L, reference=cap.reference,
+                            params={"detrend_degree": 1, "sigma_mm": 5.0})
+    # along the middle row, backdrop mm from the top-left pixel centre
+    row = H // 2
+    prof = result_profile(res, "phi_eff_mD", start_mm=(40 * mmpx, row * mmpx), end_mm=(280 * mmpx, row * mmpx))
+    cols = np.rint(prof.x_mm / mmpx).astype(int)
+    on_px = np.abs(prof.x_mm / mmpx - cols) < 1e-6
+    np.testing.assert_allclose(prof.values[on_px], res.phi_eff_mD[row, cols[on_px]], atol=0.02 * np.nanmax(np.abs(res.phi_eff_mD)))
+    # a pane frame: the image's corner pixels as a pane of 1.25 pane mm per px; the same line in both frames
+    frame = pane_frame_from_corners([(0, 0), (W - 1, 0), (W - 1, H - 1), (0, H - 1)], (400.0 * (W - 1) / W, 320.0 * (H - 1) / H),
+                                    (H, W))
+    pane = result_profile(res, "displacement_detrended_mm", start_mm=(80.0, 160.0), end_mm=(320.0, 160.0), frame=frame,
+                          spacing_mm=1.25 * 8)
+    backdrop = result_profile(res, "displacement_detrended_mm", start_mm=(64 * mmpx, 128 * mmpx),
+                              end_mm=(256 * mmpx, 128 * mmpx), spacing_mm=8 * mmpx)
+    assert pane.values.shape == backdrop.values.shape == (25, 2)
+    np.testing.assert_allclose(pane.values, backdrop.values, atol=1e-6)

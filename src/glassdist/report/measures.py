@@ -6,7 +6,8 @@ them all once the displacement field is known (formulas and references in
 
 * :func:`roll_wave` -- roll-wave period, direction and amplitude (ASTM C1651 quantities),
   from the spectrum of the field's divergence;
-* :func:`line_profile` -- a field sampled along a chosen line;
+* :func:`line_profile` -- a field sampled along a chosen line (:func:`result_profile`: a
+  result's field along a line in pane or backdrop millimetres);
 * :func:`angular_deviation` -- the ray deviation angle and its change over a gauge length,
   arc minutes (ECE R43 / ISO 3538 "optical deviation" and "optical distortion");
 * :func:`grid_line_slope` -- the largest slope of a distorted grid line, "1 in N" (ASTM F2156);
@@ -48,6 +49,7 @@ __all__ = [
     "displacement_gradient",
     "roll_wave",
     "line_profile",
+    "result_profile",
     "angular_deviation",
     "grid_line_slope",
     "equivalent_power",
@@ -375,6 +377,19 @@ class LineProfile:
     values: np.ndarray
 
 
+def _segment(start_mm, end_mm, spacing_mm: float):
+    """Arc length and positions (mm) of points every ``spacing_mm`` from ``start_mm`` to ``end_mm``."""
+    p0, p1 = np.asarray(start_mm, float), np.asarray(end_mm, float)
+    length = float(np.hypot(*(p1 - p0)))
+    ds = float(spacing_mm)
+    if not (np.isfinite(ds) and ds > 0):
+        raise ValueError(f"spacing_mm must be positive, got {spacing_mm!r}")
+    n = max(2, int(np.floor(length / ds)) + 1)
+    s = np.linspace(0.0, length, n) if length > 0 else np.zeros(1)
+    t = s / length if length > 0 else s
+    return s, p0[0] + t * (p1[0] - p0[0]), p0[1] + t * (p1[1] - p0[1])
+
+
 def line_profile(field: np.ndarray, *, step_mm, start_mm, end_mm, spacing_mm: float | None = None,
                  origin_mm=(0.0, 0.0)) -> LineProfile:
     """Sample a field (a channel or the displacement) along the segment ``start_mm -> end_mm``.
@@ -396,21 +411,44 @@ def line_profile(field: np.ndarray, *, step_mm, start_mm, end_mm, spacing_mm: fl
     f = np.asarray(field, dtype=float)
     if f.ndim not in (2, 3):
         raise ValueError(f"field must have shape (h, w) or (h, w, c), got {f.shape}")
-    p0, p1 = np.asarray(start_mm, float), np.asarray(end_mm, float)
-    length = float(np.hypot(*(p1 - p0)))
-    ds = float(spacing_mm) if spacing_mm is not None else min(sx, sy)
-    if not (np.isfinite(ds) and ds > 0):
-        raise ValueError(f"spacing_mm must be positive, got {spacing_mm!r}")
-    n = max(2, int(np.floor(length / ds)) + 1)
-    s = np.linspace(0.0, length, n) if length > 0 else np.zeros(1)
-    t = s / length if length > 0 else s
-    x = p0[0] + t * (p1[0] - p0[0])
-    y = p0[1] + t * (p1[1] - p0[1])
-    rows, cols = (y - origin_mm[1]) / sy, (x - origin_mm[0]) / sx
-    planes = [f] if f.ndim == 2 else [f[..., c] for c in range(f.shape[2])]
-    out = [sample_field(p, rows, cols) for p in planes]
-    vals = out[0] if f.ndim == 2 else np.stack(out, axis=-1)
-    return LineProfile(s, x, y, vals)
+    s, x, y = _segment(start_mm, end_mm, spacing_mm if spacing_mm is not None else min(sx, sy))
+    return LineProfile(s, x, y, _sample_planes(f, (y - origin_mm[1]) / sy, (x - origin_mm[0]) / sx))
+
+
+def _sample_planes(f: np.ndarray, rows, cols) -> np.ndarray:
+    """:func:`~glassdist.analyzer.captures.sample_field` of each plane of an (h, w) or (h, w, c) field."""
+    if f.ndim == 2:
+        return sample_field(f, rows, cols)
+    return np.stack([sample_field(f[..., c], rows, cols) for c in range(f.shape[2])], axis=-1)
+
+
+def result_profile(result, name: str, *, start_mm, end_mm, frame=None, spacing_mm: float | None = None) -> LineProfile:
+    """Field ``name`` of an analysis along a segment in pane or backdrop millimetres.
+
+    Parameters
+    ----------
+    result : AnalysisResult
+    name : str
+        A registered field (``phi_eff_mD``, ``displacement_detrended_mm``, ...), sampled on
+        the analysis grid.
+    start_mm, end_mm : (float, float)
+        End points ``(u, v)``, mm: in the pane frame ``frame``, or without one on the backdrop
+        with the image's top-left pixel centre at (0, 0) (``x = column * mm_per_px``).
+    frame : glassdist.report.zones.PaneFrame, optional
+        Its ``px_to_mm`` homography maps pixels to the frame's millimetres.
+    spacing_mm : float, optional
+        Default: the analysis grid step in mm.
+    """
+    g = result.analysis_grid
+    f = np.asarray(result.grid_field(name), dtype=float)
+    s, u, v = _segment(start_mm, end_mm, spacing_mm if spacing_mm is not None else min(g.step) * result.mm_per_px)
+    if frame is None:
+        x_px, y_px = u / result.mm_per_px, v / result.mm_per_px
+    else:
+        Hinv = np.linalg.inv(np.asarray(frame.px_to_mm, dtype=float))
+        w = Hinv[2, 0] * u + Hinv[2, 1] * v + Hinv[2, 2]
+        x_px, y_px = (Hinv[0, 0] * u + Hinv[0, 1] * v + Hinv[0, 2]) / w, (Hinv[1, 0] * u + Hinv[1, 1] * v + Hinv[1, 2]) / w
+    return LineProfile(s, u, v, _sample_planes(f, (y_px - g.offset[0]) / g.step[0], (x_px - g.offset[1]) / g.step[1]))
 
 
 # --------------------------------------------------------------------------- angular deviation
