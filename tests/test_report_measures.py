@@ -275,3 +275,24 @@ def test_result_profile_in_backdrop_and_pane_mm():
                               end_mm=(256 * mmpx, 128 * mmpx), spacing_mm=8 * mmpx)
     assert pane.values.shape == backdrop.values.shape == (25, 2)
     np.testing.assert_allclose(pane.values, backdrop.values, atol=1e-6)
+
+
+def test_measures_rows_state_units_and_conventions():
+    from glassdist.report.measures import measures_rows
+
+    s = 2.0
+    X, Y = _grid(100, 100, s, s)
+    d = _field(wave_displacement(0.2, 50.0, 0.0, polarization="transverse"), X, Y) + _field(wave_displacement(0.1, 40.0, 90.0), X, Y)
+    gl = grid_line_slope(d, step_mm=s)
+    m = {
+        "field": "test", "step_mm": [s, s],
+        "roll_wave": roll_wave(d, step_mm=s, distance_m=1.0).to_dict(),
+        "angular_deviation": angular_deviation(d, step_mm=s, distance_m=1.0, gauge_mm=4.0).statistics(),
+        "grid_line_slope": gl.statistics(),
+        "equivalent_power": equivalent_power(np.full((4, 4), -20.0)).to_dict(),
+    }
+    rows = dict(measures_rows(m))
+    assert f"1 in {gl.one_in_n[0]:.3g} (lines at 0°)" in rows["grid-line slope (ASTM F2156)"]
+    assert "period 40 mm along 90°" in rows["roll wave (ASTM C1651 quantities)"]
+    assert "mean 10 mD" in rows["sphere-equivalent power P = −φ_eff/2"] and "-phi_eff/2" in rows["sphere-equivalent power P = −φ_eff/2"]
+    assert "change over 4 mm" in rows["angular deviation (ECE R43 / ISO 3538)"]
