@@ -121,16 +121,16 @@ def _sample_ready(coef, invalid_weight, rows, cols, max_invalid_weight):
     return np.where(invalid_weight > max(max_invalid_weight, 1e-9), np.nan, v)
 
 
-def _apply(H: np.ndarray, u: np.ndarray, v: np.ndarray):
-    w = H[2, 0] * u + H[2, 1] * v + H[2, 2]
-    return (H[0, 0] * u + H[0, 1] * v + H[0, 2]) / w, (H[1, 0] * u + H[1, 1] * v + H[1, 2]) / w
+def _phases(m: _Measurement) -> np.ndarray:
+    """The capture's phases (h, w, 2) on its analysis grid, NaN outside its valid region (whole blocks)."""
+    return np.where(m.ag.valid[..., None], m.ag.phases, np.nan)
 
 
 def _logical(m: _Measurement):
     """``U_k`` (h, w, 2) on the capture's analysis grid, carrier periods (NaN where invalid)."""
     yy, xx = m.ag.grid.coords()
     u0, v0 = apply_inverse(m.baseline, xx, yy)
-    return np.stack([u0, v0], axis=-1) + m.ag.phases / (2 * np.pi)
+    return np.stack([u0, v0], axis=-1) + _phases(m) / (2 * np.pi)
 
 
 def _grid_homography(m: _Measurement, U: np.ndarray) -> np.ndarray:
@@ -172,10 +172,10 @@ def _registered(m1: _Measurement, U1_base: np.ndarray, G1: np.ndarray, mk: _Meas
     Pinv = np.linalg.inv(P)
     uk = Pinv[0, 0] * (u1 - offset[0]) + Pinv[0, 1] * (v1 - offset[1])
     vk = Pinv[1, 0] * (u1 - offset[0]) + Pinv[1, 1] * (v1 - offset[1])
-    xk, yk = _apply(Gk, uk, vk)
+    xk, yk = apply_inverse(np.linalg.inv(Gk), uk, vk)
     g = mk.ag.grid
     rows, cols = (yk - g.offset[0]) / g.step[0], (xk - g.offset[1]) / g.step[1]
-    w = _invalid_weight(mk.ag.phases[..., 0], rows, cols)
+    w = _invalid_weight(ready[2], rows, cols)
     ph = np.stack([_sample_ready(ready[c], w, rows, cols, 0.25) for c in range(2)], axis=-1)
     bu, bv = apply_inverse(mk.baseline, xk, yk)
     Uk = np.stack([bu, bv], axis=-1) + ph / (2 * np.pi)
@@ -229,8 +229,9 @@ def _register_capture(m1: _Measurement, U1_base, G1, mk: _Measurement, degree: i
     # Offsets are scored on every other sample (the fields are smooth on the analysis grid).
     sl = (slice(None, None, 2), slice(None, None, 2))
     step = tuple(2 * st for st in m1.ag.grid.step)
-    ref = _detrended(m1.ag.phases[sl], degree, step)
-    ready = [_spline_ready(mk.ag.phases[..., c]) for c in range(2)]
+    ref = _detrended(_phases(m1)[sl], degree, step)
+    own = _phases(mk)
+    ready = [_spline_ready(own[..., c]) for c in range(2)] + [own[..., 0]]
     U1_sub = U1_base[sl]
 
     def trial(o):
@@ -335,14 +336,15 @@ def analyze_captures(
         G1 = _grid_homography(m1, _logical(m1))
         total = np.zeros(m1.ag.phases.shape)
         count = np.zeros(m1.ag.grid.shape, np.int32)
-        ok = np.all(np.isfinite(m1.ag.phases), axis=-1)
-        total[ok] += m1.ag.phases[ok]
+        first = _phases(m1)
+        ok = np.all(np.isfinite(first), axis=-1)
+        total[ok] += first[ok]
         count += ok
         records = [{"capture": 1, "grid_offset": [0, 0], "carrier_permutation": np.eye(2).tolist(), "max_shift_px": 0.0,
                     "valid_fraction": float(ok.mean())}]
         for i, mk in enumerate(meas[1:], start=2):
             o, P, ph, moved = _register_capture(m1, U1_base, G1, mk, degree)
-            ph = _aligned_to_first(ph, m1.ag.phases, degree)
+            ph = _aligned_to_first(ph, first, degree)
             ok = np.all(np.isfinite(ph), axis=-1)
             total[ok] += ph[ok]
             count += ok
@@ -355,7 +357,10 @@ def analyze_captures(
         labels, n = label_regions(valid, max(int(p.min_region_fraction * valid.size), 16))
         valid = labels > 0
         avg[~valid] = np.nan
-        ag = _AnalysisGrid(m1.ag.grid, avg, valid, labels, valid, None, m1.ag.blur_px2)
+        # Reported: the averaged region and the first capture's partial border blocks around it
+        # (smoothly extended, as for one capture).
+        report = valid | (m1.ag.report & ndimage.binary_dilation(valid))
+        ag = _AnalysisGrid(m1.ag.grid, avg, valid, labels, report, None, m1.ag.blur_px2)
         partial = float(np.mean(count[valid] < len(meas))) if valid.any() else 0.0
         if partial > 0.05:
             warn.append(f"{100 * partial:.0f}% of the averaged region is covered by fewer than all "
