@@ -730,7 +730,8 @@ def standard_measures(result, *, gauge_mm: float = 4.0, directions_deg=(0.0, 90.
     They are computed from the field ``displacement_detrended_mm`` on the result's analysis
     grid (the field the power channels differentiate: after the degree-N detrend and the sigma
     smoothing, so relative to the Direct Method's homography baseline or the Comparative
-    reference and to the degree-N trend), with the isotropic ``mm_per_px``.
+    reference and to the degree-N trend), at the samples whose centre pixel is valid, with the
+    isotropic ``mm_per_px``.
 
     Parameters
     ----------
@@ -740,9 +741,15 @@ def standard_measures(result, *, gauge_mm: float = 4.0, directions_deg=(0.0, 90.
     directions_deg : sequence of float
         Grid-line directions for the grid-line slope.
     """
-    d = np.asarray(result.grid_field("displacement_detrended_mm"), dtype=float)
-    phi = result.grid_field("phi_eff_mD")
-    sy, sx = result.analysis_grid.step
+    g = result.analysis_grid
+    # The samples whose centre pixel is in the reported region (the grid fields also hold a
+    # smooth extension one block beyond it).
+    yy, xx = g.coords()
+    H, W = result.valid.shape
+    inside = result.valid[np.clip(np.rint(yy).astype(int), 0, H - 1), np.clip(np.rint(xx).astype(int), 0, W - 1)]
+    d = np.where(inside[..., None], np.asarray(result.grid_field("displacement_detrended_mm"), dtype=float), np.nan)
+    phi = np.where(inside, np.asarray(result.grid_field("phi_eff_mD"), dtype=float), np.nan)
+    sy, sx = g.step
     step = (sy * result.mm_per_px, sx * result.mm_per_px)
     L = result.distance_m
     return StandardMeasures(
