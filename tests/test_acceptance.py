@@ -301,3 +301,51 @@ def test_capture_limit_refuses_the_photo(lens_photos, tmp_path, capsys):
                          "--pitch-mm", 2, "--distance-m", 1, "--spec", lens_photos / "coarse.json", "--out", out)
     assert code == 2 and "px per grid carrier period" in err and "at least 20" in err
     assert not (out / "summary.json").exists()
+
+
+# ----------------------------------------------------------------- Python API
+
+def test_api_analyze_takes_paths_and_settings_and_evaluate_spec(lens_photos):
+    import json
+
+    import glassdist
+    from glassdist.io import read_image
+
+    assert {"analyze", "evaluate_spec"} <= set(glassdist.__all__)
+    kw = dict(pitch_mm=2.0, distance_m=1.0, detrend_degree=1, sigma_mm=1.5)
+    by_path = glassdist.analyze(lens_photos / "pane.png", reference=str(lens_photos / "reference.png"), **kw)
+    by_array = glassdist.analyze(read_image(lens_photos / "pane.png"),
+                                 reference=read_image(lens_photos / "reference.png"),
+                                 params={"detrend_degree": 1, "sigma_mm": 1.5}, pitch_mm=2.0, distance_m=1.0)
+    assert by_path.detrend_degree == 1 and by_path.sigma_mm == 1.5
+    assert np.array_equal(by_path.phi_eff_mD, by_array.phi_eff_mD, equal_nan=True)
+    # the keyword overrides the parameters
+    over = glassdist.analyze(lens_photos / "pane.png", reference=lens_photos / "reference.png", pitch_mm=2.0,
+                             distance_m=1.0, params={"detrend_degree": 3}, detrend_degree=2)
+    assert over.detrend_degree == 2
+    spec = json.loads((lens_photos / "spec.json").read_text())
+    v_path = glassdist.evaluate_spec(by_path, lens_photos / "spec.json")
+    v_dict = glassdist.evaluate_spec(by_path, spec)
+    # detrend 1 against the pinned 2: the protocol check fails, the criteria are evaluated all the same
+    assert not v_path.passed and [c.passed for c in v_path.checks] == [c.passed for c in v_dict.checks]
+    failed = [c.criterion for c in v_path.checks if not c.passed]
+    assert failed == ["protocol: detrend_degree = 2"]
+    assert v_path.spec_sha256 and v_dict.spec_sha256 == ""
+    with pytest.raises(InputError, match="unknown key 'colour'"):
+        glassdist.evaluate_spec(by_path, dict(spec, colour=1))
+
+
+def test_mask_coverage_is_of_the_mask():
+    import glassdist
+    from glassdist.synthetic import lens_displacement, synthetic_capture
+
+    cap = synthetic_capture((320, 320), pitch_mm=2.0, mm_per_px=0.25,
+                            displacement=lens_displacement(0.05, 1.0, radius_mm=7.0), rng=0)
+    mask = np.zeros((320, 320), bool)
+    mask[40:280, 40:280] = True  # an intentional vision-area mask: 56 % of the image
+    masked = glassdist.analyze(cap.image, reference=cap.reference, pitch_mm=2.0, distance_m=1.0, mask=mask)
+    assert not any("could be analysed" in w for w in masked.warnings), masked.warnings
+    spec = {"name": "cover", "min_valid_percent": 60,
+            "criteria": [{"channel": "phi_eff", "statistic": "max_abs", "max_mD": 1e6}]}
+    assert not glassdist.evaluate_spec(masked, spec).passed  # under 56 % of the image ...
+    assert glassdist.evaluate_spec(masked, spec, mask=mask).passed  # ... but most of the region asked for

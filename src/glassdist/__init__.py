@@ -27,6 +27,7 @@ from .analyzer import (
     load_params,
     prepare_reference,
 )
+from ._api import evaluate_spec
 from .errors import AnalysisError, GlassdistError, InputError
 from .io import read_image, read_mask
 
@@ -34,6 +35,7 @@ __all__ = [
     "__version__",
     "analyze",
     "analyze_captures",
+    "evaluate_spec",
     "prepare_reference",
     "AnalysisResult",
     "AnalyzerParams",

@@ -17,6 +17,7 @@ single scale ``mm_per_px = p_c sqrt(|f1||f2|)``.
 from __future__ import annotations
 
 import logging
+import os
 import warnings
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
@@ -441,8 +442,11 @@ def _reported_region(fields: dict, ag: _AnalysisGrid, mask, warn: list[str]):
         valid_c &= np.isfinite(f_) if f_.ndim == 2 else np.all(np.isfinite(f_), axis=-1)
     valid_full, idx = image_grid_valid(valid_c, ag.grid, mask, fine_valid=ag.fine_valid)
     cover = float(valid_full[::4, ::4].mean())  # the reported region, as summary.json states it
+    if mask is not None:  # an intentional mask is not a loss: the share of the region asked for
+        cover = float(np.count_nonzero(valid_full[::4, ::4]) / max(np.count_nonzero(mask[::4, ::4]), 1))
+    where = "the image" if mask is None else "the masked region"
     if cover < 0.75:
-        warn.append(f"only {100 * cover:.0f}% of the image could be analysed (occlusion, frames, low contrast or blur)")
+        warn.append(f"only {100 * cover:.0f}% of {where} could be analysed (occlusion, frames, low contrast or blur)")
     return valid_full, idx
 
 
@@ -506,33 +510,40 @@ def prepare_reference(reference: np.ndarray, *, params: AnalyzerParams | dict | 
 
 
 def analyze(
-    image: np.ndarray,
+    image: np.ndarray | str | os.PathLike,
     *,
     pitch_mm: float,
     distance_m: float,
-    reference: np.ndarray | ReferenceModel | None = None,
-    params: AnalyzerParams | dict | None = None,
-    mask: np.ndarray | None = None,
+    reference: np.ndarray | ReferenceModel | str | os.PathLike | None = None,
+    params: AnalyzerParams | dict | str | os.PathLike | None = None,
+    mask: np.ndarray | str | os.PathLike | None = None,
     pattern: str | None = None,
+    detrend_degree: int | None = None,
+    sigma_mm: float | None = None,
 ) -> AnalysisResult:
     """Measure the distortion field of a photo of a grid seen through glass.
 
     Parameters
     ----------
-    image : ndarray (H, W)
-        Grey photo in [0, 1] (see :func:`glassdist.io.read_image`), indexed (row, col).
+    image : ndarray (H, W) or path
+        Grey photo in [0, 1] (see :func:`glassdist.io.read_image`), indexed (row, col), or
+        the path of the photo (read with :func:`glassdist.io.read_image`).
     pitch_mm : float
         Printed grid pitch, mm (line spacing; square size for a checkerboard).
     distance_m : float
         Glass-to-backdrop distance L, m.
-    reference : ndarray (H, W) or ReferenceModel, optional
+    reference : ndarray (H, W), ReferenceModel or path, optional
         Glass-less photo: Comparative Method. None: Direct Method.
-    params : AnalyzerParams or dict, optional
-        Algorithm parameters (dict = overrides of the shipped defaults).
-    mask : ndarray of bool (H, W), optional
-        User region; False pixels are excluded.
+    params : AnalyzerParams, dict or path, optional
+        Algorithm parameters (dict or JSON file = overrides of the shipped defaults).
+    mask : ndarray of bool (H, W) or path, optional
+        User region; False (zero) pixels are excluded.
     pattern : {'lines', 'checkerboard'}, optional
         Overrides ``params.pattern``.
+    detrend_degree : int, optional
+        Overrides ``params.detrend_degree`` (A2 polynomial degree N).
+    sigma_mm : float, optional
+        Overrides ``params.sigma_mm``: reporting smoothing scale on the backdrop, mm.
 
     Returns
     -------
@@ -578,11 +589,33 @@ def analyze(
     >>> bool(res.phi_eff_mD[96, 128] < 0)  # a converging lens reads phi_eff < 0
     True
     """
+    image, reference, params, mask = _api_inputs(image, reference, params, mask, detrend_degree, sigma_mm)
     warn: list[str] = []
     with _routed_warnings(warn):
         meas = _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn)
         evaluated = _evaluate(meas, meas.ag, warn)
     return _result(meas, evaluated, warn)
+
+
+def _api_inputs(image, reference, params, mask, detrend_degree, sigma_mm):
+    """Photos and mask given as paths read; ``detrend_degree`` / ``sigma_mm`` merged into the parameters."""
+    from ..io import read_image, read_mask
+
+    if isinstance(image, (str, os.PathLike)):
+        image = read_image(image)
+    if isinstance(reference, (str, os.PathLike)):
+        reference = read_image(reference)
+    if isinstance(mask, (str, os.PathLike)):
+        mask = read_mask(mask, np.shape(image))
+    settings = {k: v for k, v in (("detrend_degree", detrend_degree), ("sigma_mm", sigma_mm)) if v is not None}
+    if settings:
+        if params is None and isinstance(reference, ReferenceModel):
+            params = reference.params
+        if isinstance(params, AnalyzerParams):
+            params = {**params.model_dump(exclude_unset=True), **settings}
+        else:
+            params = load_params(params, **settings)
+    return image, reference, params, mask
 
 
 @dataclass(frozen=True)

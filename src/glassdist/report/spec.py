@@ -50,7 +50,7 @@ from .stats import format_limit, valid_percent
 
 __all__ = [
     "Criterion", "Protocol", "Pane", "Zone", "WorstRegions", "Figures", "Spec", "Check", "Verdict", "ResolvedProtocol",
-    "load_spec", "evaluate_spec", "spec_limits", "resolve_protocol", "check_capture", "px_per_period",
+    "load_spec", "as_spec", "evaluate_spec", "spec_limits", "resolve_protocol", "check_capture", "px_per_period",
 ]
 
 _SYMBOL = {"phi_eff": "phi_eff", "phi_shear": "phi_shear", "phi_total": "phi_total"}
@@ -377,6 +377,32 @@ def load_spec(path):
             f"invalid specification '{p}': {_one_line_errors(exc)}; see docs/industrial_workflow.md for the format"
         ) from None
     return spec, hashlib.sha256(raw).hexdigest()
+
+
+def as_spec(spec):
+    """A :class:`Spec` from a Spec, a dict of its JSON form, or a JSON file.
+
+    Returns
+    -------
+    spec : Spec
+    sha256 : str
+        SHA-256 of the file (``""`` for a Spec or a dict).
+
+    Raises
+    ------
+    InputError
+        Invalid specification (one line).
+    """
+    if isinstance(spec, Spec):
+        return spec, ""
+    if isinstance(spec, dict):
+        data = {k: v for k, v in spec.items() if k != "$comment"}
+        try:
+            return Spec(**data), ""
+        except ValidationError as exc:
+            raise InputError(f"invalid specification: {_one_line_errors(exc)}; see docs/industrial_workflow.md "
+                             "for the format") from None
+    return load_spec(spec)
 
 
 def spec_limits(spec):
