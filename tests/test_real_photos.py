@@ -36,8 +36,9 @@ def test_comparative_and_direct_agree_on_waves(real_data):
     p = dict(P, detrend_degree=3)
     c = analyze(real_data["waves"], pitch_mm=5.0, distance_m=0.5, reference=real_data["reference"], params=p)
     d = analyze(real_data["waves"], pitch_mm=5.0, distance_m=0.5, params=p)
-    v = c.valid & d.valid
-    assert v.mean() > 0.6
+    assert (c.valid & d.valid).mean() > 0.6
+    v = c.trusted & d.trusted  # compared where statistics are taken (outside the guard band)
+    assert v.mean() > 0.4
     for ch in ("phi_eff_mD", "phi_shear_mD"):
         a, b = getattr(c, ch)[v], getattr(d, ch)[v]
         assert np.corrcoef(a, b)[0, 1] > 0.99, ch

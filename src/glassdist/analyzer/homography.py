@@ -188,6 +188,10 @@ def _points_spacing(carriers: F.CarrierPair, grid: F.SamplingGrid) -> int:
     return max(1, int(round(period / min(grid.step))))
 
 
+# Block I's grid points keep this many carrier periods from the image edges.
+_INTERIOR_PERIODS = 1.5
+
+
 def fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParams, warn: list[str]):
     """I1 + I2 over all regions, aligning each region's free integer grid offset to the largest.
 
@@ -204,7 +208,7 @@ def fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParams
     # Grid points from the interior only: near the image edges the phase of a single photo
     # is less certain (the Comparative Method cancels that against its reference, Block I
     # cannot), and a homography tilted by them would leave a ramp in the displacement.
-    interior = erode(np.ones(grid.shape, bool), 0.0, grid, p.border_periods * period)
+    interior = erode(np.ones(grid.shape, bool), 0.0, grid, _INTERIOR_PERIODS * period)
     if (labels[interior] == 1).sum() < 0.5 * (labels == 1).sum():
         interior = np.ones(grid.shape, bool)  # small images: keep every point
     src, dst = logical_grid_points(U, V, yy, xx, (labels == 1) & interior, spacing)

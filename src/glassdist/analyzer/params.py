@@ -73,12 +73,30 @@ class AnalyzerParams(BaseModel):
     coherence_threshold: float = Field(
         0.5, ge=0, lt=1, description="valid region: phase coherence |G*z|/G*|z| of the smoothed signal must exceed this"
     )
-    border_periods: float = Field(
-        1.5, ge=0, description="valid region: margin eroded around excluded areas (frames, occluders, the user mask), carrier periods"
+    border_periods: float | None = Field(
+        None, ge=0,
+        description="valid region: margin around excluded areas (occluders, frames), carrier periods; "
+        "null: derived from the demodulation kernel for margin_phase_error_periods",
     )
-    edge_margin_periods: float = Field(
-        0.75, ge=0,
-        description="valid region: margin at the image edges, carrier periods (the periodic FFT mixes the opposite edge in)",
+    edge_margin_periods: float | None = Field(
+        None, ge=0,
+        description="valid region: margin at the image edges, carrier periods (the periodic FFT mixes the opposite edge in); "
+        "null: derived like border_periods",
+    )
+    margin_phase_error_periods: float = Field(
+        0.1, gt=0, le=0.25,
+        description="valid region: phase error (carrier periods) that an excluded area or the image edge may cause at the "
+        "margin, worst case (an unrelated signal of equal amplitude behind the boundary)",
+    )
+    guard_band_sigmas: float = Field(
+        1.5, ge=0,
+        description="quality map: measured samples within this many reporting smoothing scales (sigma) of an excluded "
+        "area or the image edge are reported but left out of statistics and specifications",
+    )
+    max_frequency_deviation: float = Field(
+        0.4, gt=0, le=1.0,
+        description="valid region: largest local offset of the grid frequency from the carrier, fraction of |f| "
+        "(beyond it the bandpass attenuates or loses the signal: 'beyond measurable distortion')",
     )
     min_region_fraction: float = Field(0.01, ge=0, lt=1, description="valid region: drop connected regions smaller than this fraction of the image")
     ransac_threshold_periods: float = Field(0.1, gt=0, description="I2: RANSAC inlier threshold, carrier periods")

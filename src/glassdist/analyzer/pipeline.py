@@ -28,11 +28,12 @@ from scipy import ndimage
 from ..errors import AnalysisError, InputError
 from . import fourier as F
 from .homography import HomographyFit, apply_inverse, fit_grid_homography, inverse_jacobian
-from .metrics import evaluate_displacement
+from .metrics import evaluate_displacement, polynomial_detrend
 from .params import AnalyzerParams, load_params
-from .region import Region, valid_region
+from .region import Region, contamination_px, guard_band, trim_edges, valid_region
 from .resample import image_grid_valid
 from .result import AnalysisResult
+from .uncertainty import channel_uncertainty, displacement_sigma, gradient_covariance, noise_std, phase_variance
 from .unwrap import unwrap
 
 __all__ = ["AnalysisResult", "ReferenceModel", "analyze", "prepare_reference"]
@@ -57,6 +58,7 @@ class ReferenceModel:
     homography: HomographyFit
     params: AnalyzerParams = field(repr=False)
     warnings: tuple[str, ...] = ()
+    noise_std: float = float("nan")
 
 
 # --------------------------------------------------------------------------- checks
@@ -123,6 +125,29 @@ def _demodulation_blur_px2(carriers: F.CarrierPair, covs, p: AnalyzerParams) -> 
         s3 = p.smoothing_periods * c.period_px
         out.append(np.linalg.inv(cov) / (4 * np.pi**2) + s3**2 * np.eye(2))
     return np.array(out)
+
+
+def _margins(carriers: F.CarrierPair, covs, p: AnalyzerParams, direct: bool) -> tuple[float, float]:
+    """Contamination margins (px) at excluded areas and at the image edges.
+
+    Given in carrier periods by ``border_periods``/``edge_margin_periods``, else derived
+    from Block F's kernel for ``margin_phase_error_periods``
+    (:func:`~glassdist.analyzer.region.contamination_px`). At the image edges of a Direct
+    analysis the wrap-around of the periodic FFT, which the reference photo cancels in the
+    Comparative heterodyne, stays in the phase and reaches Block I's baseline and the A2
+    fit: there the margin is at least ``_DIRECT_EDGE_PERIODS`` carrier periods (with the
+    derived margin alone, synthetic round trips read phi_shear correlations of 0.975-0.981
+    and the reduced pitch experiment's Direct spread 2.1 %, against >= 0.997 and 1.9 %).
+    """
+    period = max(carriers.k1.period_px, carriers.k2.period_px)
+    derived = contamination_px(_demodulation_blur_px2(carriers, covs, p), p.margin_phase_error_periods)
+    derived_edge = max(derived, _DIRECT_EDGE_PERIODS * period) if direct else derived
+    border = derived if p.border_periods is None else p.border_periods * period
+    edge = derived_edge if p.edge_margin_periods is None else p.edge_margin_periods * period
+    return float(border), float(edge)
+
+
+_DIRECT_EDGE_PERIODS = 0.75
 
 
 def _basebands(spec: F.Spectrum, carriers: F.CarrierPair, covs, grid: F.SamplingGrid):
@@ -229,6 +254,7 @@ class _Demodulation:
     signals: tuple[np.ndarray, np.ndarray]
     coherences: tuple[np.ndarray, np.ndarray]
     mods: list
+    noise_std: float = float("nan")
 
 
 @dataclass(frozen=True)
@@ -293,6 +319,7 @@ def _demodulate(img: np.ndarray, refm: ReferenceModel | None, p: AnalyzerParams)
         carriers, covs, grid = refm.carriers, refm.covariances, refm.grid
         F.find_carriers(spec, min_period_px=p.min_period_px)  # raises if the photo shows no grid
     ks = (carriers.k1, carriers.k2)
+    noise = noise_std(spec, carriers)
     if refm is None:
         # Direct: F3 applied in the spectral patch; coherence against the modulation G*|b|.
         pairs = [F.baseband(spec, c, cov, grid, smooth_sigma_px=p.smoothing_periods * c.period_px) for c, cov in zip(ks, covs)]
@@ -300,14 +327,14 @@ def _demodulate(img: np.ndarray, refm: ReferenceModel | None, p: AnalyzerParams)
         mods = [_modulation(b, c.period_px, grid, p) for (b, _), c in zip(pairs, ks)]
         zs = tuple(gb for _, gb in pairs)
         cohs = tuple(np.abs(z) / np.maximum(m_, 1e-30) for z, m_ in zip(zs, mods))
-        return _Demodulation("direct", carriers, covs, grid, zs, cohs, mods)
+        return _Demodulation("direct", carriers, covs, grid, zs, cohs, mods, noise)
     bb = _basebands(spec, carriers, covs, grid)
     del spec
     mods = [_modulation(b, c.period_px, grid, p) for b, c in zip(bb, ks)]
     zs = tuple(b * np.conj(r) for b, r in zip(bb, refm.baseband))
     mods += list(refm.modulation)
     zs, cohs = _smooth_with_coherence(zs, ks, grid, p)  # F3
-    return _Demodulation("comparative", carriers, covs, grid, zs, cohs, mods)
+    return _Demodulation("comparative", carriers, covs, grid, zs, cohs, mods, noise)
 
 
 def _check_region(region: Region, mods, warn: list[str]) -> None:
@@ -335,9 +362,56 @@ def _direct_baseline(phases, demod: _Demodulation, region: Region, p: AnalyzerPa
     U = carriers.k1.fx * xx + carriers.k1.fy * yy + phases[..., 0] / (2 * np.pi)
     V = carriers.k2.fx * xx + carriers.k2.fy * yy + phases[..., 1] / (2 * np.pi)
     fit, offsets = fit_grid_homography((U, V), yy, xx, region.labels, region.n, carriers, demod.grid, p, warn)
+    if 0.1 <= fit.inlier_fraction < _MIN_INLIERS:
+        warn.append(
+            f"Direct Method: only {100 * fit.inlier_fraction:.0f}% of the grid points lie within "
+            f"{p.ransac_threshold_periods:g} period of the fitted homography (inlier RMS {fit.rms_inlier_px:.2f} px): the "
+            "baseline is weakly determined (strong distortion, or the camera's lens distortion), and results are relative "
+            "to it; take a glass-less reference (Comparative Method) where possible"
+        )
     if region.n > 1:
         phases -= (2 * np.pi * offsets[region.labels]).astype(np.float32)
     return fit
+
+
+# Block I's fit is called weak below this inlier fraction (below 0.1 Block I warns itself). A roller
+# wave of 0.375 carrier period amplitude keeps 30% of the points as inliers (the outliers are the
+# signal); a rig whose lens the homography cannot follow was seen at 20%.
+_MIN_INLIERS = 0.25
+# Share of the map's RMS phi_total above which the cubic terms left by an N < 3 detrend are reported
+# (they then dominate the map: a flat pane seen through a real lens reads ~95%, a synthetic roller wave
+# of five periods across the view 24%, of two periods 61%).
+_CUBIC_WARN = 0.5
+
+
+def _warn_cubic(ag: _AnalysisGrid, ch, p: AnalyzerParams, p_c: float, mm_per_px: float, distance_m: float,
+                warn: list[str]) -> None:
+    """Direct, N < 3: warn when the displacement's cubic terms carry a good share of the map's power.
+
+    A camera lens's distortion is cubic; the Direct Method cannot tell it from the glass's,
+    and the degree-N detrend removes it only from N = 3. The part of a degree-3 fit beyond
+    degree N is differentiated and its RMS phi_total compared with the map's (the real
+    glass-less reference of examples/data reads 95%).
+    """
+    if p.detrend_degree >= 3 or ag.valid.sum() < 64:
+        return
+    delta = ag.phases * (p_c / (2 * np.pi))
+    lab = np.where(ag.valid, ag.labels, 0)
+    extra = polynomial_detrend(delta, lab, p.detrend_degree, ag.grid.step) - polynomial_detrend(delta, lab, 3, ag.grid.step)
+    ok = ag.valid & np.all(np.isfinite(extra), axis=-1)
+    if ok.sum() < 64:
+        return
+    sy, sx = ag.grid.step
+    g2 = sum(np.gradient(extra[..., c], sy, sx)[a] ** 2 for c in range(2) for a in range(2))
+    cubic = float(np.sqrt(np.nanmean(g2[ok]))) / mm_per_px * 1000.0 / distance_m
+    total = float(np.sqrt(np.nanmean(ch.phi_total_mD[ok] ** 2)))
+    if total > 0 and cubic > _CUBIC_WARN * total:
+        warn.append(
+            f"Direct Method with detrend degree {p.detrend_degree}: the displacement has cubic terms worth "
+            f"{cubic:.3g} mD RMS ({100 * cubic / total:.0f}% of the map's phi_total), as a camera lens's distortion "
+            "gives; the Direct Method cannot tell them from the glass - use --detrend-degree 3 with a real camera "
+            "(or the Comparative Method)"
+        )
 
 
 def _smoothing_mm(demod: _Demodulation, p: AnalyzerParams, p_c: float, mm_per_px: float, warn: list[str]):
@@ -393,7 +467,7 @@ def _direct_pass2(ag: _AnalysisGrid, carriers: F.CarrierPair, fit: HomographyFit
 
 def _warn_deviation(ag: _AnalysisGrid, ks, method: str, warn: list[str]) -> None:
     deviation = _frequency_deviation(ag.phases, ag.valid, ks, ag.grid.step)
-    if deviation > _DEVIATION_WARN:
+    if deviation > _DEVIATION_WARN and not any(w.startswith("strong distortion") for w in warn):
         advice = "use a finer grid or a shorter distance L" + (" or the Comparative Method" if method == "direct" else "")
         warn.append(
             f"strong distortion: the local grid frequency departs from the carrier by up to {100 * deviation:.0f}% "
@@ -405,7 +479,10 @@ def _warn_deviation(ag: _AnalysisGrid, ks, method: str, warn: list[str]) -> None
 def _channels(ag: _AnalysisGrid, ks, H_jac, p: AnalyzerParams, p_c, mm_per_px, sigma_mm, distance_m):
     """A1-A3: displacement in backdrop mm (camera frame) and the channels, on the analysis grid.
 
-    Returns ``(delta_cam, Channels)``.
+    Returns ``(delta_cam, Channels, A1)``: ``A1`` holds what maps the phases to them (for the
+    uncertainty): ``T`` (mm per rad, component frame), ``W`` (px per mm), ``R`` (component
+    frame -> camera frame, or None), ``blur`` (px^2 per component, compensated by the
+    metric smoothing, or None).
     """
     yy, xx = ag.grid.coords()
     common = dict(distance_m=distance_m, mm_per_px=mm_per_px, detrend_degree=p.detrend_degree, sigma_mm=sigma_mm,
@@ -416,14 +493,63 @@ def _channels(ag: _AnalysisGrid, ks, H_jac, p: AnalyzerParams, p_c, mm_per_px, s
         hc, wc = ag.grid.shape
         R = _polar_rotation(J[hc // 2, wc // 2])
         ch = evaluate_displacement(delta, ag.valid, jacobian=J, component_blur_px2=ag.blur_px2, frame_rotation=R, **common)
-        return delta @ R, ch
+        a1 = {"T": p_c / (2 * np.pi) * np.eye(2), "W": np.linalg.inv(J), "R": R, "blur": ag.blur_px2}
+        return delta @ R, ch, a1
     M = np.array([ks[0].f / ks[0].norm, ks[1].f / ks[1].norm]).T  # columns: unit carriers
     proj_px = ag.phases / (2 * np.pi * np.array([ks[0].norm, ks[1].norm]))
     d_px = proj_px @ np.linalg.inv(M)  # (M^T)^{-1} p in row-vector form
     delta_cam = d_px * mm_per_px
     blur = ag.blur_px2
     iso_blur = None if blur is None else np.repeat((np.trace(blur, axis1=1, axis2=2).mean() / 2 * np.eye(2))[None], 2, 0)
-    return delta_cam, evaluate_displacement(delta_cam, ag.valid, component_blur_px2=iso_blur, **common)
+    ch = evaluate_displacement(delta_cam, ag.valid, component_blur_px2=iso_blur, **common)
+    T = mm_per_px * np.linalg.inv(M).T / (2 * np.pi * np.array([ks[0].norm, ks[1].norm]))[None, :]
+    return delta_cam, ch, {"T": T, "W": np.eye(2) / mm_per_px, "R": None, "blur": iso_blur}
+
+
+def _phase_noise(demod: _Demodulation, refm, agrid: F.SamplingGrid, p: AnalyzerParams) -> tuple:
+    """Phase noise levels ``s^2 / (2 |b|^2)`` per carrier (image, plus reference) on the Block A grid, rad^2 px^2,
+    and the covariance (px^2 per carrier) of the low-pass they went through up to that grid."""
+    s_img = demod.noise_std
+    s_ref = refm.noise_std if refm is not None else 0.0
+    white = []
+    for i in range(2):
+        w_ = s_img**2 / (2 * np.maximum(demod.mods[i].astype(np.float64), 1e-12) ** 2)
+        if refm is not None:
+            w_ = w_ + s_ref**2 / (2 * np.maximum(demod.mods[2 + i].astype(np.float64), 1e-12) ** 2)
+        white.append(w_.astype(np.float32))
+    m = demod.grid.shape[0] // agrid.shape[0]
+    blur = _demodulation_blur_px2(demod.carriers, demod.covariances, p)
+    if m > 1:
+        ones = np.ones(demod.grid.shape, np.float32)
+        white = [F.block_mean(w_, ones, m)[0] for w_ in white]
+        blur = blur + (m * max(demod.grid.step)) ** 2 / 12.0 * np.eye(2)
+    return tuple(white), blur
+
+
+def _uncertainty(ag: _AnalysisGrid, phase_noise, ch, a1: dict, sigma_px: float, distance_m: float) -> dict:
+    """Standard uncertainties of the displacement and the channels from the image noise (registered fields).
+
+    The phase noise (:func:`_phase_noise`) through Block F's kernel (and the block means)
+    gives the displacement's; through the whole chain, the metric smoothing included, and
+    the differentiation, the channels' (:mod:`~glassdist.analyzer.uncertainty`).
+    """
+    white, blur = phase_noise
+    var = tuple(phase_variance(w_, b) for w_, b in zip(white, blur))
+    disp = displacement_sigma(var, a1["T"], a1["R"])
+    grad_cov = []
+    for i in range(2):
+        metric = sigma_px**2 * np.eye(2)
+        if a1["blur"] is not None:  # the metric smoothing tops the demodulation blur up to sigma
+            ev, V = np.linalg.eigh(metric - a1["blur"][i])
+            metric = (V * np.clip(ev, 0.0, None)) @ V.T
+        grad_cov.append(gradient_covariance(white[i], blur[i] + metric))
+    strain = ch.strain if a1["R"] is None else a1["R"] @ ch.strain @ a1["R"].T  # back to the component frame
+    unc = channel_uncertainty(tuple(grad_cov), a1["T"], a1["W"], strain, distance_m)
+    out = {"phi_eff_sigma_mD": unc.phi_eff_sigma_mD, "phi_shear_sigma_mD": unc.phi_shear_sigma_mD,
+           "displacement_sigma_mm": disp}
+    for f_ in out.values():
+        f_[~ag.report] = np.nan
+    return out
 
 
 def _result_fields(delta_cam, ch) -> dict:
@@ -435,12 +561,13 @@ def _result_fields(delta_cam, ch) -> dict:
     }
 
 
-def _reported_region(fields: dict, ag: _AnalysisGrid, mask, warn: list[str]):
-    """The valid region on the image grid (where every field is finite) and the fill indices."""
+def _reported_region(fields: dict, ag: _AnalysisGrid, mask, edge_px: float, warn: list[str]):
+    """The valid region on the image grid (where every field is finite, outside the image-edge margin) and the fill indices."""
     valid_c = ag.report.copy()
     for f_ in fields.values():
         valid_c &= np.isfinite(f_) if f_.ndim == 2 else np.all(np.isfinite(f_), axis=-1)
     valid_full, idx = image_grid_valid(valid_c, ag.grid, mask, fine_valid=ag.fine_valid)
+    trim_edges(valid_full, edge_px)
     cover = float(valid_full[::4, ::4].mean())  # the reported region, as summary.json states it
     if mask is not None:  # an intentional mask is not a loss: the share of the region asked for
         cover = float(np.count_nonzero(valid_full[::4, ::4]) / max(np.count_nonzero(mask[::4, ::4]), 1))
@@ -453,7 +580,8 @@ def _reported_region(fields: dict, ag: _AnalysisGrid, mask, warn: list[str]):
 @contextmanager
 def _routed_warnings(warn: list[str]):
     """Numerical warnings raised inside the analysis join the result's warnings (not stderr)."""
-    with warnings.catch_warnings(record=True) as caught, np.errstate(all="warn"):
+    # Underflow (tiny spectral powers squared) is harmless and not reported.
+    with warnings.catch_warnings(record=True) as caught, np.errstate(all="warn", under="ignore"):
         warnings.simplefilter("always")
         yield
     seen = set()
@@ -498,7 +626,8 @@ def prepare_reference(reference: np.ndarray, *, params: AnalyzerParams | dict | 
         # Homography of the reference's own grid: the pixel -> backdrop Jacobian (A1, projective).
         zs, cohs = _smooth_with_coherence(bb, (carriers.k1, carriers.k2), grid, p, smoothed_abs=mods)
         wrapped = [np.angle(z) for z in zs]
-        region = valid_region(wrapped, cohs, mods, carriers, grid, p, None, [])
+        border, edge = _margins(carriers, covs, p, direct=False)
+        region = valid_region(wrapped, cohs, mods, carriers, grid, p, None, [], margin_px=border, edge_margin_px=edge)
         if region.n == 0:
             raise InputError("the reference photo shows no usable grid region; check it is in focus and well exposed")
         yy, xx = grid.coords()
@@ -506,7 +635,8 @@ def prepare_reference(reference: np.ndarray, *, params: AnalyzerParams | dict | 
         U = carriers.k1.fx * xx + carriers.k1.fy * yy + psi[0] / (2 * np.pi)
         V = carriers.k2.fx * xx + carriers.k2.fy * yy + psi[1] / (2 * np.pi)
         fit, _ = fit_grid_homography((U, V), yy, xx, region.labels, region.n, carriers, grid, p, [])
-    return ReferenceModel(ref.shape, carriers, covs, grid, bb, mods, fit, p, tuple(warn))
+        noise = noise_std(spec, carriers)
+    return ReferenceModel(ref.shape, carriers, covs, grid, bb, mods, fit, p, tuple(warn), noise)
 
 
 def analyze(
@@ -632,6 +762,12 @@ class _Measurement:
     n_regions: int
     pitch_mm: float
     distance_m: float
+    quality: np.ndarray
+    label_grid: F.SamplingGrid
+    margin_px: tuple[float, float]
+    guard_px: float
+    noise_std: tuple[float, float | None]
+    phase_noise: tuple
 
 
 def _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn: list[str]) -> _Measurement:
@@ -645,7 +781,9 @@ def _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn
     demod = _demodulate(inp.image, inp.reference, p)
     carriers = demod.carriers
     wrapped = [np.angle(z) for z in demod.signals]
-    region = valid_region(wrapped, demod.coherences, demod.mods, carriers, demod.grid, p, inp.mask, warn)
+    margins = _margins(carriers, demod.covariances, p, direct=demod.method == "direct")
+    region = valid_region(wrapped, demod.coherences, demod.mods, carriers, demod.grid, p, inp.mask, warn,
+                          margin_px=margins[0], edge_margin_px=margins[1])
     del wrapped
     _check_region(region, demod.mods, warn)
     phases = _unwrapped_phases(demod, region, p)  # F4
@@ -654,12 +792,20 @@ def _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn
     phases[~region.valid] = np.nan
     mm_per_px = p_c * float(np.sqrt(carriers.k1.norm * carriers.k2.norm))
     sigma_mm, blur = _smoothing_mm(demod, p, p_c, mm_per_px, warn)
-    ag = _to_analysis_grid(phases, region, demod.grid, sigma_mm / mm_per_px, blur, p)
-    del phases, demod
+    sigma_px = sigma_mm / mm_per_px
+    ag = _to_analysis_grid(phases, region, demod.grid, sigma_px, blur, p)
+    del phases
     if fit is not None:
         ag = replace(ag, phases=_direct_pass2(ag, carriers, fit))
+    guard_px = float(p.guard_band_sigmas * sigma_px)
+    quality = guard_band(region.quality, demod.grid, guard_px)
+    noise = (demod.noise_std, inp.reference.noise_std if inp.reference is not None else None)
+    phase_noise = _phase_noise(demod, inp.reference, ag.grid, p)
+    label_grid = demod.grid
+    del demod
     inp = replace(inp, image=None)  # several captures are held at once: not their photos
-    return _Measurement(inp, carriers, fit, H_jac, mm_per_px, sigma_mm, ag, region.n, float(pitch_mm), float(distance_m))
+    return _Measurement(inp, carriers, fit, H_jac, mm_per_px, sigma_mm, ag, region.n, float(pitch_mm), float(distance_m),
+                        quality, label_grid, margins, guard_px, noise, phase_noise)
 
 
 def _evaluate(meas: _Measurement, ag: _AnalysisGrid, warn: list[str]):
@@ -670,9 +816,12 @@ def _evaluate(meas: _Measurement, ag: _AnalysisGrid, warn: list[str]):
     p, p_c, carriers = meas.inputs.params, meas.inputs.carrier_period_mm, meas.carriers
     ks = (carriers.k1, carriers.k2)
     _warn_deviation(ag, ks, "direct" if meas.fit is not None else "comparative", warn)
-    delta_cam, ch = _channels(ag, ks, meas.baseline, p, p_c, meas.mm_per_px, meas.sigma_mm, meas.distance_m)
+    delta_cam, ch, a1 = _channels(ag, ks, meas.baseline, p, p_c, meas.mm_per_px, meas.sigma_mm, meas.distance_m)
+    if meas.fit is not None:
+        _warn_cubic(ag, ch, p, p_c, meas.mm_per_px, meas.distance_m, warn)
     fields = _result_fields(delta_cam, ch)
-    valid_full, idx = _reported_region(fields, ag, meas.inputs.mask, warn)
+    fields.update(_uncertainty(ag, meas.phase_noise, ch, a1, meas.sigma_mm / meas.mm_per_px, meas.distance_m))
+    valid_full, idx = _reported_region(fields, ag, meas.inputs.mask, meas.margin_px[1], warn)
     return ag, fields, valid_full, idx
 
 
@@ -699,5 +848,9 @@ def _result(meas: _Measurement, evaluated, warn: list[str], *, extra_fields: dic
         warnings=tuple(warn),
         sampling_step_px=ag.grid.step,
         n_regions=meas.n_regions if n_regions is None else n_regions,
-        _deferred={"fields": {**fields, **(extra_fields or {})}, "idx": idx, "grid": ag.grid},
+        margin_px=meas.margin_px,
+        guard_px=meas.guard_px,
+        noise_std=meas.noise_std,
+        _deferred={"fields": {**fields, "quality": meas.quality, **(extra_fields or {})}, "idx": idx, "grid": ag.grid,
+                   "label_grid": meas.label_grid, "mask": meas.inputs.mask},
     )

@@ -9,6 +9,7 @@ fields: writers, figures and exports iterate it rather than naming fields themse
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -17,6 +18,7 @@ from . import fourier as F
 from .homography import HomographyFit
 from .metrics import channel_statistics
 from .params import AnalyzerParams
+from .region import ANALYSED, LABELS, pixel_quality
 from .resample import upsample_field, upsample_labels
 
 __all__ = ["AnalysisResult", "FieldSpec", "FIELDS", "CHANNELS"]
@@ -58,6 +60,11 @@ FIELDS: tuple[FieldSpec, ...] = (
     FieldSpec("phi_total_mD", "mD", "total power ||eps||_F / L"),
     FieldSpec("axis_deg", "deg", "astigmatism principal axis (largest stretch), degrees from +x towards +y, in (-90, 90]"),
     FieldSpec("capture_count", "", "number of captures averaged at each sample (several captures only)", kind="label"),
+    FieldSpec("quality", "", "quality label: " + ", ".join(f"{k} {v}" for k, v in LABELS.items()), kind="label"),
+    FieldSpec("displacement_sigma_mm", "mm", "standard uncertainty of displacement_mm from the image noise, per component "
+              "[...,0]=x, [...,1]=y", 2),
+    FieldSpec("phi_eff_sigma_mD", "mD", "standard uncertainty of phi_eff_mD from the image noise"),
+    FieldSpec("phi_shear_sigma_mD", "mD", "standard uncertainty of phi_shear_mD from the image noise (linearised)"),
 )
 
 #: The power channels (mD) that statistics, specifications and heatmaps are about.
@@ -97,6 +104,18 @@ class AnalysisResult:
     axis_deg : ndarray (H, W) float32
         Astigmatism principal axis, degrees from +x towards +y, in (-90, 90].
     valid : ndarray (H, W) bool
+        The reported region: quality labels 0 (analysed) and 6 (guard band).
+    quality : ndarray (H, W) uint8
+        Quality label of every pixel (:data:`~glassdist.analyzer.region.LABELS`): 0 analysed,
+        1 image edge, 2 occluded / low modulation, 3 beyond measurable distortion, 4 phase
+        residue, 5 user mask, 6 guard band (reported, left out of statistics), 7 isolated fragment.
+    trusted : ndarray (H, W) bool
+        Label 0: the pixels statistics and specifications use.
+    displacement_sigma_mm : ndarray (H, W, 2) float32
+        Standard uncertainty of each displacement component (x, y) from the image noise, mm.
+    phi_eff_sigma_mD, phi_shear_sigma_mD : ndarray (H, W) float32
+        Standard uncertainties of phi_eff and phi_shear from the image noise, mD
+        (:mod:`~glassdist.analyzer.uncertainty`).
     mm_per_px : float
         Isotropic scale ``p_c sqrt(|f1||f2|)``, backdrop mm per px.
     sigma_mm, detrend_degree, pitch_mm, distance_m
@@ -118,6 +137,13 @@ class AnalysisResult:
         Several captures averaged (:func:`~glassdist.analyzer.captures.analyze_captures`): per
         capture its grid offset, carrier permutation, largest shift (px) and valid fraction
         on the first capture's grid; empty for one photo.
+    margin_px : (float, float)
+        Contamination margins applied at excluded areas and at the image edges, px.
+    guard_px : float
+        Width of the guard band (quality label 6), px.
+    noise_std : (float, float or None)
+        White noise of the photo and of the reference (Comparative), intensity units,
+        estimated from their spectra.
     """
 
     method: str
@@ -137,6 +163,9 @@ class AnalysisResult:
     sampling_step_px: tuple[float, float] = (1.0, 1.0)
     n_regions: int = 1
     captures: tuple = ()
+    margin_px: tuple[float, float] = (0.0, 0.0)
+    guard_px: float = 0.0
+    noise_std: tuple[float, float | None] = (float("nan"), None)
     _deferred: dict | None = field(default=None, repr=False, compare=False)
 
     def field_specs(self) -> tuple[FieldSpec, ...]:
@@ -159,17 +188,41 @@ class AnalysisResult:
         """Field ``name`` brought to the input's pixel grid (not cached; the attribute is)."""
         f = self.grid_field(name)
         d = self._deferred
+        if name == "quality":
+            return pixel_quality(f, d.get("label_grid", d["grid"]), self.valid, d.get("mask"), self.margin_px[1])
         if _SPECS[name].kind == "label":
             return upsample_labels(f, d["grid"])
         return upsample_field(f, d["idx"], d["grid"], ~self.valid)
 
+    @cached_property
+    def trusted(self) -> np.ndarray:
+        """Pixels of quality label 0 (analysed, outside the guard band): what statistics use."""
+        if self._deferred is None or "quality" not in self._deferred["fields"]:
+            return self.valid
+        return self.quality == ANALYSED
+
+    def _requested(self) -> int:
+        mask = self._deferred.get("mask") if self._deferred else None
+        return int(np.count_nonzero(mask)) if mask is not None else self.valid.size
+
     @property
     def valid_fraction(self) -> float:
-        return float(self.valid.mean())
+        """Reported share of the requested region (the user mask, else the whole image)."""
+        return float(np.count_nonzero(self.valid)) / max(self._requested(), 1)
+
+    @property
+    def trusted_fraction(self) -> float:
+        """Share of the requested region that is trusted (quality label 0)."""
+        return float(np.count_nonzero(self.trusted)) / max(self._requested(), 1)
 
     def statistics(self) -> dict:
-        """Per-channel statistics over the valid region (see :func:`channel_statistics`)."""
-        return {name: channel_statistics(getattr(self, name), self.valid) for name in CHANNELS}
+        """Per-channel statistics over the trusted pixels (see :func:`channel_statistics`)."""
+        return {name: channel_statistics(getattr(self, name), self.trusted) for name in CHANNELS}
+
+    def quality_counts(self) -> dict:
+        """Pixels per quality label, ``{label name: count}``."""
+        counts = np.bincount(np.asarray(self.quality).ravel(), minlength=len(LABELS))
+        return {LABELS[k]: int(counts[k]) for k in LABELS}
 
     def summary(self) -> dict:
         """JSON-serialisable record of the run (written as ``summary.json``)."""
@@ -188,6 +241,11 @@ class AnalysisResult:
             "carriers": self.carriers.to_dict(),
             "homography": None if self.homography_fit is None else self.homography_fit.to_dict(),
             "valid_fraction": self.valid_fraction,
+            "trusted_fraction": self.trusted_fraction,
+            "quality_counts": self.quality_counts(),
+            "margin_px": {"excluded_areas": self.margin_px[0], "image_edge": self.margin_px[1]},
+            "guard_px": self.guard_px,
+            "noise_std": {"image": self.noise_std[0], "reference": self.noise_std[1]},
             "n_regions": self.n_regions,
             "sampling_step_px": list(self.sampling_step_px),
             "statistics": self.statistics(),

@@ -27,7 +27,7 @@ from ..analyzer.metrics import channel_statistics
 from ..errors import InputError
 from ..render.tracer import GLASS
 from ..scene import load_scene
-from ..theory import analysis_params, carrier_period_mm
+from ..theory import analysis_params
 from ._common import ExperimentResult, RunOptions, evaluate, validation_record
 
 __all__ = [
@@ -175,11 +175,11 @@ def against_truth(val, region: np.ndarray) -> dict:
 
 
 def edge_margin_ceiling(res, scene, pane: np.ndarray) -> float:
-    """Share of the pane's pixels farther than ``edge_margin_periods`` carrier periods from the image edge.
+    """Share of the pane's pixels farther than the analyzer's image-edge margin (px) from the image edge.
 
-    The most pane coverage the image-edge margin alone leaves (carrier period taken at the mean mm/px).
+    The most pane coverage the image-edge margin alone leaves.
     """
-    margin_px = res.params.edge_margin_periods * carrier_period_mm(scene) / res.mm_per_px
+    margin_px = res.margin_px[1]
     H, W = pane.shape
     rows, cols = np.arange(H) + 0.5, np.arange(W) + 0.5
     dist = np.minimum.outer(np.minimum(rows, H - rows), np.minimum(cols, W - cols))
@@ -205,7 +205,8 @@ def measure(inputs, method: str, params, kind: str) -> dict:
     run["pane_pixels"] = int(pane.sum())
     run["pane_coverage"] = float((res.valid & pane).sum() / max(int(pane.sum()), 1))
     run["edge_margin_ceiling"] = edge_margin_ceiling(res, inputs.scene, pane)
-    run["p95_abs_phi_eff_mD"] = channel_statistics(res.phi_eff_mD, res.valid)["p95_abs"]
+    run["edge_margin_px"] = res.margin_px[1]
+    run["p95_abs_phi_eff_mD"] = channel_statistics(res.phi_eff_mD, res.trusted)["p95_abs"]
     run["params"] = res.params.resolved()
     run["checks"] = checks(run, kind)
     return run
@@ -411,11 +412,9 @@ def notes(record: dict) -> str:
         worst = max(gaps, key=gaps.get)
         out.append(
             f"- Pane coverage below 90 % (runs without a strong-distortion warning): the image-edge margin "
-            f"(`edge_margin_periods` = {short[0][1]['params']['edge_margin_periods']:g} carrier periods) alone leaves "
+            f"({short[0][1]['edge_margin_px']:.1f} px, derived from the demodulation kernel) alone leaves "
             f"{min(ceilings):.1f}–{max(ceilings):.1f} % of the pane (the ceiling in brackets above); the coverage lies "
-            f"{min(gaps.values()):.1f}–{gaps[worst]:.1f} points below that ceiling, the most on {worst}. With 0.5 "
-            "periods the coverage passes 90 % on the lens and rotated scenes, but φ_eff then moves by 4–5 % near "
-            "the image edges (separate measurement, not part of this run)."
+            f"{min(gaps.values()):.1f}–{gaps[worst]:.1f} points below that ceiling, the most on {worst}."
         )
     lens = _runs(record, "biconvex_lens_p96")
     if lens:

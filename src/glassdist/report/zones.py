@@ -230,17 +230,14 @@ def pane_frame(result, pane=None):
     Parameters
     ----------
     result : AnalysisResult
-        Needs ``valid`` and ``mm_per_px``; ``carrier_period_mm`` and ``params.border_periods``
-        set the margin grown back onto the analysed region.
+        Needs ``valid`` and ``mm_per_px``; ``margin_px`` (the margin at excluded areas) is
+        grown back onto the analysed region.
     pane : glassdist.report.spec.Pane, optional
     """
     valid = np.asarray(result.valid, dtype=bool)
     if pane is not None:
         return pane_frame_from_corners(pane.corners_px, pane.size_mm, valid.shape)
-    params = getattr(result, "params", None)
-    grow = 0.0
-    if params is not None and getattr(result, "carrier_period_mm", None):
-        grow = float(params.border_periods) * float(result.carrier_period_mm) / float(result.mm_per_px)
+    grow = float(getattr(result, "margin_px", (0.0, 0.0))[0])
     return pane_frame_from_region(valid, float(result.mm_per_px), grow_px=grow)
 
 

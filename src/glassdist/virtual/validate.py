@@ -158,7 +158,7 @@ def compare_with_scene(result, scene: Scene, *, model: Prediction, truth: Predic
     Returns
     -------
     Validation
-        :func:`compare` on the model's region within the analyzer's valid region; the
+        :func:`compare` on the model's region within the analyzer's trusted pixels; the
         stack runs with the analyzer's ``sigma_mm``, ``detrend_degree``, ``mm_per_px``,
         valid region and A1 mode.
     """
@@ -168,7 +168,8 @@ def compare_with_scene(result, scene: Scene, *, model: Prediction, truth: Predic
     )
     _, analytical, region = predict_channels(scene, prediction=model, **settings)
     exact = None if truth is None else predict_channels(scene, prediction=truth, **settings)[1]
-    return compare(result, analytical, region & result.valid, exact=exact)
+    # compared where the analyzer's statistics are taken (trusted: outside the guard band)
+    return compare(result, analytical, region & result.trusted, exact=exact)
 
 
 def validate_scene(
