@@ -18,7 +18,10 @@ checkerboard, 512 and 320 px, a roller wave, with and without a drop).
 
 Usage::
 
-    python benchmarks/bench_coverage.py [--params JSON] [--out FILE.json] [--cases SUBSTR,...]
+    python benchmarks/bench_coverage.py [--params JSON] [--out FILE.json] [--cases SUBSTR,...] [--before FILE.json]
+
+``--out docs/coverage.json`` is the record docs/accuracy.md shows; ``--before`` embeds an
+earlier run's records (e.g. of an earlier version) as the "before" columns.
 """
 
 from __future__ import annotations
@@ -148,6 +151,8 @@ def main(argv=None) -> int:
     ap.add_argument("--params", default="{}", help="analyzer parameter overrides, JSON")
     ap.add_argument("--out", type=Path, help="write the records as JSON")
     ap.add_argument("--cases", help="comma-separated substrings of the case names to run")
+    ap.add_argument("--before", type=Path, help="an earlier run's JSON, embedded as the 'before' records")
+    ap.add_argument("--before-command", default="", help="how the --before record was made (shown with it)")
     a = ap.parse_args(argv)
     params = json.loads(a.params)
     recs = []
@@ -159,7 +164,15 @@ def main(argv=None) -> int:
         print(f"| {name} | {r['shape'][0]} | {100 * r['agree_area']:.1f} % | {100 * r['analysed']:.1f} % | "
               f"{100 * r['coverage']:.1f} % | {100 * r['precision']:.1f} % | {100 * r['accuracy']:.1f} % |", flush=True)
     if a.out:
-        a.out.write_text(json.dumps({"params": params, "tolerance_periods": TOL_PERIODS, "records": recs}, indent=1))
+        import glassdist
+
+        args = " ".join(argv if argv is not None else sys.argv[1:])
+        out = {"command": f"python benchmarks/bench_coverage.py {args}".strip(), "glassdist_version": glassdist.__version__,
+               "params": params, "tolerance_periods": TOL_PERIODS, "records": recs}
+        if a.before:
+            prev = json.loads(a.before.read_text())
+            out["before"] = {"command": a.before_command or prev.get("command", ""), "records": prev["records"]}
+        a.out.write_text(json.dumps(out, indent=1))
     return 0
 
 

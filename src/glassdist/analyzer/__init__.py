@@ -6,6 +6,7 @@ from .homography import HomographyFit
 from .metrics import Channels, channel_statistics, evaluate_displacement
 from .params import AnalyzerParams, default_params_path, load_params
 from .pipeline import ReferenceModel, analyze, prepare_reference
+from .region import LABELS as QUALITY_LABELS
 from .result import FIELDS, AnalysisResult, FieldSpec
 
 __all__ = [
@@ -25,4 +26,5 @@ __all__ = [
     "Carrier",
     "CarrierPair",
     "HomographyFit",
+    "QUALITY_LABELS",
 ]

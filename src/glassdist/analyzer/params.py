@@ -94,9 +94,10 @@ class AnalyzerParams(BaseModel):
         "area or the image edge are reported but left out of statistics and specifications",
     )
     max_frequency_deviation: float = Field(
-        0.4, gt=0, le=1.0,
+        0.5, gt=0, le=1.0,
         description="valid region: largest local offset of the grid frequency from the carrier, fraction of |f| "
-        "(beyond it the bandpass attenuates or loses the signal: 'beyond measurable distortion')",
+        "(beyond it the bandpass attenuates or loses the signal: 'beyond measurable distortion'; at 0.5 the "
+        "along-carrier bandpass passes a quarter of the amplitude)",
     )
     min_region_fraction: float = Field(0.01, ge=0, lt=1, description="valid region: drop connected regions smaller than this fraction of the image")
     ransac_threshold_periods: float = Field(0.1, gt=0, description="I2: RANSAC inlier threshold, carrier periods")

@@ -49,11 +49,13 @@ __all__ = [
     "results_table",
     "criteria_list",
     "notes",
+    "coverage_and_uncertainty_sections",
 ]
 
 log = logging.getLogger(__name__)
 
 SCENES_DIR = Path(__file__).resolve().parents[3] / "examples" / "scenes"
+DOCS_DIR = Path(__file__).resolve().parents[3] / "docs"
 METHODS = ("comparative", "direct")
 CHANNELS = ("phi_eff", "phi_shear")
 
@@ -364,8 +366,9 @@ def accuracy_markdown(record: dict) -> str:
 (with and without the glass) and analysed by both methods with the scene's own analysis settings \
 (`analysis` block; σ = 2 carrier periods where it sets none). Truth: the tracer's landing-point displacement \
 through the same evaluation stack (same N, σ, mm/px and region). Ratio: mean |φ| Analyzer / truth over the \
-compared region; r: Pearson correlation of the maps there; pane coverage: share of the pixels that see the pane \
-(tracer status "through the glass") inside the analyzer's valid region; p95 |φ_eff| over the valid region. \
+compared region (the analyzer's trusted pixels, quality label 0); r: Pearson correlation of the maps there; pane \
+coverage: share of the pixels that see the pane (tracer status "through the glass") inside the analyzer's reported \
+region (`valid`: labels 0 and 6); p95 |φ_eff| over the trusted pixels. \
 Bold: outside the bound of its scene (the φ_shear ratio has none).
 
 Scenes:
@@ -383,7 +386,75 @@ every scene: pane coverage ≥ 90 %; flat glass: p95 |φ_eff| ≤ 0.4 mD.
 
 ## Notes
 
-{notes(record)}"""
+{notes(record)}
+{coverage_and_uncertainty_sections(DOCS_DIR)}"""
+
+
+def coverage_and_uncertainty_sections(folder: Path) -> str:
+    """Markdown of the coverage-against-peers and uncertainty-calibration records kept in ``folder``.
+
+    ``coverage.json`` and ``uncertainty_calibration.json`` are written by
+    ``benchmarks/bench_coverage.py`` and ``benchmarks/calibrate_uncertainty.py`` (they need
+    no rendering, so they are not re-run here); absent files give no section.
+    """
+    import json
+
+    out = []
+    cov = folder / "coverage.json"
+    if cov.is_file():
+        rec = json.loads(cov.read_text())
+        before = {r["case"]: r for r in rec.get("before", {}).get("records", [])}
+        rows = []
+        for r in rec["records"]:
+            b = before.get(r["case"])
+            was = f"{100 * b['analysed']:.1f} / {100 * b['coverage']:.1f} / {100 * b['precision']:.1f} %" if b else "—"
+            rows.append(f"| {r['case']} | {100 * r['agree_area']:.1f} % | {was} | {100 * r['analysed']:.1f} % | "
+                        f"{100 * r['coverage']:.1f} % | {100 * r['precision']:.1f} % | {100 * r['accuracy']:.1f} % |")
+        out.append(f"""
+## Coverage against independent peers
+
+Produced by `{rec['command']}` (the "before" columns: `{rec.get('before', {}).get('command', '—')}`). Peers: a
+compact fast checkerboard demodulation (FCD, Wildeman 2018; `benchmarks/_fcd.py`) and OpenCV's DIS and
+Farneback optical flow, each given the reference and the photo. Agreement area: where FCD agrees with at
+least one of the flows within {rec['tolerance_periods']:g} carrier period (each flow alone locks onto the wrong
+period in places). Coverage: share of the agreement area that glassdist (Comparative Method) reports
+(`valid`); precision: share of the reported region inside the agreement area; accuracy: share of the
+reported region where glassdist agrees with FCD within {rec['tolerance_periods']:g} period. Real photos:
+`examples/data` at 1024 px, 320 px centre crops and 320 px downscales, each also with an opaque drop
+(120 px across at 1024 px) painted in; synthetic: a roller wave behind a line grid or a checkerboard.
+
+| case | agree area | before: analysed / coverage / precision | analysed | coverage | precision | accuracy vs FCD |
+|---|---|---|---|---|---|---|
+{chr(10).join(rows)}
+""")
+    cal = folder / "uncertainty_calibration.json"
+    if cal.is_file():
+        rec = json.loads(cal.read_text())
+
+        def cell(r, k):
+            return f"{r[k]['median_ratio']:.2f} ({r[k]['p10']:.2f}–{r[k]['p90']:.2f})"
+
+        rows = [f"| {r['pattern']} | {r['period_px']:g} | {r['noise_std']:g} | {r['noise_estimated']:.4f} | "
+                f"{r['sigma_periods']:g} | {r['method']} | {r['phi_eff']['median_sigma']:.3g} | {cell(r, 'phi_eff')} | "
+                f"{cell(r, 'phi_shear')} | {cell(r, 'disp_x')} | {cell(r, 'disp_y')} |" for r in rec["records"]]
+        ratios = [r[k]["median_ratio"] for r in rec["records"] for k in ("phi_eff", "phi_shear", "disp_x", "disp_y")]
+        out.append(f"""
+## Per-pixel uncertainty: calibration
+
+Produced by `{rec['command']}` ({rec['seconds']:.0f} s). Each scene (a roller wave, {rec['records'][0]['size_px']} px
+square, 1 mm/px) is analysed over {rec['records'][0]['realisations']} independent noise realisations (the reference
+with its own noise); per pixel trusted in every realisation, the empirical standard deviation over the
+realisations is divided by the mean predicted `phi_eff_sigma_mD`, `phi_shear_sigma_mD` and
+`displacement_sigma_mm` (x, y). Median ratio over the pixels (10th–90th percentile); calibrated is
+0.8–1.25. Direct Method displacement: Block I's baseline moves with the noise too, an image-wide smooth
+term outside the per-pixel uncertainty, removed per realisation (best-fit affine) before the comparison.
+All {len(ratios)} median ratios lie in {min(ratios):.2f}–{max(ratios):.2f}.
+
+| pattern | period px | noise | noise estimated | σ periods | method | σ(φ_eff) mD | φ_eff | φ_shear | δ_x | δ_y |
+|---|---|---|---|---|---|---|---|---|---|---|
+{chr(10).join(rows)}
+""")
+    return "".join(out)
 
 
 def _runs(record: dict, name: str):
