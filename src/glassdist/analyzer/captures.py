@@ -55,6 +55,7 @@ from .pipeline import (
     analyze,
     prepare_reference,
 )
+from .region import trusted_on
 from .result import AnalysisResult
 from .unwrap import label_regions
 
@@ -230,6 +231,7 @@ def _register_capture(m1: _Measurement, U1_base, G1, mk: _Measurement, degree: i
     sl = (slice(None, None, 2), slice(None, None, 2))
     step = tuple(2 * st for st in m1.ag.grid.step)
     ref = _detrended(_phases(m1)[sl], degree, step)
+    ref[~trusted_on(m1.quality, m1.ag.grid.shape)[sl]] = np.nan  # scored where capture 1 is trusted
     own = _phases(mk)
     ready = [_spline_ready(own[..., c]) for c in range(2)] + [own[..., 0]]
     U1_sub = U1_base[sl]
@@ -342,6 +344,7 @@ def analyze_captures(
         count += ok
         records = [{"capture": 1, "grid_offset": [0, 0], "carrier_permutation": np.eye(2).tolist(), "max_shift_px": 0.0,
                     "valid_fraction": float(ok.mean())}]
+        trusted = trusted_on(m1.quality, m1.ag.grid.shape)  # shifts read where capture 1 is trusted
         for i, mk in enumerate(meas[1:], start=2):
             o, P, ph, moved = _register_capture(m1, U1_base, G1, mk, degree)
             ph = _aligned_to_first(ph, first, degree)
@@ -349,7 +352,8 @@ def analyze_captures(
             total[ok] += ph[ok]
             count += ok
             records.append({"capture": i, "grid_offset": [int(o[0]), int(o[1])], "carrier_permutation": P.tolist(),
-                            "max_shift_px": float(np.nanmax(moved)), "valid_fraction": float(ok.mean())})
+                            "max_shift_px": float(np.nanmax(np.where(trusted, moved, np.nan))),
+                            "valid_fraction": float(ok.mean())})
         valid = count > 0
         with np.errstate(invalid="ignore", divide="ignore"):
             avg = np.where(valid[..., None], total / np.maximum(count, 1)[..., None], np.nan).astype(np.float32)

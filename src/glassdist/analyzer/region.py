@@ -76,6 +76,7 @@ __all__ = [
     "guard_band",
     "pixel_quality",
     "trim_edges",
+    "trusted_on",
     "downsample_mask",
 ]
 
@@ -336,6 +337,16 @@ def trim_edges(valid: np.ndarray, edge_px: float) -> np.ndarray:
         valid[:, :e] = False
         valid[:, -e:] = False
     return valid
+
+
+def trusted_on(quality: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """Trusted samples (label 0 throughout each block) of ``quality`` on a grid of ``shape`` (a block grid of it)."""
+    t = quality == ANALYSED
+    h, w = shape
+    if t.shape != (h, w):
+        my, mx = t.shape[0] // h, t.shape[1] // w
+        t = t[: h * my, : w * mx].reshape(h, my, w, mx).all(axis=(1, 3))
+    return t
 
 
 def pixel_quality(quality: np.ndarray, grid: F.SamplingGrid, valid: np.ndarray, user_mask=None, edge_px: float = 0.0) -> np.ndarray:

@@ -18,7 +18,7 @@ from . import fourier as F
 from .homography import HomographyFit
 from .metrics import channel_statistics
 from .params import AnalyzerParams
-from .region import ANALYSED, LABELS, pixel_quality
+from .region import ANALYSED, LABELS, pixel_quality, trusted_on
 from .resample import upsample_field, upsample_labels
 
 __all__ = ["AnalysisResult", "FieldSpec", "FIELDS", "CHANNELS"]
@@ -193,6 +193,13 @@ class AnalysisResult:
         if _SPECS[name].kind == "label":
             return upsample_labels(f, d["grid"])
         return upsample_field(f, d["idx"], d["grid"], ~self.valid)
+
+    @cached_property
+    def grid_trusted(self) -> np.ndarray:
+        """Trusted samples (quality label 0 throughout the block) on :attr:`analysis_grid`, bool (h, w)."""
+        d = self._deferred
+        q = d["fields"].get("quality") if d else None
+        return np.ones(self.analysis_grid.shape, bool) if q is None else trusted_on(q, self.analysis_grid.shape)
 
     @cached_property
     def trusted(self) -> np.ndarray:

@@ -743,10 +743,12 @@ def standard_measures(result, *, gauge_mm: float = 4.0, directions_deg=(0.0, 90.
     """
     g = result.analysis_grid
     # The samples whose centre pixel is in the reported region (the grid fields also hold a
-    # smooth extension one block beyond it).
+    # smooth extension one block beyond it), and of those the trusted ones (quality label 0:
+    # the guard band's channels are biased).
     yy, xx = g.coords()
     H, W = result.valid.shape
     inside = result.valid[np.clip(np.rint(yy).astype(int), 0, H - 1), np.clip(np.rint(xx).astype(int), 0, W - 1)]
+    inside &= getattr(result, "grid_trusted", np.ones(inside.shape, bool))
     d = np.where(inside[..., None], np.asarray(result.grid_field("displacement_detrended_mm"), dtype=float), np.nan)
     phi = np.where(inside, np.asarray(result.grid_field("phi_eff_mD"), dtype=float), np.nan)
     sy, sx = g.step
