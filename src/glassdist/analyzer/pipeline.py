@@ -132,21 +132,25 @@ def _margins(carriers: F.CarrierPair, covs, p: AnalyzerParams, direct: bool) -> 
 
     Given in carrier periods by ``border_periods``/``edge_margin_periods``, else derived
     from Block F's kernel for ``margin_phase_error_periods``
-    (:func:`~glassdist.analyzer.region.contamination_px`). At the image edges of a Direct
-    analysis the wrap-around of the periodic FFT, which the reference photo cancels in the
-    Comparative heterodyne, stays in the phase and reaches Block I's baseline and the A2
-    fit: there the margin is at least ``_DIRECT_EDGE_PERIODS`` carrier periods (with the
-    derived margin alone, synthetic round trips read phi_shear correlations of 0.975-0.981
-    and the reduced pitch experiment's Direct spread 2.1 %, against >= 0.997 and 1.9 %).
+    (:func:`~glassdist.analyzer.region.contamination_px`). At the image edges the derived
+    margin has a floor: the wrap-around of the periodic FFT is an unrelated signal of full
+    amplitude that the reference cancels only where both photos see the same pattern there
+    (not after a camera move, not where the glass distorts the edge), and edge samples
+    enter the A2 fit of the whole region. Measured: with the derived ~2 px alone, the
+    reduced pitch experiment's interior Direct-vs-Comparative phi_shear reads 3.5 % (2.9 %
+    from 0.5 period), a moved capture registers one period off, and synthetic Direct round
+    trips lose phi_shear correlation (0.975-0.981, >= 0.997 from 0.5 period; the Direct
+    Method keeps 0.75, its value before the margins were derived).
     """
     period = max(carriers.k1.period_px, carriers.k2.period_px)
     derived = contamination_px(_demodulation_blur_px2(carriers, covs, p), p.margin_phase_error_periods)
-    derived_edge = max(derived, _DIRECT_EDGE_PERIODS * period) if direct else derived
+    derived_edge = max(derived, (_DIRECT_EDGE_PERIODS if direct else _EDGE_PERIODS) * period)
     border = derived if p.border_periods is None else p.border_periods * period
     edge = derived_edge if p.edge_margin_periods is None else p.edge_margin_periods * period
     return float(border), float(edge)
 
 
+_EDGE_PERIODS = 0.5
 _DIRECT_EDGE_PERIODS = 0.75
 
 
