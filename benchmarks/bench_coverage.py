@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -166,7 +167,7 @@ def main(argv=None) -> int:
     if a.out:
         import glassdist
 
-        args = " ".join(argv if argv is not None else sys.argv[1:])
+        args = shlex.join(argv if argv is not None else sys.argv[1:])
         out = {"command": f"python benchmarks/bench_coverage.py {args}".strip(), "glassdist_version": glassdist.__version__,
                "params": params, "tolerance_periods": TOL_PERIODS, "records": recs}
         if a.before:

@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import itertools
 import json
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -98,7 +99,7 @@ def main(argv=None) -> int:
         print(f"| {name} | {r['noise_estimated']:.4f} | {r['phi_eff']['median_sigma']:.3g} | {cell('phi_eff')} | "
               f"{cell('phi_shear')} | {cell('disp_x')} | {cell('disp_y')} |", flush=True)
     if a.out:
-        args = " ".join(argv if argv is not None else sys.argv[1:])
+        args = shlex.join(argv if argv is not None else sys.argv[1:])
         a.out.write_text(json.dumps({"command": f"python benchmarks/calibrate_uncertainty.py {args}".strip(), "records": recs,
                                      "seconds": time.perf_counter() - t0}, indent=1))
     return 0

@@ -413,7 +413,7 @@ def coverage_and_uncertainty_sections(folder: Path) -> str:
         out.append(f"""
 ## Coverage against independent peers
 
-Produced by `{rec['command']}` (the "before" columns: `{rec.get('before', {}).get('command', '—')}`). Peers: a
+Produced by `{rec['command']}` (the "before" columns: `{rec.get("before", {}).get("command", "—")}`, the analyzer before the quality map). Peers: a
 compact fast checkerboard demodulation (FCD, Wildeman 2018; `benchmarks/_fcd.py`) and OpenCV's DIS and
 Farneback optical flow, each given the reference and the photo. Agreement area: where FCD agrees with at
 least one of the flows within {rec['tolerance_periods']:g} carrier period (each flow alone locks onto the wrong
@@ -426,6 +426,33 @@ reported region where glassdist agrees with FCD within {rec['tolerance_periods']
 | case | agree area | before: analysed / coverage / precision | analysed | coverage | precision | accuracy vs FCD |
 |---|---|---|---|---|---|---|
 {chr(10).join(rows)}
+""")
+    ex = folder / "examples_before_after.json"
+    if ex.is_file():
+        rec = json.loads(ex.read_text())
+        before = {(r["photo"], r["method"]): r for r in rec.get("before", {}).get("records", [])}
+
+        def cells(r):
+            return (f"{100 * r['valid']:.1f} % | {100 * r['trusted']:.1f} % | {r['p95_eff']:.1f} | {r['max_eff']:.1f} | "
+                    f"{r['max_eff_reported']:.0f}")
+
+        rows = []
+        for r in rec["records"]:
+            b = before.get((r["photo"], r["method"]))
+            rows.append(f"| {r['photo']} | {r['method']} | before | {cells(b)} |" if b else "")
+            rows.append(f"| {r['photo']} | {r['method']} | after | {cells(r)} |")
+        out.append(f"""
+## Real photos (examples/data): before and after the quality map
+
+Produced by `{rec['command']}`. The factory example's settings (checkerboard, pitch 5 mm, L = 1 m, N = 2);
+reported: share of the image in `valid`; trusted: quality label 0 (before: the reported region, which
+statistics used); p95 and max |φ_eff| as the statistics give them (before: over the reported region,
+after: over the trusted pixels); the last column is the largest |φ_eff| anywhere in the reported region
+(after: in the guard band next to excluded areas, drawn but left out of statistics).
+
+| photo | method | version | reported | trusted | p95 \\|φ_eff\\| mD | max \\|φ_eff\\| mD | max in reported region mD |
+|---|---|---|---|---|---|---|---|
+{chr(10).join(x for x in rows if x)}
 """)
     cal = folder / "uncertainty_calibration.json"
     if cal.is_file():
