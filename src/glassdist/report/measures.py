@@ -730,8 +730,8 @@ def standard_measures(result, *, gauge_mm: float = 4.0, directions_deg=(0.0, 90.
     They are computed from the field ``displacement_detrended_mm`` on the result's analysis
     grid (the field the power channels differentiate: after the degree-N detrend and the sigma
     smoothing, so relative to the Direct Method's homography baseline or the Comparative
-    reference and to the degree-N trend), at the samples whose centre pixel is valid, with the
-    isotropic ``mm_per_px``.
+    reference and to the degree-N trend), at the trusted samples whose centre pixel is in the
+    reported region (the region the statistics use), with the isotropic ``mm_per_px``.
 
     Parameters
     ----------
