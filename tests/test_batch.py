@@ -273,3 +273,28 @@ def test_index_fits_a_1200_px_window(tmp_path):
 
     scroll, client = map(int, re.search(r'data-width="(\d+)x(\d+)"', r.stdout).groups())
     assert client > 1000 and scroll <= client, (scroll, client)  # no horizontal scroll bar
+
+
+def test_thumbnails_share_one_colour_scale_and_trend_groups_lots(tmp_path):
+    import matplotlib.image
+    import numpy as np
+
+    from glassdist.report.batch_index import write_thumbnails, write_trend
+
+    for pid, value in (("a", 10.0), ("b", 20.0)):
+        d = tmp_path / "panes" / pid
+        d.mkdir(parents=True)
+        field = np.full((40, 60), value)
+        valid = np.ones((40, 60), bool)
+        valid[:5] = False
+        np.savez(d / "result.npz", phi_eff_mD=field, valid=valid)
+    thumbs, vmax = write_thumbnails(tmp_path, ["a", "b", "missing"])
+    assert set(thumbs) == {"a", "b"} and vmax == pytest.approx(20.0)
+    a, b = (matplotlib.image.imread(tmp_path / thumbs[k]) for k in ("a", "b"))
+    assert a.shape[:2] == (40, 60)  # no axes, no margin: the field's own pixels
+    # one scale: 10 mD is half-way to the top colour, 20 mD is the top colour; grey where not analysed
+    assert not np.allclose(a[20, 30], b[20, 30]) and np.allclose(a[0, 0], b[0, 0])
+    rows = [{"id": i, "lot": lot, "status": "done", "verdict": v, "phi_eff_p95_abs_mD": "5",
+             "phi_shear_p95_abs_mD": "4"} for i, lot, v in (("a", "L1", "PASS"), ("b", "L2", "FAIL"))]
+    assert write_trend(tmp_path, rows) == "trend.png" and (tmp_path / "trend.png").stat().st_size > 0
+    assert write_trend(tmp_path, [dict(rows[0], status="pending")]) is None

@@ -28,7 +28,10 @@ options, output folder).
 Manifest columns
 ----------------
 ``image`` (required), ``id``, ``reference``, ``pitch_mm``, ``distance_m``,
-``pattern``, ``params``, ``mask``, ``spec``, ``sigma_mm``, ``detrend_degree``.
+``pattern``, ``params``, ``mask``, ``spec``, ``sigma_mm``, ``detrend_degree``,
+``site``, ``operator``, ``lot``. ``pitch_mm`` and ``distance_m`` may be left to a
+pane's ``spec`` whose protocol pins them; ``id`` is passed as the pane ID, ``site``
+and ``operator`` to the report, ``lot`` groups the index's trend plot.
 Empty cells take the value of the matching command-line option. Relative paths
 are relative to the manifest's folder. Rows whose first cell starts with ``#``
 are comments.
@@ -84,8 +87,8 @@ class Pane:
 
     id: str
     image: Path
-    pitch_mm: float
-    distance_m: float
+    pitch_mm: float | None
+    distance_m: float | None
     reference: Path | None = None
     pattern: str | None = None
     params: Path | None = None
@@ -93,13 +96,24 @@ class Pane:
     spec: Path | None = None
     sigma_mm: float | None = None
     detrend_degree: int | None = None
+    site: str | None = None
+    operator: str | None = None
+    lot: str | None = None
 
     def analyze_args(self, out_dir, *, report=False, export=False):
-        """Arguments of ``glassdist analyze`` for this pane, writing into ``out_dir``."""
-        args = ["analyze", str(self.image), "--pitch-mm", repr(self.pitch_mm), "--distance-m", repr(self.distance_m)]
+        """Arguments of ``glassdist analyze`` for this pane, writing into ``out_dir``.
+
+        The pane's ``id`` is its ``--pane-id``; pitch and distance may be left to the
+        pane's specification when its protocol pins them.
+        """
+        args = ["analyze", str(self.image)]
+        for flag, value in (("--pitch-mm", self.pitch_mm), ("--distance-m", self.distance_m)):
+            if value is not None:
+                args += [flag, repr(value)]
         for flag, value in (("--reference", self.reference), ("--pattern", self.pattern), ("--params", self.params),
                             ("--mask", self.mask), ("--spec", self.spec), ("--sigma-mm", self.sigma_mm),
-                            ("--detrend-degree", self.detrend_degree)):
+                            ("--detrend-degree", self.detrend_degree), ("--pane-id", self.id), ("--site", self.site),
+                            ("--operator", self.operator)):
             if value is not None:
                 args += [flag, str(value)]
         if report:
@@ -159,10 +173,12 @@ def _make_pane(values, defaults, base, where):
     merged.update({k: v for k, v in values.items() if v is not None})
     if "image" not in merged:
         raise InputError(f"{where}: no 'image' given")
-    for name in ("pitch_mm", "distance_m"):
+    for name in ("pitch_mm", "distance_m") if "spec" not in merged else ():  # a spec's protocol may pin them
         if name not in merged:
             opt = "--" + name.replace("_", "-")
             raise InputError(f"{where}: no '{name}'; add a '{name}' column or give {opt} for every pane")
+    merged.setdefault("pitch_mm", None)
+    merged.setdefault("distance_m", None)
     for name in _PATH_COLS:
         if merged.get(name) is not None:
             p = Path(merged[name]).expanduser()
@@ -459,7 +475,7 @@ def run_batch(panes, out, *, report=False, export=False, runner=None, progress=T
                 todo.append(pane)
         if records:
             echo(f"resuming: {len(records)} pane(s) already done, {len(todo)} to analyse")
-        write_index(panes, out)
+        write_index(panes, out, figures=False)
         cwd = None
         if executor is not None and executor.distributed and todo:
             paths = [out] + [p for pane in todo for p in _input_paths(pane)]
@@ -475,7 +491,7 @@ def run_batch(panes, out, *, report=False, export=False, runner=None, progress=T
                 label = rec.get("verdict") or ("analysed" if rec["status"] == "done" else "ERROR")
                 tail = f": {rec['error']}" if rec["status"] == "error" else ""
                 echo(f"[{len(records)}/{len(panes)}] {pane.id}  {label}  ({rec['seconds']:.1f} s){tail}")
-                write_index(panes, out)
+                write_index(panes, out, figures=False)
                 bar.advance(task)
 
             if executor is None or not executor.distributed:
@@ -495,6 +511,7 @@ def run_batch(panes, out, *, report=False, export=False, runner=None, progress=T
                     finished(pane, _record_pane(pane, out, tmp, outcome, seconds, report, export))
                 for stale in (out / "panes").glob(".tmp-*"):  # of attempts lost with their worker
                     shutil.rmtree(stale, ignore_errors=True)
+        write_index(panes, out)  # the final index: shared-scale thumbnails and the trend plot
     finally:
         lock.close()
     n_err = sum(r["status"] == "error" for r in records.values())
@@ -523,6 +540,9 @@ def _index_rows(panes, out):
     for pane in panes:
         row = {"id": pane.id, "status": "pending", "verdict": "", "method": "", "image": str(pane.image),
                "reference": str(pane.reference or ""), "pitch_mm": pane.pitch_mm, "distance_m": pane.distance_m}
+        row.update({"lot": pane.lot or "", "site": pane.site or "", "operator": pane.operator or "",
+                    "spec": Path(pane.spec).stem if pane.spec else "", "spec_name": "", "detrend_degree": "",
+                    "sigma_mm": ""})
         row.update({f"{c}_{s}_mD": "" for c, s in _INDEX_STATS})
         row.update({"valid_percent": "", "seconds": "", "report": "", "error": ""})
         done = _read_json(out / "panes" / pane.id / "pane.json")
@@ -534,6 +554,8 @@ def _index_rows(panes, out):
             row.update(status="done", verdict=done.get("verdict") or "", method=summary.get("method", ""),
                        seconds=done.get("seconds", ""), valid_percent=_round(a4.get("valid_percent")))
             row.update({f"{c}_{s}_mD": _round(stats.get(c, {}).get(s)) for c, s in _INDEX_STATS})
+            row.update(spec_name=(summary.get("verdict") or {}).get("spec_name", ""),
+                       detrend_degree=summary.get("detrend_degree", ""), sigma_mm=_round(summary.get("sigma_mm")))
             if (out / "panes" / pane.id / "report.html").is_file():
                 row["report"] = f"panes/{pane.id}/report.html"
         elif failed:
@@ -557,24 +579,35 @@ def _write_csv(path, rows):
     return atomic_write_text(path, buf.getvalue())
 
 
-def write_index(panes, out):
-    """Write ``OUT/index.csv`` and ``OUT/index.html`` listing every pane with its status and statistics."""
+def write_index(panes, out, *, figures=True):
+    """Write ``OUT/index.csv`` and ``OUT/index.html`` listing every pane with its status and statistics.
+
+    With ``figures`` (the final index of a run), also the thumbnails on one shared colour
+    scale and the per-lot trend plot (:mod:`glassdist.report.batch_index`); the indexes
+    written while the batch runs link each pane's own heatmap instead.
+    """
     out = Path(out)
     rows = _index_rows(panes, out)
     _write_csv(out / "index.csv", rows)
-    atomic_write_text(out / "index.html", _index_html(rows, out))
+    atomic_write_text(out / "index.html", _index_html(rows, out, figures=figures))
     return out / "index.csv", out / "index.html"
 
 
-def _index_html(rows, out):
+def _index_html(rows, out, *, figures=True):
     from .. import __version__
+    from .batch_index import write_thumbnails, write_trend
+
+    thumbs, vmax = write_thumbnails(out, [r["id"] for r in rows if r["status"] == "done"]) if figures else ({}, None)
+    trend = write_trend(out, rows) if figures else None
+    with_lot = any(r["lot"] for r in rows)
 
     counts = {s: sum(r["status"] == s for r in rows) for s in ("done", "error", "pending")}
     n_fail = sum(r["verdict"] == "FAIL" for r in rows)
     # Two header rows: the statistics grouped under their channel, so that the columns stay
     # narrow and the table (thumbnail included) fits a 1200 px wide window.
     channels = list(dict.fromkeys(c for c, _ in _INDEX_STATS))
-    top = "".join(f'<th rowspan="2">{h}</th>' for h in ("pane", "status", "verdict", "method"))
+    top = "".join(f'<th rowspan="2">{h}</th>' for h in ("pane",) + (("lot",) if with_lot else ())
+                  + ("status", "verdict", "spec", "method", "N", "σ mm"))
     top += "".join(f'<th colspan="{sum(c == ch for c, _ in _INDEX_STATS)}">|{escape(ch)}| (mD)</th>' for ch in channels)
     top += "".join(f'<th rowspan="2">{h}</th>' for h in ("analysed %", "s", "heatmap"))
     sub = "".join(f"<th>{escape(s.removesuffix('_abs'))}</th>" for _, s in _INDEX_STATS)
@@ -585,13 +618,28 @@ def _index_html(rows, out):
         cls = "FAIL" if r["verdict"] == "FAIL" or r["status"] == "error" else r["verdict"] or r["status"]
         status = escape(r["status"]) + (f"<br><small>{escape(r['error'])}</small>" if r["error"] else "")
         thumb = ""
-        if r["status"] == "done" and (out / "panes" / r["id"] / "phi_eff.png").is_file():
+        if r["id"] in thumbs:  # shared colour scale, no axes
+            thumb = (f'<a href="panes/{pid}/phi_eff.png"><img class="thumb shared" src="{escape(thumbs[r["id"]])}" '
+                     'alt="phi_eff"></a>')
+        elif r["status"] == "done" and (out / "panes" / r["id"] / "phi_eff.png").is_file():
             thumb = f'<a href="panes/{pid}/phi_eff.png"><img class="thumb" src="panes/{pid}/phi_eff.png" alt="phi_eff"></a>'
-        cells = [name, status, escape(r["verdict"]), escape(r["method"])]
+        spec = f'<span title="{escape(r["spec_name"])}">{escape(r["spec"])}</span>' if r["spec"] else ""
+        cells = [name] + ([escape(r["lot"])] if with_lot else []) + [status, escape(r["verdict"]), spec,
+                                                                    escape(r["method"]), escape(str(r["detrend_degree"])),
+                                                                    escape(str(r["sigma_mm"]))]
         cells += [escape(str(r[f"{c}_{s}_mD"])) for c, s in _INDEX_STATS]
         cells += [escape(str(r["valid_percent"])), escape(str(r["seconds"])), thumb]
         body += f'<tr class="{escape(cls)}" id="pane-{pid}">' + "".join(f"<td>{c}</td>" for c in cells) + "</tr>\n"
     stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M:%S")
+    scale = ""
+    if thumbs:
+        scale = (f'<p id="thumb-scale">Thumbnails: phi_eff on one colour scale for every pane, [-{vmax:.3g}, {vmax:.3g}] '
+                 f'mD (the largest of the panes\' 99th percentiles of |phi_eff|); grey: not analysed.<br>'
+                 '<img src="thumbs/colourbar.png" alt="colour scale of the thumbnails" style="max-width:400px"></p>')
+    trend_html = ""
+    if trend:
+        trend_html = ('<h2>Trend</h2><p>p95 |phi_eff| and p95 phi_shear per pane in batch order, grouped by lot.</p>'
+                      f'<img id="trend" src="{trend}" alt="per-lot trend" style="max-width:100%">')
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>glassdist batch index</title><style>
 body{{font-family:system-ui,Arial,sans-serif;margin:1.5em}}table{{border-collapse:collapse;max-width:100%}}
@@ -604,8 +652,10 @@ tr.PASS td{{background:#f3fbf4}}tr.FAIL td{{background:#fff0ef}}tr.pending td{{c
 <p>{len(rows)} panes: {counts['done']} analysed ({n_fail} failed their specification), {counts['error']} could not
 be analysed, {counts['pending']} pending. Updated {stamp} UTC by glassdist {escape(__version__)}.
 Machine-readable copy: <a href="index.csv">index.csv</a>.</p>
+{scale}
 <table><tr>{top}</tr><tr>{sub}</tr>
-{body}</table></body></html>
+{body}</table>
+{trend_html}</body></html>
 """
 
 
