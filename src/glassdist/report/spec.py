@@ -1,16 +1,21 @@
-"""Acceptance specifications: JSON criteria on the channel statistics, and verdicts.
+"""Acceptance specifications: JSON criteria on the channel statistics, the protocol they were written for, zones.
 
 A specification is a JSON object::
 
     {
       "name": "Line 2 acceptance, 6 mm float",
+      "protocol": {"method": "comparative", "distance_m": 1.0, "pitch_mm": 5.0, "pattern": "checkerboard",
+                   "sigma_periods": 2, "detrend_degree": 2, "min_px_per_period": 6},
+      "pane": {"corners_px": [[10, 12], [1010, 8], [1014, 760], [6, 764]], "size_mm": [1200, 900]},
+      "zones": [{"name": "edge", "edge_band_mm": 50}, {"name": "vision", "inset_mm": 50}],
       "criteria": [
-        {"channel": "phi_eff",   "statistic": "p95_abs",   "max_mD": 60},
+        {"channel": "phi_eff",   "statistic": "p95_abs",   "max_mD": 60, "zone": "vision"},
         {"channel": "phi_shear", "statistic": "max_abs",   "max_mD": 150},
         {"channel": "phi_eff",   "statistic": "area_over", "threshold_mD": 100, "max_percent": 1.0}
       ],
       "min_valid_percent": 50,
-      "protocol": {"method": "comparative", "sigma_mm": 2.0, "detrend_degree": 2}
+      "figures": {"colour_limit": "spec"},
+      "worst_regions": {"max_count": 10}
     }
 
 Criteria
@@ -20,11 +25,20 @@ Criteria
 * ``statistic`` ``area_over`` with ``threshold_mD`` and ``max_percent``: passes when
   the percentage of the valid region where ``|phi| > threshold_mD`` is
   ``<= max_percent``.
+* ``zone`` (optional): the statistic is taken over that zone's analysed pixels.
 * ``min_valid_percent`` (optional): the analysed region must cover at least this
-  percentage of the image, so a pane cannot pass because little of it was measured.
-* ``protocol`` (optional): the analysis must have used this method, smoothing scale
-  ``sigma_mm`` (mm, 1e-6 relative tolerance) and detrend degree; a mismatch fails
-  the verdict, since limits only mean something on the scale they were written for.
+  percentage of the image (of the user's mask when one is given), so a pane cannot
+  pass because little of it was measured; a zone's ``min_valid_percent`` is of the zone.
+* ``protocol`` (optional, :class:`Protocol`): the capture and analysis the limits were
+  written for. ``glassdist analyze`` takes each pinned value when its option is
+  omitted and refuses an option that contradicts one (:func:`resolve_protocol`); a
+  photo under ``min_px_per_period`` is refused (:func:`check_capture`). The verdict
+  repeats each pin as a check (a result computed otherwise fails it).
+* ``pane`` (optional, :class:`Pane`) and ``zones`` (optional, :class:`Zone`): named parts
+  of the pane in pane millimetres (:mod:`glassdist.report.zones`).
+* ``figures`` (optional, :class:`Figures`) and ``worst_regions`` (optional,
+  :class:`WorstRegions`): heatmap colour limit; worst-region threshold and count
+  (:mod:`glassdist.report.regions`).
 
 A value that cannot be computed (empty valid region) fails its criterion. Unknown
 keys are errors. Limits are in mD, percentages in percent of the valid region.
