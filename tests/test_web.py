@@ -111,6 +111,7 @@ def test_upload_result_and_report_in_headless_chromium(server, tmp_path):
             page.fill("#distance_m", "0.5")
             page.select_option("#pattern", "checkerboard")
             page.fill("#detrend_degree", "3")
+            page.fill("#pane_id", "north facade W12")
             page.click("#submit")
             page.wait_for_selector("#progress, #verdict")  # the job page, polling its status
             page.wait_for_selector("#verdict", timeout=240_000)
@@ -125,6 +126,7 @@ def test_upload_result_and_report_in_headless_chromium(server, tmp_path):
             report = Path(info.value.path()).read_text(encoding="utf-8")
             assert info.value.suggested_filename == "report.html"
             assert "FAIL" in report and "image.bmp" in report  # the upload's name in its job folder
+            assert "north facade W12" in report
             page.goto(url)
             assert "distorted_waves.bmp" in page.inner_text("#jobs")  # recent jobs
 
