@@ -17,8 +17,8 @@ import numpy as np
 
 from .regions import REGION_CHANNELS, all_worst_regions, regions_csv
 from .spec import evaluate_spec, spec_limits
-from .stats import result_statistics, valid_percent
-from .zones import pane_frame, zone_masks, zone_statistics
+from .stats import valid_percent
+from .zones import measured_region, pane_frame, region_statistics, zone_masks, zone_statistics
 
 __all__ = ["Acceptance", "assess", "camera_metadata", "heatmap_axes", "draw_overlays", "colour_limits", "describe_clipping", "metadata_rows",
            "METADATA_KEYS"]
@@ -87,7 +87,8 @@ class Acceptance:
     Attributes
     ----------
     stats : dict
-        ``{channel: statistics}`` over the analysed region (with the spec's area-over values).
+        ``{channel: statistics}`` over the analysed region (the result's trusted pixels,
+        :func:`~glassdist.report.zones.measured_region`; with the spec's area-over values).
     frame : PaneFrame
         The pane and its millimetre frame.
     zones : dict
@@ -149,7 +150,7 @@ def colour_limits(result, spec=None, channels=("phi_eff", "phi_shear")):
     """
     from .figures import CHANNELS, shared_limit
 
-    valid = np.asarray(result.valid, dtype=bool)
+    valid = measured_region(result)
     shared = shared_limit(*(getattr(result, CHANNELS[c][0]) for c in channels), valid=valid)
     choice = spec.figures.colour_limit if spec is not None else "auto"
     if choice == "auto":
@@ -191,17 +192,17 @@ def assess(result, spec=None, *, spec_path="", spec_sha256="", protocol=None, ma
         The capture violates the protocol's capture limits.
     """
     limits = spec_limits(spec) if spec is not None else {}
-    stats = result_statistics(result, over_limits_mD=limits)
+    measured = measured_region(result)
+    stats = region_statistics(result, measured, over_limits_mD=limits)
     frame = pane_frame(result, spec.pane if spec is not None else None)
     zones_def = spec.zones if spec is not None else ()
     masks = zone_masks(frame, zones_def)
     zones = zone_statistics(result, frame, zones_def, over_limits_mD=limits, masks=masks)
-    valid = np.asarray(result.valid, dtype=bool)
     if mask is not None:
         m = np.asarray(mask, dtype=bool)
-        coverage = 100.0 * np.count_nonzero(valid & m) / max(np.count_nonzero(m), 1)
+        coverage = 100.0 * np.count_nonzero(measured & m) / max(np.count_nonzero(m), 1)
     else:
-        coverage = valid_percent(valid)
+        coverage = valid_percent(measured)
     verdict = None
     if spec is not None:
         verdict = evaluate_spec(spec, stats, result, spec_path=spec_path, spec_sha256=spec_sha256, zones=zones,

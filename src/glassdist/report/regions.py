@@ -138,9 +138,11 @@ def region_thresholds(result, spec=None, channels=REGION_CHANNELS):
     """
     from .spec import spec_limits
 
+    from .zones import measured_region
+
     limits = spec_limits(spec) if spec is not None else {}
     given = dict(spec.worst_regions.threshold_mD) if spec is not None else {}
-    valid = np.asarray(result.valid, dtype=bool)
+    valid = measured_region(result)
     out = {}
     for ch in channels:
         if ch in given:
@@ -162,8 +164,10 @@ def all_worst_regions(result, frame, spec=None, *, channels=REGION_CHANNELS):
     dict
         ``{channel: {"threshold_mD", "threshold_source", "regions": tuple of WorstRegion}}``.
     """
+    from .zones import measured_region
+
     settings = spec.worst_regions if spec is not None else None
-    valid = np.asarray(result.valid, dtype=bool)
+    valid = measured_region(result)
     out = {}
     for ch, (t, source) in region_thresholds(result, spec, channels).items():
         regions = () if not np.isfinite(t) else worst_regions(

@@ -701,7 +701,12 @@ def evaluate_spec(spec, stats, result, *, spec_path="", spec_sha256="", zones=No
     zones = zones or {}
     checks = _protocol_checks(spec.protocol, result)
     if spec.min_valid_percent is not None:
-        cov = valid_percent(result.valid) if coverage_percent is None else float(coverage_percent)
+        if coverage_percent is None:
+            from .zones import measured_region
+
+            cov = valid_percent(measured_region(result))
+        else:
+            cov = float(coverage_percent)
         where = "the image" if coverage_percent is None else "the region to analyse"
         checks.append(Check(f"analysed area >= {spec.min_valid_percent:g} % of {where}", cov,
                             spec.min_valid_percent, "%", ">=", cov >= spec.min_valid_percent))

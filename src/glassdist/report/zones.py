@@ -37,7 +37,7 @@ from scipy import ndimage
 from .stats import CHANNEL_FIELDS, channel_statistics
 
 __all__ = ["PaneFrame", "pane_frame", "pane_frame_from_corners", "pane_frame_from_region", "zone_masks",
-           "zone_statistics"]
+           "zone_statistics", "measured_region", "region_statistics"]
 
 
 def _apply(H, x, y):
@@ -277,6 +277,23 @@ def zone_masks(frame, zones):
     return out
 
 
+def measured_region(result):
+    """The pixels statistics and verdicts use: the result's trusted pixels (quality label 0), else its valid region."""
+    return np.asarray(getattr(result, "trusted", None) if getattr(result, "trusted", None) is not None
+                      else result.valid, dtype=bool)
+
+
+def region_statistics(result, region, *, over_limits_mD=None):
+    """``{channel: statistics}`` of every channel of ``result`` over the pixels of ``region`` (bool, (H, W))."""
+    over_limits_mD = over_limits_mD or {}
+    stats = {}
+    for name, attr in CHANNEL_FIELDS.items():
+        f = getattr(result, attr, None)
+        if f is not None:
+            stats[name] = channel_statistics(f, region, over_limits_mD=over_limits_mD.get(name, ()))
+    return stats
+
+
 def zone_statistics(result, frame, zones, *, over_limits_mD=None, masks=None):
     """Statistics and coverage of every zone.
 
@@ -297,21 +314,17 @@ def zone_statistics(result, frame, zones, *, over_limits_mD=None, masks=None):
         ``{name: {"definition", "area_mm2", "analysed_area_mm2", "coverage_percent",
         "statistics": {channel: statistics}}}``; ``coverage_percent`` is the analysed
         share of the zone's area (NaN for a zone outside the photo), the statistics are
-        over the analysed pixels of the zone (see :mod:`glassdist.report.stats`).
+        over the analysed pixels of the zone (see :mod:`glassdist.report.stats`); analysed
+        pixels are those of :func:`measured_region`.
     """
     masks = zone_masks(frame, zones) if masks is None else masks
-    over_limits_mD = over_limits_mD or {}
-    valid = np.asarray(result.valid, dtype=bool)
+    measured = measured_region(result)
     out = {}
     for z in zones:
         m = masks[z.name]
         area = frame.area_mm2(m)
-        analysed = frame.area_mm2(m & valid)
-        stats = {}
-        for name, attr in CHANNEL_FIELDS.items():
-            f = getattr(result, attr, None)
-            if f is not None:
-                stats[name] = channel_statistics(f, valid & m, over_limits_mD=over_limits_mD.get(name, ()))
+        analysed = frame.area_mm2(m & measured)
+        stats = region_statistics(result, measured & m, over_limits_mD=over_limits_mD)
         out[z.name] = {
             "definition": z.describe(), "area_mm2": area, "analysed_area_mm2": analysed,
             "coverage_percent": 100.0 * analysed / area if area > 0 else math.nan, "statistics": stats,
