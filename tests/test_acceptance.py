@@ -349,3 +349,17 @@ def test_mask_coverage_is_of_the_mask():
             "criteria": [{"channel": "phi_eff", "statistic": "max_abs", "max_mD": 1e6}]}
     assert not glassdist.evaluate_spec(masked, spec).passed  # under 56 % of the image ...
     assert glassdist.evaluate_spec(masked, spec, mask=mask).passed  # ... but most of the region asked for
+
+
+def test_statistics_and_regions_use_the_trusted_pixels():
+    from glassdist.report.acceptance import assess
+
+    res = _field_result()
+    res.trusted = res.valid.copy()
+    res.trusted[:, :20] = False  # e.g. a guard band: reported, not trusted
+    res.phi_eff_mD = res.phi_eff_mD.copy()
+    res.phi_eff_mD[:, :20] = 500.0
+    acc = assess(res, Spec(name="t", criteria=[{"channel": "phi_eff", "statistic": "max_abs", "max_mD": 20}]))
+    assert acc.stats["phi_eff"]["max_abs"] == pytest.approx(10.0) and acc.verdict.passed
+    assert all(r.peak_mD < 500 for r in acc.regions["phi_eff"]["regions"])
+    assert acc.coverage_percent == pytest.approx(100.0 * 240 / 260)
