@@ -1,5 +1,6 @@
 """The command-line contract: outputs, and one-line errors for bad input."""
 
+import hashlib
 import json
 import subprocess
 import sys
@@ -35,14 +36,29 @@ def photos(tmp_path_factory):
 def test_analyze_writes_the_contract(photos, tmp_path):
     out = tmp_path / "out"
     r = _cli("analyze", photos / "img.png", "--reference", photos / "ref.png", "--pitch-mm", 8, "--distance-m", 10,
-             "--sigma-mm", 16, "--out", out)
+             "--sigma-mm", 16, "--out", out, "--fields", "pixel")
     assert r.returncode == 0, r.stderr
-    with np.load(out / "result.npz") as z:
-        assert z["displacement_mm"].shape == (240, 300, 2)
-        for k in ("phi_eff_mD", "phi_shear_mD", "phi_total_mD", "valid"):
+    with np.load(out / "result.npz") as z:  # the documented pixel-grid file
+        assert z["displacement_mm"].shape == (240, 300, 2) and z["displacement_detrended_mm"].shape == (240, 300, 2)
+        for k in ("phi_eff_mD", "phi_shear_mD", "phi_total_mD", "axis_deg", "valid"):
             assert z[k].shape == (240, 300)
         assert z["valid"].dtype == bool
-        assert np.all(np.isnan(z["phi_eff_mD"][~z["valid"]]))
+        for k in ("phi_eff_mD", "phi_shear_mD", "phi_total_mD", "axis_deg"):
+            assert np.all(np.isnan(z[k][~z["valid"]])) and np.all(np.isfinite(z[k][z["valid"]]))
+        pixel = {k: z[k] for k in z.files}
+    # the default, compact layout: the same fields, brought to the pixel grid by load_result
+    from glassdist import load_result
+
+    r = _cli("analyze", photos / "img.png", "--reference", photos / "ref.png", "--pitch-mm", 8, "--distance-m", 10,
+             "--sigma-mm", 16, "--out", tmp_path / "compact")
+    assert r.returncode == 0, r.stderr
+    stored = load_result(tmp_path / "compact")
+    assert stored.layout == "analysis" and stored.fields["phi_eff_mD"].shape[0] < 240
+    assert (tmp_path / "compact" / "result.npz").stat().st_size < (out / "result.npz").stat().st_size / 4
+    back = stored.to_pixel_grid()
+    for k in ("displacement_mm", "displacement_detrended_mm", "phi_eff_mD", "phi_shear_mD", "phi_total_mD",
+              "axis_deg", "valid"):
+        np.testing.assert_array_equal(back[k], pixel[k], err_msg=k)
     s = json.loads((out / "summary.json").read_text())
     assert s["method"] == "comparative"
     assert s["parameters"]["sigma_mm"] == 16.0 and s["glassdist_version"]
@@ -179,7 +195,8 @@ def test_rerun_removes_only_the_previous_runs_own_leftovers(photos, tmp_path):
     assert {"report.html", "fields.npz", "tiff/valid.tif", "mask_phi_eff_0.001mD.png", "notes.txt"} <= set(first)
     s = json.loads((out / "summary.json").read_text())
     assert sorted(s["outputs"]) == [f for f in first if f not in ("notes.txt", "summary.json")]
-    assert s["outputs"]["result.npz"] == (out / "result.npz").stat().st_size
+    assert s["outputs"]["result.npz"]["size"] == (out / "result.npz").stat().st_size
+    assert s["outputs"]["result.npz"]["sha256"] == hashlib.sha256((out / "result.npz").read_bytes()).hexdigest()
     # the user appends to fields.npz after the first run: it is no longer the file glassdist wrote
     with (out / "fields.npz").open("ab") as fh:
         fh.write(b"appended by the user")
@@ -197,8 +214,12 @@ def test_rerun_removes_only_the_previous_runs_own_leftovers(photos, tmp_path):
     assert "removed from" in r.stdout and "report.html" in r.stdout
 
 
+def _record(*paths):
+    return {"size": sum(p.stat().st_size for p in paths), "sha256": hashlib.sha256(b"".join(p.read_bytes() for p in paths)).hexdigest()}
+
+
 def test_recorded_outputs_never_leave_the_folder(tmp_path):
-    from glassdist.io import recorded_outputs, remove_outputs
+    from glassdist.report.outputs import recorded_outputs, remove_outputs
 
     out = tmp_path / "out"
     (out / "sub").mkdir(parents=True)
@@ -206,14 +227,33 @@ def test_recorded_outputs_never_leave_the_folder(tmp_path):
     for f in (outside, out / "a.png", out / "sub" / "b.png"):
         f.write_text("x")
     (out / "link.png").symlink_to(outside)
-    listed = {"../outside.txt": 1, str(outside): 1, "link.png": 1, "sub/../a.png": 1, "a.png": 1, "sub/b.png": 1,
-              "missing.png": 1, "summary.json": 1, "sub": 1}
+    rec = _record(out / "a.png")
+    listed = {"../outside.txt": rec, str(outside): rec, "link.png": rec, "sub/../a.png": rec, "a.png": rec,
+              "sub/b.png": rec, "missing.png": rec, "summary.json": rec, "sub": rec}
     (out / "summary.json").write_text(json.dumps({"glassdist_version": "0", "outputs": listed}))
-    assert recorded_outputs(out) == {"a.png": 1, "sub/b.png": 1}
-    assert remove_outputs(out, list(listed)) == (["a.png", "sub/b.png"], [])
+    record = recorded_outputs(out)
+    assert record == {"a.png": rec, "sub/b.png": rec}
+    assert remove_outputs(out, record, list(listed)) == (["a.png", "sub/b.png"], [])
     assert outside.read_text() == "x" and (out / "link.png").is_symlink() and not (out / "sub").exists()
-    (out / "summary.json").write_text(json.dumps({"outputs": {"link.png": 1}}))  # not a glassdist summary
+    (out / "summary.json").write_text(json.dumps({"outputs": {"link.png": rec}}))  # not a glassdist summary
     assert recorded_outputs(out) == {}
+
+
+def test_crafted_summary_never_deletes_an_unrelated_file(tmp_path):
+    """Cleanup removes a file only when it still has the SHA-256 its run recorded: sizes alone are not enough."""
+    from glassdist.report.outputs import recorded_outputs, remove_outputs
+
+    out = tmp_path / "out"
+    out.mkdir()
+    precious, old_style = out / "thesis.pdf", out / "notes.txt"
+    precious.write_bytes(b"precious bytes")
+    old_style.write_text("mine")
+    crafted = {"thesis.pdf": {"size": precious.stat().st_size, "sha256": "0" * 64},  # right size, wrong hash
+               "notes.txt": old_style.stat().st_size}  # the old size-only form
+    (out / "summary.json").write_text(json.dumps({"glassdist_version": "0", "outputs": crafted}))
+    record = recorded_outputs(out)
+    assert remove_outputs(out, record, ["thesis.pdf", "notes.txt"]) == ([], [])
+    assert precious.read_bytes() == b"precious bytes" and old_style.read_text() == "mine"
 
 
 def test_result_npz_has_the_usual_permissions(photos, tmp_path):
@@ -227,3 +267,58 @@ def test_result_npz_has_the_usual_permissions(photos, tmp_path):
     os.umask(umask)
     for name in ("result.npz", "summary.json", "statistics.csv", "phi_eff.png"):
         assert stat.S_IMODE((out / name).stat().st_mode) == 0o666 & ~umask, name
+
+
+# ---------------------------------------------------------------- the output folder: lock, debris, inputs
+
+def test_second_run_into_a_locked_folder_exits_2(photos, tmp_path):
+    fcntl = pytest.importorskip("fcntl")
+    import os
+
+    out = tmp_path / "out"
+    out.mkdir()
+    fd = os.open(out, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # as a run in progress holds it
+        r = _cli("analyze", photos / "img.png", "--pitch-mm", 8, "--distance-m", 10, "--out", out)
+    finally:
+        os.close(fd)
+    assert r.returncode == 2 and "another glassdist run is writing to" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
+    assert not any(out.iterdir())
+
+
+def test_debris_of_a_killed_run_is_removed_and_nothing_else(photos, tmp_path):
+    import os
+
+    out = tmp_path / "out"
+    out.mkdir()
+    dead = out / ".result.npz.4194301.0badc0de.tmp"  # a killed run's temporary file (no such process)
+    alive = out / f".phi_eff.png.{os.getppid()}.0badc0de.tmp"  # a live process: not provably debris
+    other = out / ".notes.txt.4194301.0badc0de.tmp"  # not a name glassdist writes
+    for f in (dead, alive, other):
+        f.write_bytes(b"x" * 10)
+    r = _cli("analyze", photos / "img.png", "--pitch-mm", 8, "--distance-m", 10, "--out", out)
+    assert r.returncode == 0, r.stderr
+    assert not dead.exists() and alive.exists() and other.exists()
+    assert not [p for p in out.iterdir() if p.name.endswith(".tmp") and p not in (alive, other)]
+
+
+@pytest.mark.parametrize("name", ["phi_eff.png", "summary.json"])
+def test_an_input_named_like_an_output_is_never_overwritten(photos, tmp_path, name):
+    import shutil
+
+    folder = tmp_path / "inputs"
+    folder.mkdir()
+    if name.endswith(".png"):
+        shutil.copy(photos / "img.png", folder / name)
+        args = ["analyze", folder / name, "--pitch-mm", 8, "--distance-m", 10]
+    else:
+        shutil.copy(photos / "img.png", folder / "img.png")
+        (folder / name).write_text(json.dumps({"name": "s", "criteria": [
+            {"channel": "phi_eff", "statistic": "max_abs", "max_mD": 1000}]}))
+        args = ["analyze", folder / "img.png", "--pitch-mm", 8, "--distance-m", 10, "--spec", folder / name]
+    before = {p.name: p.read_bytes() for p in folder.iterdir()}
+    r = _cli(*args, "--out", folder)
+    assert r.returncode == 2 and "would be overwritten" in r.stderr and "Traceback" not in r.stderr
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == before

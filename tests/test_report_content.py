@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from glassdist.report.workflow import EXIT_SPEC_FAIL, finish_analysis
+from glassdist.report.outputs import EXIT_SPEC_FAIL, finish_analysis
 
 try:
     from test_report_figures import fake_result

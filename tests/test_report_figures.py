@@ -7,6 +7,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from glassdist.analyzer import FIELDS
+from glassdist.analyzer.fourier import SamplingGrid
 from glassdist.report import figures
 
 
@@ -32,7 +34,13 @@ def fake_result(shape=(96, 128), *, eff_mD=-40.0, shear_mD=12.0, seed=0, method=
         f[~valid] = np.nan
     disp[~valid] = np.nan
     direct = method == "direct"
+    fields = {"displacement_mm": disp.astype(np.float32), "displacement_detrended_mm": disp.astype(np.float32),
+              "phi_eff_mD": eff.astype(np.float32), "phi_shear_mD": shear.astype(np.float32),
+              "phi_total_mD": np.hypot(eff, shear).astype(np.float32), "axis_deg": axis.astype(np.float32)}
+    # the result interface on a 1 px analysis grid (the pixel grid itself)
     return SimpleNamespace(
+        field_specs=lambda: tuple(f for f in FIELDS if f.name in fields), grid_field=fields.__getitem__,
+        pixel_field=lambda name: fields[name].copy(), grid_valid=valid, analysis_grid=SamplingGrid(shape, shape),
         method=method, phi_eff_mD=eff, phi_shear_mD=shear, phi_total_mD=np.hypot(eff, shear),
         axis_deg=axis, valid=valid, displacement_mm=disp, displacement_detrended_mm=disp,
         mm_per_px=0.5, sigma_mm=2.0, detrend_degree=2, pitch_mm=5.0, distance_m=1.5,

@@ -30,8 +30,11 @@ from .analyzer import (
 from ._api import evaluate_spec
 from .errors import AnalysisError, GlassdistError, InputError
 from .io import read_image, read_mask
+from .report.outputs import load_result, write_outputs
 
 __all__ = [
+    "write_outputs",
+    "load_result",
     "__version__",
     "analyze",
     "analyze_captures",

@@ -8,6 +8,7 @@ no traceback), 3 analysis done but an acceptance specification FAILED,
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import json
 import logging
@@ -19,7 +20,7 @@ import numpy as np
 from ._version import __version__
 from .errors import GlassdistError, InputError
 
-__all__ = ["main", "build_parser", "write_analysis"]
+__all__ = ["main", "build_parser"]
 
 log = logging.getLogger("glassdist")
 
@@ -93,47 +94,44 @@ def _register_analyze(sub) -> None:
     p.add_argument("--operator", help="who took the photo, for the report")
     p.add_argument("--report", action="store_true", help="also write a self-contained HTML report")
     p.add_argument("--export", action="store_true", help="also export the fields as NPZ and 32-bit TIFF (statistics.csv is always written)")
+    p.add_argument("--fields", choices=["analysis", "pixel"], default="analysis",
+                   help="result.npz layout: 'analysis' (default, compact: the analysis grid with pixel coordinates; "
+                   "glassdist.load_result brings it to the pixel grid) or 'pixel' (every field on the image's pixel grid)")
+    p.add_argument("--quiet", "-q", action="store_true",
+                   help="no progress display and no summary lines (errors and warnings still go to stderr)")
     p.set_defaults(func=_run_analyze, parser=p)
 
 
-def write_analysis(result, out_dir: Path, *, inputs: dict | None = None, outputs: dict | None = None) -> list[Path]:
-    """Write ``result.npz`` and ``summary.json`` (atomically, usual permissions) for an :class:`AnalysisResult`.
+@contextlib.contextmanager
+def _stage_progress(enabled: bool):
+    """Yield ``step(stage)``: a spinner with the stage and the elapsed time, shown from the start.
 
-    ``outputs`` (``{relative path: bytes}``, see :func:`glassdist.io.recorded_outputs`): files
-    of an earlier run still in ``out_dir``, kept on the summary's list of outputs with
-    ``result.npz`` until the run is complete, so that an interrupted run leaves them known.
+    Only when stderr is a terminal (silent when piped, or with ``--quiet``); each stage is
+    also logged at debug level.
     """
-    from .io import output_record
-    from .report.exports import atomic_write, atomic_write_text, to_jsonable
+    if not enabled or not sys.stderr.isatty():
+        yield lambda stage: log.debug("analyze: %s", stage)
+        return
+    from rich.console import Console
+    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
-    out_dir = Path(out_dir)
-    arrays = {
-        "displacement_mm": result.displacement_mm,
-        "displacement_detrended_mm": result.displacement_detrended_mm,
-        "phi_eff_mD": result.phi_eff_mD,
-        "phi_shear_mD": result.phi_shear_mD,
-        "phi_total_mD": result.phi_total_mD,
-        "axis_deg": result.axis_deg,
-        "valid": result.valid,
-    }
-    if any(f.name == "capture_count" for f in result.field_specs()):  # several captures averaged
-        arrays["capture_count"] = result.capture_count
-    npz = atomic_write(out_dir / "result.npz", lambda fh: np.savez(fh, **arrays))
-    summary = result.summary()
-    if inputs:
-        summary["inputs"] = inputs
-    summary["outputs"] = {**(outputs or {}), **output_record(out_dir, [npz])}
-    js = atomic_write_text(out_dir / "summary.json", json.dumps(to_jsonable(summary), indent=2, allow_nan=False) + "\n")
-    return [npz, js]
+    with Progress(SpinnerColumn(), TextColumn("glassdist analyze: {task.description}"), TimeElapsedColumn(),
+                  console=Console(stderr=True), transient=True) as bar:
+        task = bar.add_task("starting", total=None)
+
+        def step(stage: str) -> None:
+            log.debug("analyze: %s", stage)
+            bar.update(task, description=stage)
+
+        yield step
 
 
-def _run_analyze(args) -> int:
-    from .analyzer import analyze, analyze_captures, load_params, prepare_reference
-    from .io import prepare_output_dir, read_image, read_mask, recorded_outputs, remove_outputs
-    from .report.spec import check_capture, load_spec, resolve_protocol
-    from .report.workflow import file_sha256, finish_analysis
+def _read_inputs(args):
+    """Every input of ``analyze``, validated before any work or any write; the spec's protocol fills omitted options."""
+    from .analyzer import load_params
+    from .io import read_image, read_mask
+    from .report.spec import load_spec, resolve_protocol
 
-    # Validate every input before any work or any write; the spec's protocol fills omitted options.
     if args.spec is None:
         missing = [opt for opt, v in (("--pitch-mm", args.pitch_mm), ("--distance-m", args.distance_m)) if v is None]
         if missing:
@@ -161,47 +159,62 @@ def _run_analyze(args) -> int:
             f"{image.shape[1]}x{image.shape[0]} px; both photos must come from the same camera, same size"
         )
     mask = read_mask(args.mask, image.shape) if args.mask is not None else None
-    out = prepare_output_dir(args.out)
-    previous = recorded_outputs(out)  # files of an earlier run into this folder
+    return spec, protocol, params, images, reference, mask
 
-    if reference is not None:
-        reference = prepare_reference(reference, params=params)
-    kw = dict(pitch_mm=protocol.pitch_mm, distance_m=protocol.distance_m, reference=reference, params=params, mask=mask)
-    result = analyze(image, **kw) if len(images) == 1 else analyze_captures(images, **kw)
-    del images, image
-    if spec is not None:  # a capture outside the protocol is not judged (exit 2), nothing written
-        check_capture(spec[0].protocol, result, spec_label=f"the specification '{args.spec}'")
-    inputs = {
-        "image": str(paths[0]),
-        "image_sha256": file_sha256(paths[0]),
-        "reference": None if args.reference is None else str(args.reference),
-        "reference_sha256": None if args.reference is None else file_sha256(args.reference),
-        "mask": None if args.mask is None else str(args.mask),
-    }
-    if len(paths) > 1:
-        inputs["captures"] = [{"image": str(path), "sha256": file_sha256(path)} for path in paths]
-    written = write_analysis(result, out, inputs=inputs, outputs=previous)
-    code = finish_analysis(
-        result, out_dir=out, image_path=paths[0], reference_path=args.reference, spec_path=args.spec,
-        report=args.report, exports=args.export, written=written, spec=spec, protocol=protocol, mask=mask,
-        metadata={"pane_id": args.pane_id, "site": args.site, "operator": args.operator},
-    )
-    # the earlier run's files that this one did not write again (e.g. its report, masks of its spec)
-    removed, problems = remove_outputs(out, sorted(set(previous) - set(recorded_outputs(out))))
-    stats = result.statistics()
-    print(
-        f"{result.method} method: valid {100 * result.valid_fraction:.1f}% of the image, "
-        f"mean |phi_eff| {stats['phi_eff_mD']['mean_abs']:.3g} mD, p95 |phi_eff| {stats['phi_eff_mD']['p95_abs']:.3g} mD, "
-        f"mean phi_shear {stats['phi_shear_mD']['mean_abs']:.3g} mD"
-    )
+
+def _run_analyze(args) -> int:
+    from .analyzer import FIELDS, analyze, analyze_captures, prepare_reference
+    from .report.outputs import open_output_folder, plan_outputs, preview, write_outputs
+    from .report.spec import check_capture, spec_limits
+
+    with _stage_progress(not args.quiet) as step:
+        step("reading the inputs")
+        spec, protocol, params, images, reference, mask = _read_inputs(args)
+        limits = spec_limits(spec[0]) if spec is not None else {}
+        planned = plan_outputs(FIELDS, fields=args.fields, report=args.report, export=args.export, limits=limits)
+        inputs = (*args.image, args.reference, args.mask, args.spec, args.params)
+        with open_output_folder(args.out, planned=planned, inputs=inputs) as folder:
+            if reference is not None:
+                step("preparing the reference")
+                reference = prepare_reference(reference, params=params)
+            step("analysing")
+            kw = dict(pitch_mm=protocol.pitch_mm, distance_m=protocol.distance_m, reference=reference, params=params,
+                      mask=mask)
+            result = analyze(images[0], **kw) if len(images) == 1 else analyze_captures(images, **kw)
+            small = preview(images[0])
+            del images, reference  # only the reduced photo is drawn from here on
+            if spec is not None:  # a capture outside the protocol is not judged (exit 2), nothing written
+                check_capture(spec[0].protocol, result, spec_label=f"the specification '{args.spec}'")
+            step("writing the outputs")
+            lines = []
+            code = write_outputs(
+                result, folder, fields=args.fields, report=args.report, export=args.export, spec_path=args.spec,
+                spec=spec, protocol=protocol, mask=mask, image=small, image_path=args.image[0],
+                reference_path=args.reference, mask_path=args.mask, captures=args.image,
+                metadata={"pane_id": args.pane_id, "site": args.site, "operator": args.operator}, echo=lines.append,
+            )
     for w in result.warnings:
         print(f"warning: {w}", file=sys.stderr)
-    if removed:
-        print(f"removed from {out}, left by the previous run: {', '.join(removed)}")
-    for line in problems:
+    for line in folder.problems:
         print(f"warning: {line}", file=sys.stderr)
-    print(f"results written to {out}")
+    if not args.quiet:
+        _echo_run(result, folder, lines)
     return code
+
+
+def _echo_run(result, folder, lines) -> None:
+    """The run's lines on stdout: verdict and zones, a summary of the statistics, what was removed."""
+    for line in lines:
+        print(line)
+    s = json.loads((folder.path / "summary.json").read_text(encoding="utf-8"))["statistics"]
+    print(
+        f"{result.method} method: valid {100 * result.valid_fraction:.1f}% of the image, "
+        f"mean |phi_eff| {s['phi_eff_mD']['mean_abs']:.3g} mD, p95 |phi_eff| {s['phi_eff_mD']['p95_abs']:.3g} mD, "
+        f"mean phi_shear {s['phi_shear_mD']['mean_abs']:.3g} mD"
+    )
+    if folder.removed:
+        print(f"removed from {folder.path}, left by the previous run: {', '.join(folder.removed)}")
+    print(f"results written to {folder.path}")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -17,10 +17,7 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = [
-    "read_image", "read_mask", "write_png16", "prepare_output_dir", "output_record", "recorded_outputs",
-    "remove_outputs",
-]
+__all__ = ["read_image", "read_mask", "write_png16", "prepare_output_dir"]
 
 _READABLE = {".png", ".tif", ".tiff", ".bmp", ".jpg", ".jpeg"}
 
@@ -164,104 +161,3 @@ def prepare_output_dir(path: str | os.PathLike) -> Path:
     except OSError as exc:
         raise InputError(f"cannot create output folder '{p}': {exc.strerror}; choose a writable location") from None
     return p
-
-
-# ---------------------------------------------------------------- files written by a run
-#
-# ``glassdist analyze`` lists the files it wrote in ``summary.json`` ("outputs": relative
-# path -> size in bytes, summary.json itself excepted). When it runs again into the same
-# folder it removes the files of that list that the new run did not write again, so that
-# no result of the earlier run (a FAIL report, threshold masks of another specification)
-# is left beside the new one. Nothing that is not on the list is ever removed.
-
-SUMMARY_NAME = "summary.json"
-
-
-def output_record(out_dir: str | os.PathLike, paths) -> dict[str, int]:
-    """``{path relative to out_dir (with '/'): size in bytes}`` of files written into ``out_dir``.
-
-    ``summary.json``, which holds the record, is left out of it.
-    """
-    out_dir = Path(out_dir)
-    record = {Path(p).relative_to(out_dir).as_posix(): Path(p).stat().st_size for p in paths
-              if Path(p).name != SUMMARY_NAME or Path(p).parent != out_dir}
-    return dict(sorted(record.items()))
-
-
-def _own_file(out_dir: Path, name) -> Path | None:
-    """``out_dir / name`` if ``name`` is a plain relative path to a regular file inside ``out_dir``, else None."""
-    if not isinstance(name, str) or not name or "\\" in name:
-        return None
-    rel = PurePosixPath(name)
-    if rel.is_absolute() or any(part in ("", ".", "..") for part in rel.parts) or rel.name == SUMMARY_NAME:
-        return None
-    path = out_dir.joinpath(*rel.parts)
-    try:
-        if path.is_symlink() or not path.is_file():
-            return None
-        path.resolve().relative_to(out_dir.resolve())  # no linked folder on the way out
-    except (OSError, ValueError):
-        return None
-    return path
-
-
-def recorded_outputs(out_dir: str | os.PathLike) -> dict[str, int]:
-    """The files the last glassdist run into ``out_dir`` recorded as written, still as it left them.
-
-    Reads ``out_dir/summary.json`` ("outputs"); keeps only the entries that name a regular
-    file inside ``out_dir`` (no link, no '..') whose size is still the recorded one, so that
-    a file replaced by the user since then is not taken for glassdist's.
-
-    Returns
-    -------
-    dict
-        ``{relative path: size in bytes}``; empty when there is no readable glassdist summary.
-    """
-    out_dir = Path(out_dir)
-    try:
-        summary = json.loads((out_dir / SUMMARY_NAME).read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
-        return {}
-    if not isinstance(summary, dict) or "glassdist_version" not in summary:
-        return {}
-    outputs = summary.get("outputs")
-    if not isinstance(outputs, dict):
-        return {}
-    kept = {}
-    for name, size in outputs.items():
-        path = _own_file(out_dir, name)
-        if path is not None and isinstance(size, int) and path.stat().st_size == size:
-            kept[name] = size
-    return kept
-
-
-def remove_outputs(out_dir: str | os.PathLike, names) -> tuple[list[str], list[str]]:
-    """Remove files of ``out_dir`` named by :func:`recorded_outputs`, and folders they leave empty.
-
-    Returns
-    -------
-    removed : list of str
-        The names removed.
-    problems : list of str
-        One line per file that could not be removed (the run goes on).
-    """
-    out_dir = Path(out_dir)
-    removed, problems = [], []
-    for name in names:
-        path = _own_file(out_dir, name)
-        if path is None:
-            continue
-        try:
-            path.unlink()
-        except OSError as exc:
-            problems.append(f"could not remove '{path}' of the previous run: {exc.strerror}")
-            continue
-        removed.append(name)
-        parent = path.parent
-        while parent != out_dir and out_dir in parent.parents:
-            try:
-                parent.rmdir()  # only if empty
-            except OSError:
-                break
-            parent = parent.parent
-    return removed, problems

@@ -18,7 +18,14 @@ from scipy import ndimage
 
 from . import fourier as F
 
-__all__ = ["image_grid_valid", "bspline_upsample", "bspline_refine", "upsample_field", "upsample_labels"]
+__all__ = ["grid_fill_indices", "image_grid_valid", "bspline_upsample", "bspline_refine", "upsample_field", "upsample_labels"]
+
+
+def grid_fill_indices(valid: np.ndarray):
+    """Index of the nearest valid sample of each coarse sample (``(2, h, w)``), None when all or none are valid."""
+    if valid.all() or not valid.any():
+        return None
+    return ndimage.distance_transform_edt(~valid, return_distances=False, return_indices=True)
 
 
 def image_grid_valid(valid: np.ndarray, grid: F.SamplingGrid, user_mask, fine_valid=None):
@@ -30,10 +37,7 @@ def image_grid_valid(valid: np.ndarray, grid: F.SamplingGrid, user_mask, fine_va
     import cv2
 
     H, W = grid.full_shape
-    if not valid.all() and valid.any():
-        idx = ndimage.distance_transform_edt(~valid, return_distances=False, return_indices=True)
-    else:
-        idx = None
+    idx = grid_fill_indices(valid)
     v = valid
     if fine_valid is not None:  # keep the border at the finer grid's resolution
         m = fine_valid.shape[0] // valid.shape[0]

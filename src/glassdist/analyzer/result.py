@@ -194,6 +194,18 @@ class AnalysisResult:
             return upsample_labels(f, d["grid"])
         return upsample_field(f, d["idx"], d["grid"], ~self.valid)
 
+    @property
+    def grid_valid(self) -> np.ndarray:
+        """``(h, w)`` bool: the samples of :attr:`analysis_grid` inside the analysed region.
+
+        The valid samples are those the nearest-valid fill of the upsampling maps to themselves.
+        """
+        idx = self._deferred["idx"]
+        h, w = self.analysis_grid.shape
+        if idx is None:  # all samples valid, or none
+            return np.full((h, w), bool(self.valid.any()))
+        return (idx[0] == np.arange(h)[:, None]) & (idx[1] == np.arange(w)[None, :])
+
     @cached_property
     def grid_trusted(self) -> np.ndarray:
         """Trusted samples (quality label 0 throughout the block) on :attr:`analysis_grid`, bool (h, w)."""
@@ -224,7 +236,9 @@ class AnalysisResult:
 
     def statistics(self) -> dict:
         """Per-channel statistics over the trusted pixels (see :func:`channel_statistics`)."""
-        return {name: channel_statistics(getattr(self, name), self.trusted) for name in CHANNELS}
+        # a channel not accessed yet is brought to the pixel grid for this and dropped (not cached)
+        return {name: channel_statistics(self.__dict__[name] if name in self.__dict__ else self.pixel_field(name),
+                                         self.trusted) for name in CHANNELS}
 
     def quality_counts(self) -> dict:
         """Pixels per quality label, ``{label name: count}``."""

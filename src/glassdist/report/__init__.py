@@ -1,8 +1,29 @@
 """A4 visual metrics and the industrial workflow built on them.
 
-* :mod:`~glassdist.report.figures`: heatmaps, threshold masks, histograms (plots return ``(fig, ax)``).
+The output stage of a run (:mod:`~glassdist.report.outputs`) writes every file of
+``glassdist analyze``, for the command line, ``glassdist batch`` and the Python API alike;
+beside it: figures, statistics, specifications, acceptance zones and regions, the HTML
+report, exports and batches (one module each).
 """
 
-from .figures import save_channel_heatmaps
+from .outputs import (
+    EXIT_SPEC_FAIL,
+    OutputFolder,
+    StoredResult,
+    load_result,
+    open_output_folder,
+    plan_outputs,
+    preview,
+    write_outputs,
+)
 
-__all__ = ["save_channel_heatmaps"]
+__all__ = [
+    "EXIT_SPEC_FAIL",
+    "OutputFolder",
+    "StoredResult",
+    "load_result",
+    "open_output_folder",
+    "plan_outputs",
+    "preview",
+    "write_outputs",
+]

@@ -57,7 +57,7 @@ from pathlib import Path
 
 from ..errors import InputError
 from .exports import atomic_write_text
-from .workflow import EXIT_SPEC_FAIL
+from .outputs import EXIT_SPEC_FAIL
 
 __all__ = [
     "EXIT_PANE_ERRORS",
@@ -453,7 +453,7 @@ def run_batch(panes, out, *, report=False, export=False, runner=None, progress=T
     Returns
     -------
     int
-        The batch exit code (0, :data:`~glassdist.report.workflow.EXIT_SPEC_FAIL` or
+        The batch exit code (0, :data:`~glassdist.report.outputs.EXIT_SPEC_FAIL` or
         :data:`EXIT_PANE_ERRORS`).
     """
     from rich.console import Console

@@ -5,13 +5,16 @@ renamed, so a reader never sees half a file):
 
 * ``statistics.csv``: one row per channel, columns ``<statistic>_mD`` and
   ``area_over_<T>_percent`` (see :mod:`glassdist.report.stats`);
-* ``fields.npz``: ``displacement_mm`` (H, W, 2; ``[..., 0] = x``, ``[..., 1] = y``),
+* ``fields.npz``: every registered field of the result (:data:`glassdist.analyzer.FIELDS`:
+  ``displacement_mm`` (H, W, 2; ``[..., 0] = x``, ``[..., 1] = y``),
   ``displacement_detrended_mm``, ``phi_eff_mD``, ``phi_shear_mD``, ``phi_total_mD``,
-  ``axis_deg``, ``valid``, plus scalars ``mm_per_px``, ``distance_m``, ``pitch_mm``,
-  ``sigma_mm`` and the string ``version`` (float fields are float32, NaN where invalid);
-* ``tiff/<name>.tif``: the same fields, one float32 TIFF each (displacement split into
-  ``displacement_x_mm`` and ``displacement_y_mm``), ``valid.tif`` as uint8 0/1; the
-  TIFF description holds a JSON object with the unit and the glassdist version.
+  ``axis_deg``, uncertainty and label maps) on the pixel grid, ``valid``, plus scalars
+  ``mm_per_px``, ``distance_m``, ``pitch_mm``, ``sigma_mm`` and the string ``version``
+  (float fields are float32, NaN where invalid; label maps uint8);
+* ``tiff/<name>.tif``: the same fields, one TIFF each (vector fields split into
+  ``<name>_x_<unit>`` and ``<name>_y_<unit>``, e.g. ``displacement_x_mm``), ``valid.tif``
+  as uint8 0/1; the TIFF description holds a JSON object with the unit and the glassdist
+  version. Fields are brought to the pixel grid one at a time.
 """
 
 from __future__ import annotations
@@ -27,11 +30,8 @@ import numpy as np
 
 from .stats import STATISTICS
 
-__all__ = ["to_jsonable", "resolved_parameters", "atomic_write", "atomic_write_bytes", "atomic_write_text", "write_statistics_csv", "write_fields_npz", "write_fields_tiff"]
+__all__ = ["to_jsonable", "resolved_parameters", "atomic_write", "atomic_write_bytes", "atomic_write_text", "write_statistics_csv", "write_fields_npz", "write_fields_tiff", "tiff_names"]
 
-_FIELDS = (
-    ("phi_eff_mD", "mD"), ("phi_shear_mD", "mD"), ("phi_total_mD", "mD"), ("axis_deg", "deg"),
-)
 
 
 def to_jsonable(obj):
@@ -129,52 +129,60 @@ def write_statistics_csv(stats, path):
     return atomic_write_text(path, buf.getvalue())
 
 
-def _field_arrays(result):
-    arrays = {}
-    for name in ("displacement_mm", "displacement_detrended_mm") + tuple(n for n, _ in _FIELDS):
-        value = getattr(result, name, None)
-        if value is not None:
-            arrays[name] = np.asarray(value, dtype=np.float32)
-    arrays["valid"] = np.asarray(result.valid, dtype=bool)
-    return arrays
+def _planes(spec):
+    """``[(tiff stem, component index or None, unit)]`` of a field: vector fields split into x and y."""
+    if spec.components == 1:
+        return [(spec.name, None, spec.unit)]
+    suffix = f"_{spec.unit}" if spec.unit else ""
+    stem = spec.name.removesuffix(suffix)
+    return [(f"{stem}_{axis}{suffix}", c, spec.unit) for c, axis in enumerate("xy")]
+
+
+def tiff_names(specs):
+    """File names under ``tiff/`` for the fields ``specs`` (``valid.tif`` last)."""
+    return [f"{stem}.tif" for spec in specs for stem, _, _ in _planes(spec)] + ["valid.tif"]
+
+
+def _pixel_arrays(result):
+    """``(spec, array)`` of each registered field on the pixel grid (float32; labels uint8), one at a time."""
+    for spec in result.field_specs():
+        a = result.pixel_field(spec.name)
+        yield spec, (a.astype(np.float32, copy=False) if spec.kind == "float" else a.astype(np.uint8, copy=False))
+        del a
 
 
 def write_fields_npz(result, path):
-    """Write the displacement and channel fields (float32) and scalars to a compressed NPZ; returns the path."""
-    arrays = _field_arrays(result)
-    for name in ("mm_per_px", "distance_m", "pitch_mm", "sigma_mm"):
-        value = getattr(result, name, None)
-        if value is not None:
-            arrays[name] = np.float64(value)
-    arrays["version"] = np.str_(getattr(result, "version", ""))
-    buf = io.BytesIO()
-    np.savez_compressed(buf, **arrays)
-    return atomic_write_bytes(path, buf.getvalue())
+    """Write every field (pixel grid), ``valid`` and the scalars as a compressed NPZ, one field at a time; returns the path."""
+    from .outputs import write_npz
+
+    def members():
+        for spec, a in _pixel_arrays(result):
+            yield spec.name, a, True
+        yield "valid", np.asarray(result.valid, dtype=bool), True
+        for name in ("mm_per_px", "distance_m", "pitch_mm", "sigma_mm"):
+            yield name, np.float64(getattr(result, name)), False
+        yield "version", np.str_(result.version), False
+
+    return atomic_write(path, lambda fh: write_npz(fh, members()))
 
 
 def write_fields_tiff(result, folder):
-    """Write each field as a float32 TIFF in ``folder`` (created); returns the paths written."""
+    """Write each field (pixel grid) as a TIFF in ``folder`` (created), one plane at a time; returns the paths."""
     import tifffile
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    version = str(getattr(result, "version", ""))
-    arrays = _field_arrays(result)
-    units = dict(_FIELDS)
-    planes = {}
-    for key in ("displacement_mm", "displacement_detrended_mm"):
-        if key in arrays:
-            stem = key.removesuffix("_mm")
-            planes[f"{stem}_x_mm"] = (arrays[key][..., 0], "mm")
-            planes[f"{stem}_y_mm"] = (arrays[key][..., 1], "mm")
-    for key, unit in units.items():
-        if key in arrays:
-            planes[key] = (arrays[key], unit)
-    planes["valid"] = (arrays["valid"].astype(np.uint8), "1 = analysed")
-    written = []
-    for name, (data, unit) in planes.items():
+
+    def tiff(data, name, unit):
         buf = io.BytesIO()
-        meta = {"field": name, "unit": unit, "glassdist_version": version, "invalid": "NaN"}
-        tifffile.imwrite(buf, np.ascontiguousarray(data), description=json.dumps(meta), compression="zlib")
-        written.append(atomic_write_bytes(folder / f"{name}.tif", buf.getvalue()))
+        meta = {"field": name, "unit": unit, "glassdist_version": result.version, "invalid": "NaN"}
+        tifffile.imwrite(buf, np.ascontiguousarray(data), description=json.dumps(meta), compression="zlib",
+                         compressionargs={"level": 1})
+        return atomic_write_bytes(folder / f"{name}.tif", buf.getbuffer())
+
+    written = []
+    for spec, a in _pixel_arrays(result):
+        written += [tiff(a if c is None else a[..., c], stem, unit) for stem, c, unit in _planes(spec)]
+        del a
+    written.append(tiff(np.asarray(result.valid, dtype=np.uint8), "valid", "1 = analysed"))
     return written

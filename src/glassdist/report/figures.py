@@ -65,6 +65,15 @@ def _new_ax(ax, figsize=(6.4, 5.2)):
     return fig, fig.add_subplot()
 
 
+def _centres(shape, extent):
+    """``(x, y)`` coordinates of the sample centres of an (h, w) map drawn with ``extent`` (default: indices)."""
+    h, w = shape
+    if extent is None:
+        return np.arange(w), np.arange(h)
+    return (extent[0] + (np.arange(w) + 0.5) * (extent[1] - extent[0]) / w,
+            extent[3] + (np.arange(h) + 0.5) * (extent[2] - extent[3]) / h)
+
+
 def _label_image_axes(ax, title, units="px"):
     ax.set_xlabel(f"x ({units}, columns)" if units == "px" else f"x ({units})")
     ax.set_ylabel(f"y ({units}, rows)" if units == "px" else f"y ({units})")
@@ -150,7 +159,7 @@ def plot_channel(field, valid=None, *, signed=True, vmax=None, cmap=None, title=
     return fig, ax
 
 
-def plot_axis(axis_deg, phi_shear, valid=None, *, min_shear_mD=None, title=None, ax=None, colorbar=True):
+def plot_axis(axis_deg, phi_shear, valid=None, *, min_shear_mD=None, title=None, ax=None, colorbar=True, extent=None):
     """Principal axis of the astigmatism (direction of largest stretch), degrees.
 
     Parameters
@@ -180,7 +189,7 @@ def plot_axis(axis_deg, phi_shear, valid=None, *, min_shear_mD=None, title=None,
     show = ok & np.isfinite(axis_deg) & (np.nan_to_num(np.asarray(phi_shear), nan=-1.0) >= min_shear_mD)
     data = np.ma.masked_where(~show, np.asarray(axis_deg, dtype=np.float64))
     cmap_obj = matplotlib.colormaps["twilight"].with_extremes(bad=_INVALID_RGBA)
-    im = ax.imshow(data, cmap=cmap_obj, norm=Normalize(-90.0, 90.0), interpolation="nearest")
+    im = ax.imshow(data, cmap=cmap_obj, norm=Normalize(-90.0, 90.0), interpolation="nearest", extent=extent)
     _label_image_axes(ax, title or f"astigmatism axis (where $\\phi_{{shear}}$ ≥ {min_shear_mD:.3g} mD)")
     if colorbar:
         cb = fig.colorbar(im, ax=ax, label="axis (deg from +x towards +y, down)", shrink=0.9)
@@ -188,7 +197,7 @@ def plot_axis(axis_deg, phi_shear, valid=None, *, min_shear_mD=None, title=None,
     return fig, ax
 
 
-def plot_input(image, valid=None, *, title=None, ax=None):
+def plot_input(image, valid=None, *, title=None, ax=None, extent=None):
     """The input photograph (grey, its own intensities) with the analysed region outlined.
 
     Parameters
@@ -205,14 +214,16 @@ def plot_input(image, valid=None, *, title=None, ax=None):
     fig, ax
     """
     fig, ax = _new_ax(ax)
-    ax.imshow(np.asarray(image, dtype=np.float64), cmap="gray", vmin=0.0, vmax=1.0, interpolation="nearest")
+    ax.imshow(np.asarray(image, dtype=np.float64), cmap="gray", vmin=0.0, vmax=1.0, interpolation="nearest",
+              extent=extent)
     if valid is not None and np.any(valid):
-        ax.contour(np.asarray(valid, dtype=float), levels=[0.5], colors=["tab:orange"], linewidths=1.5)
+        v = np.asarray(valid, dtype=float)
+        ax.contour(*_centres(v.shape, extent), v, levels=[0.5], colors=["tab:orange"], linewidths=1.5)
     _label_image_axes(ax, title or "input with analysed region (orange)")
     return fig, ax
 
 
-def plot_threshold_mask(field, valid=None, *, limit_mD, absolute=True, name="φ", title=None, ax=None):
+def plot_threshold_mask(field, valid=None, *, limit_mD, absolute=True, name="φ", title=None, ax=None, extent=None):
     """Pixels over a limit: red over the limit, white under it, grey outside the region.
 
     Parameters
@@ -241,14 +252,14 @@ def plot_threshold_mask(field, valid=None, *, limit_mD, absolute=True, name="φ"
     over = ok & (np.nan_to_num(values, nan=-np.inf) > limit_mD)
     img = np.ma.masked_where(~ok, over.astype(float))
     cmap_obj = ListedColormap(["white", "tab:red"]).with_extremes(bad=_INVALID_RGBA)
-    ax.imshow(img, cmap=cmap_obj, vmin=0, vmax=1, interpolation="nearest")
+    ax.imshow(img, cmap=cmap_obj, vmin=0, vmax=1, interpolation="nearest", extent=extent)
     frac = 100.0 * over.sum() / max(int(ok.sum()), 1)
     op = f"|{name}|" if absolute else name
     _label_image_axes(ax, title or f"{op} > {limit_mD:g} mD: {frac:.2f} % of the region")
     return fig, ax
 
 
-def plot_histogram(field, valid=None, *, signed=True, limits_mD=(), bins=80, title=None, ax=None):
+def plot_histogram(field, valid=None, *, signed=True, limits_mD=(), bins=80, title=None, ax=None, weight=1.0):
     """Histogram of a channel over the valid region, with optional limit lines.
 
     Parameters
@@ -263,6 +274,9 @@ def plot_histogram(field, valid=None, *, signed=True, limits_mD=(), bins=80, tit
     bins : int
     title : str, optional
     ax : matplotlib Axes, optional
+    weight : float
+        Pixels each value stands for (an analysis-grid sample: its cell area, px), so that
+        the counts read in pixels.
 
     Returns
     -------
@@ -277,9 +291,10 @@ def plot_histogram(field, valid=None, *, signed=True, limits_mD=(), bins=80, tit
         top = max([1.2 * float(np.percentile(np.abs(values), 99.5))] + [1.1 * float(x) for x in limits_mD]) or 1.0
         lo = -top if signed else 0.0
         outside = np.count_nonzero((values < lo) | (values > top))
-        ax.hist(values, bins=bins, range=(lo, top), color="tab:blue" if signed else "tab:green", alpha=0.85)
+        ax.hist(values, bins=bins, range=(lo, top), weights=np.full(values.size, float(weight)),
+                color="tab:blue" if signed else "tab:green", alpha=0.85)
         if outside:
-            ax.text(0.99, 0.97, f"{100.0 * outside / values.size:.2g} % of pixels beyond the axis",
+            ax.text(0.99, 0.97, f"{100.0 * outside / values.size:.2g} % of the region beyond the axis",
                     transform=ax.transAxes, ha="right", va="top", fontsize="small")
     for lim in limits_mD:
         for v in ((-lim, lim) if signed else (lim,)):

@@ -194,7 +194,7 @@ class JobStore:
 
     def _run(self, job: Job) -> None:
         from ..report.batch import run_glassdist
-        from ..report.workflow import EXIT_SPEC_FAIL
+        from ..report.outputs import EXIT_SPEC_FAIL
 
         job.state, job.started = "running", time.time()
         try:
