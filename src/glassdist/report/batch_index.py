@@ -67,6 +67,7 @@ def write_thumbnails(out, ids):
         The shared colour limit ``V``, mD (None without any thumbnail).
     """
     import matplotlib
+    import matplotlib.image  # the submodule is not loaded by "import matplotlib" alone
     from matplotlib.colors import Normalize
 
     out = Path(out)
