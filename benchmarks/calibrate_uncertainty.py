@@ -78,13 +78,13 @@ def calibrate(pattern, period_px, noise, sigma_periods, method, *, n=30, size=25
                       params=params)
         trusted = res.trusted.copy() if trusted is None else trusted & res.trusted
         noise_est.append(res.noise_std[0])
-        disp = res.displacement_mm.astype(float)
+        d_mm = res.displacement_mm.astype(float)
         if method == "direct":
             # Block I's baseline moves with the noise too: an image-wide smooth term outside
             # the per-pixel uncertainty, removed per realisation (best-fit affine).
-            disp = _minus_affine(disp, res.trusted)
+            d_mm = _minus_affine(d_mm, res.trusted)
         for k in FIELDS:
-            val = disp[..., FIELDS[k][1]] if isinstance(FIELDS[k], tuple) else _get(res, FIELDS[k]).astype(float)
+            val = d_mm[..., FIELDS[k][1]] if isinstance(FIELDS[k], tuple) else _get(res, FIELDS[k]).astype(float)
             stacks[k].append(val)
             preds[k].append(_get(res, SIGMAS[k]).astype(float))
     rec = {"pattern": pattern, "period_px": period_px, "noise_std": noise, "sigma_periods": sigma_periods, "method": method,
