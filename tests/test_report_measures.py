@@ -296,3 +296,25 @@ def test_measures_rows_state_units_and_conventions():
     assert "period 40 mm along 90°" in rows["roll wave (ASTM C1651 quantities)"]
     assert "mean 10 mD" in rows["sphere-equivalent power P = −φ_eff/2"] and "-phi_eff/2" in rows["sphere-equivalent power P = −φ_eff/2"]
     assert "change over 4 mm" in rows["angular deviation (ECE R43 / ISO 3538)"]
+
+
+def test_analyze_writes_the_measures_to_summary_and_report(tmp_path):
+    import cv2
+
+    from glassdist.cli import main
+    from glassdist.synthetic import synthetic_capture
+
+    cap = synthetic_capture((256, 320), pitch_mm=5.0, mm_per_px=0.625, displacement=wave_displacement(0.3, 60.0, 25.0))
+    img, ref = tmp_path / "img.png", tmp_path / "ref.png"
+    assert cv2.imwrite(str(img), (cap.image * 65535).astype(np.uint16))
+    assert cv2.imwrite(str(ref), (cap.reference * 65535).astype(np.uint16))
+    out = tmp_path / "out"
+    code = main(["analyze", str(img), "--reference", str(ref), "--pitch-mm", "5", "--distance-m", "2",
+                 "--sigma-mm", "5", "--detrend-degree", "1", "--report", "--out", str(out)])
+    assert code == 0
+    m = json.loads((out / "summary.json").read_text())["measures"]
+    assert m["roll_wave"]["period_mm"] == pytest.approx(60.0, rel=0.01)
+    assert m["angular_deviation"]["gauge_mm"] == 4.0 and m["grid_line_slope"]["worst_one_in_n"] > 1
+    assert "-phi_eff/2" in m["equivalent_power"]["convention"]
+    html = (out / "report.html").read_text()
+    assert 'id="standard-measures"' in html and "1 in " in html and "P = −φ_eff/2" in html

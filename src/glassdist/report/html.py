@@ -181,8 +181,16 @@ def _acceptance_sections(acc):
         f"<h2>Pane and zones</h2>{pane}{zones}<h2>Worst regions</h2>{regions}"
 
 
+def _measures_section(measures):
+    """The standard measures (:func:`glassdist.report.measures.standard_measures`) as a table."""
+    from .measures import measures_rows
+
+    rows = _kv_table([(k, escape(v)) for k, v in measures_rows(measures)])
+    return f'<h3>Standard measures</h3><div id="standard-measures">{rows}</div>'
+
+
 def render_report(result, *, stats, figures, inputs, verdict=None, valid_percent=None, generated=None,
-                  acceptance=None):
+                  acceptance=None, measures=None):
     """HTML text of the report.
 
     Parameters
@@ -202,6 +210,9 @@ def render_report(result, *, stats, figures, inputs, verdict=None, valid_percent
     acceptance : Acceptance, optional
         Pane metadata, protocol, zones and worst regions
         (:func:`glassdist.report.acceptance.assess`).
+    measures : dict, optional
+        :meth:`glassdist.report.measures.StandardMeasures.to_dict` (roll wave, angular
+        deviation, grid-line slope, P = -phi_eff/2), shown under the results.
 
     Returns
     -------
@@ -254,6 +265,9 @@ def render_report(result, *, stats, figures, inputs, verdict=None, valid_percent
     meta_html, proto_html, zones_html = _acceptance_sections(acceptance) if acceptance is not None else ("", "", "")
     if acceptance is not None:
         data.update({k: v for k, v in acceptance.summary().items() if k in ("metadata", "protocol", "zones", "worst_regions")})
+    if measures is not None:
+        data["measures"] = measures
+    measures_html = "" if measures is None else _measures_section(measures)
     data_json = json.dumps(to_jsonable(data), allow_nan=False).replace("</", "<\\/")
     warn_html = "".join(f'<p class="warn">{escape(w)}</p>' for w in warnings) or "<p>None.</p>"
     fig_html = "".join(_img(png, fid, cap) for fid, cap, png in figures)
@@ -275,6 +289,7 @@ def render_report(result, *, stats, figures, inputs, verdict=None, valid_percent
 <details><summary>all analysis parameters (resolved)</summary><pre>{escape(json.dumps(to_jsonable(params), indent=1))}</pre></details>
 <h2>4. Results</h2>
 {_stats_table(stats)}
+{measures_html}
 {zones_html}
 <div class="figs">{fig_html}</div>
 <h2>5. Warnings</h2>

@@ -700,15 +700,19 @@ def finish_analysis(result, *, out_dir, image_path, reference_path=None, spec_pa
     if exports:
         written.append(write_fields_npz(result, out_dir / "fields.npz"))
         written.extend(write_fields_tiff(result, out_dir / "tiff"))
+    from .measures import standard_measures
+
+    measures = standard_measures(result).to_dict()
     if report:
         html = render_report(result, stats=stats, figures=figs, inputs=inputs, verdict=verdict, valid_percent=cover,
-                             acceptance=acc)
+                             acceptance=acc, measures=measures)
         written.append(atomic_write_text(out_dir / "report.html", html))
     names = [str(p.relative_to(out_dir)) for p in written]
     _update_summary(out_dir / "summary.json", {
         "verdict": verdict.to_dict() if verdict else None,
         "a4": {"statistics": stats, "valid_percent": cover, "files": names, "inputs": inputs},
         **acc.summary(),
+        "measures": measures,
         "outputs": output_record(out_dir, caller_written + written),
     })
     for w in acc.warnings:
