@@ -236,9 +236,7 @@ class AnalysisResult:
 
     def statistics(self) -> dict:
         """Per-channel statistics over the trusted pixels (see :func:`channel_statistics`)."""
-        # a channel not accessed yet is brought to the pixel grid for this and dropped (not cached)
-        return {name: channel_statistics(self.__dict__[name] if name in self.__dict__ else self.pixel_field(name),
-                                         self.trusted) for name in CHANNELS}
+        return {name: channel_statistics(getattr(self, name), self.trusted) for name in CHANNELS}
 
     def quality_counts(self) -> dict:
         """Pixels per quality label, ``{label name: count}``."""

@@ -57,12 +57,38 @@ CHANNELS = {
 _INVALID_RGBA = (0.85, 0.85, 0.85, 1.0)
 
 
-def _new_ax(ax, figsize=(6.4, 5.2)):
-    """Return ``(fig, ax)``: ``ax``'s figure, or a new Agg figure with one axes."""
+def _new_ax(ax, figsize=(6.4, 3.6)):
+    """Return ``(fig, ax)``: ``ax``'s figure, or a new Agg figure with one axes (plots that are not maps)."""
     if ax is not None:
         return ax.figure, ax
-    fig = Figure(figsize=figsize, layout="constrained")
+    fig = Figure(figsize=figsize)
+    fig.subplots_adjust(left=0.12, right=0.97, bottom=0.15, top=0.88)
     return fig, fig.add_subplot()
+
+
+def _map_ax(ax, shape, extent=None, colorbar=True):
+    """``(fig, ax, cax)`` for a map of ``shape`` (h, w): ``ax``'s figure, or a new one sized to the map.
+
+    The axes are placed by hand: a layout solver cost more than drawing the map. ``cax``
+    is the colour bar's axes (None with ``ax`` given: matplotlib takes room from ``ax``).
+    """
+    if ax is not None:
+        return ax.figure, ax, None
+    if extent is not None:
+        aspect = abs(extent[2] - extent[3]) / max(abs(extent[1] - extent[0]), 1e-9)
+    else:
+        aspect = shape[0] / max(shape[1], 1)
+    w_in = 4.4
+    h_in = w_in * aspect
+    if h_in > 5.0 or h_in < 1.2:  # very tall or very flat maps keep a readable size
+        h_in = min(max(h_in, 1.2), 5.0)
+        w_in = min(h_in / aspect, 7.0)
+    left, bottom, top, right = 0.9, 0.6, 0.75, (1.4 if colorbar else 0.3)
+    W, H = left + w_in + right, bottom + h_in + top
+    fig = Figure(figsize=(W, H))
+    ax = fig.add_axes((left / W, bottom / H, w_in / W, h_in / H))
+    cax = fig.add_axes(((left + w_in + 0.2) / W, bottom / H, 0.18 / W, h_in / H)) if colorbar else None
+    return fig, ax, cax
 
 
 def _centres(shape, extent):
@@ -146,7 +172,7 @@ def plot_channel(field, valid=None, *, signed=True, vmax=None, cmap=None, title=
     """
     import matplotlib
 
-    fig, ax = _new_ax(ax)
+    fig, ax, cax = _map_ax(ax, np.shape(field), extent, colorbar)
     data, _ = _masked(field, valid)
     if vmax is None:
         vmax = shared_limit(field, valid=valid)
@@ -155,7 +181,7 @@ def plot_channel(field, valid=None, *, signed=True, vmax=None, cmap=None, title=
     im = ax.imshow(data, cmap=cmap_obj, norm=norm, interpolation="nearest", extent=extent)
     _label_image_axes(ax, title, axis_units)
     if colorbar:
-        fig.colorbar(im, ax=ax, label="mD", extend="both" if signed else "max", shrink=0.9)
+        fig.colorbar(im, ax=ax, cax=cax, label="mD", extend="both" if signed else "max", shrink=1.0 if cax else 0.9)
     return fig, ax
 
 
@@ -182,7 +208,7 @@ def plot_axis(axis_deg, phi_shear, valid=None, *, min_shear_mD=None, title=None,
     """
     import matplotlib
 
-    fig, ax = _new_ax(ax)
+    fig, ax, cax = _map_ax(ax, np.shape(axis_deg), extent, colorbar)
     shear, ok = _masked(phi_shear, valid)
     if min_shear_mD is None:
         min_shear_mD = 0.1 * float(np.percentile(np.asarray(phi_shear)[ok], 95)) if ok.any() else 0.0
@@ -192,7 +218,7 @@ def plot_axis(axis_deg, phi_shear, valid=None, *, min_shear_mD=None, title=None,
     im = ax.imshow(data, cmap=cmap_obj, norm=Normalize(-90.0, 90.0), interpolation="nearest", extent=extent)
     _label_image_axes(ax, title or f"astigmatism axis (where $\\phi_{{shear}}$ ≥ {min_shear_mD:.3g} mD)")
     if colorbar:
-        cb = fig.colorbar(im, ax=ax, label="axis (deg from +x towards +y, down)", shrink=0.9)
+        cb = fig.colorbar(im, ax=ax, cax=cax, label="axis (deg from +x towards +y, down)", shrink=1.0 if cax else 0.9)
         cb.set_ticks([-90, -45, 0, 45, 90])
     return fig, ax
 
@@ -213,7 +239,7 @@ def plot_input(image, valid=None, *, title=None, ax=None, extent=None):
     -------
     fig, ax
     """
-    fig, ax = _new_ax(ax)
+    fig, ax, _ = _map_ax(ax, np.shape(image), extent, colorbar=False)
     ax.imshow(np.asarray(image, dtype=np.float64), cmap="gray", vmin=0.0, vmax=1.0, interpolation="nearest",
               extent=extent)
     if valid is not None and np.any(valid):
@@ -246,7 +272,7 @@ def plot_threshold_mask(field, valid=None, *, limit_mD, absolute=True, name="φ"
     """
     from matplotlib.colors import ListedColormap
 
-    fig, ax = _new_ax(ax)
+    fig, ax, _ = _map_ax(ax, np.shape(field), extent, colorbar=False)
     data, ok = _masked(field, valid)
     values = np.abs(np.asarray(field)) if absolute else np.asarray(field)
     over = ok & (np.nan_to_num(values, nan=-np.inf) > limit_mD)

@@ -605,7 +605,8 @@ def a4_figures(result, image=None, limits=None, *, heatmaps=True, acceptance=Non
             fig, _ = F.plot_threshold_mask(field, gv, limit_mD=lim, name=name, extent=px_extent)
             out.append((f"mask_{name}_{lim:g}mD", f"{name}: pixels with |{name}| > {lim:g} mD in red.",
                         F.figure_png(fig)))
-    fig = Figure(figsize=(10, 3.6), layout="constrained")
+    fig = Figure(figsize=(10, 3.6))
+    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.14, top=0.9, wspace=0.2)
     for ax, name in zip(fig.subplots(1, 2), ("phi_eff", "phi_shear")):
         _, label, _, signed = F.CHANNELS[name]
         F.plot_histogram(maps[name], gv, signed=signed, limits_mD=limits.get(name, ()), ax=ax, title=label,
