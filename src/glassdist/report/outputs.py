@@ -527,6 +527,26 @@ def _map_of(result, attr):
     return f
 
 
+def _heatmap(result, name, field, gv, v, chosen, axes, acceptance):
+    """``(stem, caption, png)`` of one channel's heatmap (analysis grid), with the acceptance overlays."""
+    from . import figures as F
+    from .acceptance import describe_clipping, draw_overlays
+
+    extent, to_axes, units = axes
+    _, label, cmap, signed = F.CHANNELS[name]
+    fig, ax = F.plot_channel(field, gv, signed=signed, vmax=v, cmap=cmap, title=f"{label}, mD", extent=extent,
+                             axis_units=units)
+    span = f"[-{v:.3g}, {v:.3g}]" if signed else f"[0, {v:.3g}]"
+    caption = f"{name} in mD; colour limits {span} mD" + ("." if chosen else " shared by both channels.")
+    if acceptance is not None:
+        draw_overlays(ax, acceptance, name, to_axes, extent)
+        ax.set_title(f"{label}, mD\n{describe_clipping(field, gv, v)}", fontsize="medium")
+        n = len(acceptance.regions.get(name, {}).get("regions", ()))
+        caption += (f" Axes in {units}. {describe_clipping(field, gv, v)}. Dashed: zones; numbers: the "
+                    f"{n} worst regions (worst_regions.csv).")
+    return name, caption + " Grey: not analysed.", F.figure_png(fig)
+
+
 def a4_figures(result, image=None, limits=None, *, heatmaps=True, acceptance=None):
     """Render the A4 figures of a result, from its analysis grid.
 
@@ -558,7 +578,7 @@ def a4_figures(result, image=None, limits=None, *, heatmaps=True, acceptance=Non
     from matplotlib.figure import Figure
 
     from . import figures as F
-    from .acceptance import describe_clipping, draw_overlays, heatmap_axes
+    from .acceptance import heatmap_axes
 
     limits = limits or {}
     H, W = result.valid.shape
@@ -580,21 +600,8 @@ def a4_figures(result, image=None, limits=None, *, heatmaps=True, acceptance=Non
         fig, _ = F.plot_input(small, region.astype(bool), extent=px_extent)
         out.append(("input_region", "Input photograph; the analysed region is outlined in orange.", F.figure_png(fig)))
     for name in ("phi_eff", "phi_shear") if heatmaps else ():
-        _, label, cmap, signed = F.CHANNELS[name]
-        v = vmaxes.get(name, vmax)
-        field = maps[name]
-        fig, ax = F.plot_channel(field, gv, signed=signed, vmax=v, cmap=cmap, title=f"{label}, mD",
-                                 extent=extent, axis_units=units)
-        span = f"[-{v:.3g}, {v:.3g}]" if signed else f"[0, {v:.3g}]"
-        caption = f"{name} in mD; colour limits {span} mD"
-        caption += "." if vmaxes else " shared by both channels."
-        if acceptance is not None:
-            draw_overlays(ax, acceptance, name, to_axes, extent)
-            ax.set_title(f"{label}, mD\n{describe_clipping(field, gv, v)}", fontsize="medium")
-            n = len(acceptance.regions.get(name, {}).get("regions", ()))
-            caption += (f" Axes in {units}. {describe_clipping(field, gv, v)}. Dashed: zones; numbers: the "
-                        f"{n} worst regions (worst_regions.csv).")
-        out.append((name, caption + " Grey: not analysed.", F.figure_png(fig)))
+        out.append(_heatmap(result, name, maps[name], gv, vmaxes.get(name, vmax), bool(vmaxes), (extent, to_axes, units),
+                            acceptance))
     if heatmaps and any(f.name == "axis_deg" for f in result.field_specs()):
         fig, _ = F.plot_axis(_map_of(result, "axis_deg"), maps["phi_shear"], gv, extent=px_extent)
         out.append(("axis", "Astigmatism axis (direction of largest stretch), degrees from +x towards +y (down); "
@@ -626,6 +633,21 @@ def _update_summary(path, additions):
             summary = {}
     summary.update(additions)
     atomic_write_text(path, json.dumps(to_jsonable(summary), indent=2, allow_nan=False) + "\n")
+
+
+def _echo_acceptance(acc, report_path, echo):
+    """The user-facing lines of the A4 stage: warnings (stderr), verdict, zones, the report's path."""
+    for w in acc.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    if acc.verdict is not None:
+        for line in acc.verdict.lines():
+            echo(line)
+    for name, z in acc.zones.items():
+        eff, shear = z["statistics"].get("phi_eff", {}), z["statistics"].get("phi_shear", {})
+        echo(f"zone {name}: {z['coverage_percent']:.1f} % analysed, p95 |phi_eff| {eff.get('p95_abs', float('nan')):.4g} mD, "
+             f"p95 |phi_shear| {shear.get('p95_abs', float('nan')):.4g} mD")
+    if report_path is not None:
+        echo(f"report: {report_path}")
 
 
 def finish_analysis(result, *, out_dir, image_path, reference_path=None, spec_path=None, report=False,
@@ -677,56 +699,35 @@ def finish_analysis(result, *, out_dir, image_path, reference_path=None, spec_pa
     from ..io import read_image
     from .acceptance import assess
     from .html import render_report
+    from .measures import standard_measures
 
     out_dir = Path(out_dir)
-    if spec is None:
-        spec = load_spec(spec_path) if spec_path is not None else (None, "")
-    spec, spec_sha = spec
+    spec, spec_sha = spec or (load_spec(spec_path) if spec_path is not None else (None, ""))
     limits = spec_limits(spec) if spec is not None else {}
     acc = assess(result, spec, spec_path=spec_path or "", spec_sha256=spec_sha, protocol=protocol, mask=mask,
                  metadata=metadata, image_path=image_path)
     stats, verdict = acc.stats, acc.verdict
-    shape = result.valid.shape
-    inputs = {"image": _describe_input(image_path, shape), "reference": _describe_input(reference_path, shape)}
+    inputs = {k: _describe_input(v, result.valid.shape) for k, v in (("image", image_path), ("reference", reference_path))}
     cover = valid_percent(result.valid)
-
-    caller_written = list(written)
-    written = [write_statistics_csv(stats, out_dir / "statistics.csv"),
-               atomic_write_text(out_dir / "worst_regions.csv", acc.regions_csv())]
-    if image is None and image_path is not None:
-        image = read_image(image_path)
-    figs = a4_figures(result, image, limits, heatmaps=True, acceptance=acc)
-    for stem, _, png in figs:
-        written.append(atomic_write_bytes(out_dir / f"{stem}.png", png))
+    files = [write_statistics_csv(stats, out_dir / "statistics.csv"),
+             atomic_write_text(out_dir / "worst_regions.csv", acc.regions_csv())]
+    figs = a4_figures(result, read_image(image_path) if image is None and image_path is not None else image, limits,
+                      heatmaps=True, acceptance=acc)
+    files += [atomic_write_bytes(out_dir / f"{stem}.png", png) for stem, _, png in figs]
     if exports:
-        written.append(write_fields_npz(result, out_dir / "fields.npz"))
-        written.extend(write_fields_tiff(result, out_dir / "tiff"))
-    from .measures import standard_measures
-
+        files += [write_fields_npz(result, out_dir / "fields.npz"), *write_fields_tiff(result, out_dir / "tiff")]
     measures = standard_measures(result).to_dict()
     if report:
         html = render_report(result, stats=stats, figures=figs, inputs=inputs, verdict=verdict, valid_percent=cover,
                              acceptance=acc, measures=measures)
-        written.append(atomic_write_text(out_dir / "report.html", html))
-    names = [str(p.relative_to(out_dir)) for p in written]
+        files.append(atomic_write_text(out_dir / "report.html", html))
+    names = [str(p.relative_to(out_dir)) for p in files]
     _update_summary(out_dir / "summary.json", {
         "verdict": verdict.to_dict() if verdict else None,
         "a4": {"statistics": stats, "valid_percent": cover, "files": names, "inputs": inputs},
-        **acc.summary(),
-        "measures": measures,
-        "outputs": output_record(out_dir, caller_written + written),
+        **acc.summary(), "measures": measures, "outputs": output_record(out_dir, [*written, *files]),
     })
-    for w in acc.warnings:
-        print(f"warning: {w}", file=sys.stderr)
-    if verdict is not None:
-        for line in verdict.lines():
-            echo(line)
-    for name, z in acc.zones.items():
-        s = z["statistics"].get("phi_eff", {})
-        echo(f"zone {name}: {z['coverage_percent']:.1f} % analysed, p95 |phi_eff| {s.get('p95_abs', float('nan')):.4g} mD, "
-             f"p95 |phi_shear| {z['statistics'].get('phi_shear', {}).get('p95_abs', float('nan')):.4g} mD")
-    if report:
-        echo(f"report: {out_dir / 'report.html'}")
+    _echo_acceptance(acc, out_dir / "report.html" if report else None, echo)
     logger.info("A4 outputs written to %s: %s", out_dir, ", ".join(names))
     return EXIT_SPEC_FAIL if verdict is not None and not verdict.passed else EXIT_OK
 
