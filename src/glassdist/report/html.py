@@ -189,6 +189,53 @@ def _measures_section(measures):
     return f'<h3>Standard measures</h3><div id="standard-measures">{rows}</div>'
 
 
+def _fit_facts(result):
+    fit = result.homography_fit
+    if fit is None:
+        return None
+    return {"inlier_fraction": fit.inlier_fraction, "n_points": fit.n_points, "rms_inlier_px": fit.rms_inlier_px}
+
+
+def _geometry_rows(result, params, valid_percent, fit_facts):
+    """Rows of the capture-geometry table (the homography and its fit for the Direct method)."""
+    geometry = [
+        ("grid pitch", f"{_num(result.pitch_mm)} mm"),
+        ("glass-to-grid distance L", f"{_num(result.distance_m)} m"),
+        ("grid pattern", escape(str(params.get("pattern", "—")))),
+        ("scale on the grid plane", f"{_num(result.mm_per_px)} mm per px"),
+        ("smoothing scale σ", f"{_num(result.sigma_mm)} mm"),
+        ("detrend degree N", _num(result.detrend_degree)),
+        ("analysed area", f"{_num(valid_percent)} % of the image" if valid_percent is not None else "—"),
+    ]
+    if result.homography is not None:
+        rows = "<br>".join(" ".join(f"{x: .6g}" for x in r) for r in np.asarray(result.homography, dtype=float))
+        geometry.append(("homography (grid → image)", f'<span class="mono">{rows}</span>'))
+    if fit_facts is not None:
+        share = fit_facts["inlier_fraction"]
+        geometry.append(("homography fit (Direct method)",
+                         f'<span id="homography-fit">inliers {_num(None if share is None else 100 * share)} % of '
+                         f'{_num(fit_facts["n_points"])} grid points, RMS inlier reprojection error '
+                         f'{_num(fit_facts["rms_inlier_px"])} px</span>'))
+    return geometry
+
+
+def _report_data(result, generated, inputs, valid_percent, verdict, stats, params, acceptance, measures):
+    """The report's key facts, embedded as JSON (``glassdist-report-data``)."""
+    data = {
+        "glassdist_version": str(result.version), "method": str(result.method),
+        "generated_utc": generated.isoformat(timespec="seconds"), "inputs": inputs, "pitch_mm": result.pitch_mm,
+        "distance_m": result.distance_m, "mm_per_px": result.mm_per_px, "sigma_mm": result.sigma_mm,
+        "detrend_degree": result.detrend_degree, "valid_percent": valid_percent,
+        "verdict": verdict.to_dict() if verdict is not None else None, "statistics": stats, "parameters": params,
+        "homography_fit": _fit_facts(result), "warnings": list(result.warnings),
+    }
+    if acceptance is not None:
+        data.update({k: v for k, v in acceptance.summary().items() if k in ("metadata", "protocol", "zones", "worst_regions")})
+    if measures is not None:
+        data["measures"] = measures
+    return data
+
+
 def render_report(result, *, stats, figures, inputs, verdict=None, valid_percent=None, generated=None,
                   acceptance=None, measures=None):
     """HTML text of the report.
@@ -220,53 +267,19 @@ def render_report(result, *, stats, figures, inputs, verdict=None, valid_percent
         A complete HTML document with every image embedded as a data URI.
     """
     generated = generated or datetime.now(timezone.utc)
-    version = str(getattr(result, "version", ""))
-    method = str(getattr(result, "method", ""))
+    version, method = str(result.version), str(result.method)
     params = resolved_parameters(result)
-    carriers = result.carriers.to_dict() if getattr(result, "carriers", None) is not None else {}
-    homography = getattr(result, "homography", None)
-    fit = getattr(result, "homography_fit", None)
-    fit_facts = None if fit is None else {
-        "inlier_fraction": fit.inlier_fraction, "n_points": fit.n_points, "rms_inlier_px": fit.rms_inlier_px,
-    }
-    warnings = tuple(getattr(result, "warnings", ()) or ())
+    carriers = result.carriers.to_dict()
+    fit_facts = _fit_facts(result)
+    warnings = tuple(result.warnings)
     image_name = inputs["image"]["name"]
     title = f"Glass distortion report: {image_name}"
     pane_id = (acceptance.metadata.get("pane_id") if acceptance is not None else None)
     if pane_id:
         title = f"Glass distortion report: pane {pane_id} ({image_name})"
-
-    geometry = [
-        ("grid pitch", f"{_num(result.pitch_mm)} mm"),
-        ("glass-to-grid distance L", f"{_num(result.distance_m)} m"),
-        ("grid pattern", escape(str(params.get("pattern", "—")))),
-        ("scale on the grid plane", f"{_num(result.mm_per_px)} mm per px"),
-        ("smoothing scale σ", f"{_num(result.sigma_mm)} mm"),
-        ("detrend degree N", _num(result.detrend_degree)),
-        ("analysed area", f"{_num(valid_percent)} % of the image" if valid_percent is not None else "—"),
-    ]
-    if homography is not None:
-        h = np.asarray(homography, dtype=float)
-        rows = "<br>".join(" ".join(f"{x: .6g}" for x in r) for r in h)
-        geometry.append(("homography (grid → image)", f'<span class="mono">{rows}</span>'))
-    if fit_facts is not None:
-        share = fit_facts["inlier_fraction"]
-        geometry.append(("homography fit (Direct method)",
-                         f'<span id="homography-fit">inliers {_num(None if share is None else 100 * share)} % of '
-                         f'{_num(fit_facts["n_points"])} grid points, RMS inlier reprojection error '
-                         f'{_num(fit_facts["rms_inlier_px"])} px</span>'))
-    data = {
-        "glassdist_version": version, "method": method, "generated_utc": generated.isoformat(timespec="seconds"),
-        "inputs": inputs, "pitch_mm": result.pitch_mm, "distance_m": result.distance_m,
-        "mm_per_px": result.mm_per_px, "sigma_mm": result.sigma_mm, "detrend_degree": result.detrend_degree,
-        "valid_percent": valid_percent, "verdict": verdict.to_dict() if verdict is not None else None,
-        "statistics": stats, "parameters": params, "homography_fit": fit_facts, "warnings": list(warnings),
-    }
+    geometry = _geometry_rows(result, params, valid_percent, fit_facts)
+    data = _report_data(result, generated, inputs, valid_percent, verdict, stats, params, acceptance, measures)
     meta_html, proto_html, zones_html = _acceptance_sections(acceptance) if acceptance is not None else ("", "", "")
-    if acceptance is not None:
-        data.update({k: v for k, v in acceptance.summary().items() if k in ("metadata", "protocol", "zones", "worst_regions")})
-    if measures is not None:
-        data["measures"] = measures
     measures_html = "" if measures is None else _measures_section(measures)
     data_json = json.dumps(to_jsonable(data), allow_nan=False).replace("</", "<\\/")
     warn_html = "".join(f'<p class="warn">{escape(w)}</p>' for w in warnings) or "<p>None.</p>"
