@@ -351,7 +351,7 @@ def analyze_captures(
             ok = np.all(np.isfinite(ph), axis=-1)
             total[ok] += ph[ok]
             count += ok
-            records.append({"capture": i, "grid_offset": [int(o[0]), int(o[1])], "carrier_permutation": P.tolist(),
+            records.append({"capture": i, "grid_offset": [int(o[0]), int(o[1])], "carrier_permutation": (P + 0.0).tolist(),
                             "max_shift_px": float(np.nanmax(np.where(trusted, moved, np.nan))),
                             "valid_fraction": float(ok.mean())})
         valid = count > 0
