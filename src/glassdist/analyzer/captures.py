@@ -364,7 +364,7 @@ def analyze_captures(
         # Reported: the averaged region and the first capture's partial border blocks around it
         # (smoothly extended, as for one capture).
         report = valid | (m1.ag.report & ndimage.binary_dilation(valid))
-        ag = _AnalysisGrid(m1.ag.grid, avg, valid, labels, report, None, m1.ag.blur_px2)
+        ag = _AnalysisGrid(m1.ag.grid, avg, valid, labels, report, None, m1.ag.transfer)
         partial = float(np.mean(count[valid] < len(meas))) if valid.any() else 0.0
         if partial > 0.05:
             warn.append(f"{100 * partial:.0f}% of the averaged region is covered by fewer than all "

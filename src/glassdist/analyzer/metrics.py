@@ -39,10 +39,13 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.fft as sfft
 
+from .transfer import MIN_RESPONSE, difference_response
+
 __all__ = [
     "Channels",
     "polynomial_detrend",
     "masked_gaussian",
+    "masked_filter",
     "strain_tensor",
     "channels_from_strain",
     "evaluate_displacement",
@@ -127,25 +130,82 @@ def polynomial_detrend(field: np.ndarray, labels: np.ndarray, degree: int, step_
 
 
 def _gaussian_transfer(shape, cov_idx: np.ndarray) -> np.ndarray:
+    """Continuous Gaussian transfer (covariance in samples^2) on the rfft2 grid of ``shape``."""
     fy = sfft.fftfreq(shape[0])[:, None]
     fx = sfft.rfftfreq(shape[1])[None, :]
     q = cov_idx[0, 0] * fx**2 + 2 * cov_idx[0, 1] * fx * fy + cov_idx[1, 1] * fy**2
     return np.exp(-2 * np.pi**2 * q)
 
 
-def masked_gaussian(
-    field: np.ndarray, weight: np.ndarray, cov_px: np.ndarray, step_px=(1.0, 1.0), *, min_weight: float = 0.02,
-    order: int = 1,
-) -> np.ndarray:
-    """Gaussian smoothing restricted to a region (normalised convolution), any covariance.
+#: Samples kept beyond the Gaussian's reach for the short non-Gaussian correction kernel.
+_CORRECTION_SUPPORT = 12
 
-    ``order=1`` (default) fits, at every sample, a plane by Gaussian-weighted least
-    squares over the region (first-order normalised convolution): inside the region
-    this equals the plain Gaussian convolution, and near its border linear trends are
-    preserved exactly instead of being pulled towards the interior (which would bias
-    the strain there). ``order=0`` is the classic ``G*(w f) / G*w``. Values are
+
+def _kernel_spectrum(data_shape, cov_idx: np.ndarray, step_px, correction):
+    """FFT shape and kernel transfer (rfft2 layout) for a linear convolution of ``data_shape`` samples.
+
+    The FFT is at most about twice the data along each axis, whatever the kernel's width:
+    a kernel reaching beyond the data is sampled in space (only its values within the
+    data's extent can act on it) and transformed; a narrower one uses the continuous
+    Gaussian transfer on a grid padded by its reach. The cost therefore does not grow
+    with sigma.
+    """
+    sd = np.sqrt(np.maximum([cov_idx[1, 1], cov_idx[0, 0]], 0.0))  # (rows, cols), samples
+    extra = _CORRECTION_SUPPORT if correction is not None else 0
+    reach = [int(np.ceil(4.0 * s)) + 1 + extra for s in sd]
+    wide = any(r > n for r, n in zip(reach, data_shape))
+    if not wide:
+        shape = (sfft.next_fast_len(data_shape[0] + reach[0]), sfft.next_fast_len(data_shape[1] + reach[1], real=True))
+        T = _gaussian_transfer(shape, cov_idx)
+    else:
+        shape = tuple(
+            sfft.next_fast_len(min(n + r, 2 * n + 2 * extra + 2), real=(i == 1))
+            for i, (n, r) in enumerate(zip(data_shape, reach))
+        )
+        # The kernel's samples on the periodic FFT grid (offsets wrapped to [-P/2, P/2)):
+        # exact where the convolution of the data can reach.
+        dy = (np.arange(shape[0]) + shape[0] // 2) % shape[0] - shape[0] // 2
+        dx = (np.arange(shape[1]) + shape[1] // 2) % shape[1] - shape[1] // 2
+        c = np.asarray(cov_idx, float)
+        det = c[0, 0] * c[1, 1] - c[0, 1] ** 2
+        if det <= 1e-12 * max(c[0, 0], c[1, 1], 1e-30) ** 2:
+            c = c + 1e-6 * np.eye(2)
+            det = c[0, 0] * c[1, 1] - c[0, 1] ** 2
+        ci = np.array([[c[1, 1], -c[0, 1]], [-c[0, 1], c[0, 0]]]) / det
+        X, Y = dx[None, :].astype(float), dy[:, None].astype(float)
+        k = np.exp(-0.5 * (ci[0, 0] * X**2 + 2 * ci[0, 1] * X * Y + ci[1, 1] * Y**2))
+        T = sfft.rfft2(k / k.sum(), workers=-1).real  # even kernel: real transfer
+    if correction is not None:
+        sy, sx = step_px
+        fy = sfft.fftfreq(shape[0])[:, None] / sy  # cycles/px
+        fx = sfft.rfftfreq(shape[1])[None, :] / sx
+        T = T * correction(fy, fx)
+    return shape, T
+
+
+def masked_filter(
+    field: np.ndarray, weight: np.ndarray, cov_px: np.ndarray, step_px=(1.0, 1.0), *, correction=None,
+    min_weight: float = 0.02, order: int = 1,
+) -> np.ndarray:
+    """Normalised convolution restricted to a region with the kernel ``G_cov * C``.
+
+    The kernel's transfer is the Gaussian of covariance ``cov_px`` times
+    ``correction(fy, fx)`` (frequencies in cycles/px; a short, even correction such as
+    the inverse of a block mean or an interpolation, see
+    :class:`glassdist.analyzer.transfer.InstrumentTransfer`). It is a linear operator:
+    inside the region (farther than the kernel's reach from its border) the output is
+    exactly the convolution of the field with that kernel.
+
+    ``order=1`` (default) fits, at every sample, a plane by kernel-weighted least
+    squares over the region (first-order normalised convolution): near the border linear
+    trends are preserved exactly instead of being pulled towards the interior (which
+    would bias the strain there). ``order=0`` is the classic ``K*(w f) / K*w``. Values are
     extrapolated smoothly outside the region (where the normalising weight exceeds
     ``min_weight``), which gives clean centred differences at borders; elsewhere NaN.
+
+    The cost is that of a few FFTs of at most twice the field's size along each axis,
+    independent of the kernel's width (a kernel wider than the region is sampled over
+    the region's extent only).
 
     Parameters
     ----------
@@ -153,9 +213,12 @@ def masked_gaussian(
     weight : ndarray (h, w)
         1 inside the region, 0 outside.
     cov_px : ndarray (2, 2)
-        Kernel covariance in image px^2, (x, y) order. Zero means no smoothing.
+        Gaussian covariance in image px^2, (x, y) order. Zero (and no correction) means
+        no smoothing.
     step_px : (float, float)
         Sample spacing (sy, sx), px.
+    correction : callable (fy, fx) -> ndarray, optional
+        Extra transfer multiplying the Gaussian's, frequencies in cycles/px.
 
     References
     ----------
@@ -163,19 +226,16 @@ def masked_gaussian(
     """
     f = np.where(weight > 0, np.nan_to_num(field), 0.0)
     wgt = (weight > 0).astype(float)
-    if not np.any(cov_px):
+    if not np.any(cov_px) and correction is None:
         return np.where(weight > 0, field, np.nan)
     sy, sx = step_px
     D = np.diag([1.0 / sx, 1.0 / sy])
-    cov_idx = D @ cov_px @ D
-    pad = [int(np.ceil(4.0 * np.sqrt(max(cov_idx[1, 1], 0.0)))) + 1, int(np.ceil(4.0 * np.sqrt(max(cov_idx[0, 0], 0.0)))) + 1]
-    shape = (f.shape[0] + 2 * pad[0], f.shape[1] + 2 * pad[1])
-    shape = (sfft.next_fast_len(shape[0]), sfft.next_fast_len(shape[1], real=True))
-    T = _gaussian_transfer(shape, cov_idx)
+    cov_idx = D @ np.asarray(cov_px, float) @ D
     h, w = f.shape
+    shape, T = _kernel_spectrum((h, w), cov_idx, step_px, correction)
 
     def conv(*arrays):
-        """Gaussian convolution of each array, as one batched transform."""
+        """Convolution of each array with the kernel, as one batched transform."""
         st = sfft.rfft2(np.stack(arrays), s=shape, axes=(-2, -1), workers=-1)
         st *= T
         return sfft.irfft2(st, s=shape, axes=(-2, -1), workers=-1)[:, :h, :w]
@@ -218,6 +278,19 @@ def masked_gaussian(
     return out
 
 
+def masked_gaussian(
+    field: np.ndarray, weight: np.ndarray, cov_px: np.ndarray, step_px=(1.0, 1.0), *, min_weight: float = 0.02,
+    order: int = 1,
+) -> np.ndarray:
+    """Gaussian smoothing restricted to a region (normalised convolution), any covariance.
+
+    :func:`masked_filter` with a plain Gaussian kernel of covariance ``cov_px`` (px^2,
+    (x, y) order): inside the region it equals the Gaussian convolution; near its border
+    the first-order fit (``order=1``) preserves linear trends. Cost independent of sigma.
+    """
+    return masked_filter(field, weight, cov_px, step_px, min_weight=min_weight, order=order)
+
+
 def _derivative(f: np.ndarray, axis: int, h: float) -> np.ndarray:
     """Fourth-order centred difference (second order in the two outermost samples).
 
@@ -236,7 +309,10 @@ def _derivative(f: np.ndarray, axis: int, h: float) -> np.ndarray:
     return g
 
 
-def strain_tensor(displacement_mm: np.ndarray, step_px=(1.0, 1.0), *, mm_per_px: float | None = None, jacobian=None):
+def strain_tensor(
+    displacement_mm: np.ndarray, step_px=(1.0, 1.0), *, mm_per_px: float | None = None, jacobian=None,
+    for_gradient: tuple[np.ndarray, np.ndarray] | None = None,
+):
     """A3: eps = sym(d delta / dX) by centred differences, X in backdrop mm.
 
     Parameters
@@ -248,17 +324,22 @@ def strain_tensor(displacement_mm: np.ndarray, step_px=(1.0, 1.0), *, mm_per_px:
         Isotropic scale (used when ``jacobian`` is None).
     jacobian : ndarray (h, w, 2, 2), optional
         ``dX/dr`` (mm per px).
+    for_gradient : (ndarray (h, w, 2), ndarray (h, w, 2)), optional
+        The fields to difference along x and along y, when they differ from
+        ``displacement_mm`` (each pre-filtered by the inverse of the stencil's transfer
+        along its axis, see :func:`evaluate_displacement`).
 
     Returns
     -------
     ndarray (h, w, 2, 2)
     """
     d = displacement_mm
+    dx_src, dy_src = (d, d) if for_gradient is None else for_gradient
     sy, sx = step_px
     G = np.empty(d.shape[:2] + (2, 2))
     for c in range(2):  # d delta_c / d(x, y) in px
-        G[..., c, 1] = _derivative(d[..., c], 0, sy)
-        G[..., c, 0] = _derivative(d[..., c], 1, sx)
+        G[..., c, 1] = _derivative(dy_src[..., c], 0, sy)
+        G[..., c, 0] = _derivative(dx_src[..., c], 1, sx)
     if jacobian is None:
         if mm_per_px is None:
             raise ValueError("strain_tensor needs mm_per_px or jacobian")
@@ -297,6 +378,7 @@ def evaluate_displacement(
     component_blur_px2: np.ndarray | None = None,
     frame_rotation: np.ndarray | None = None,
     report_mask: np.ndarray | None = None,
+    transfer=None,
 ) -> Channels:
     """The shared evaluation stack: A2 detrend, metric-anchored smoothing, A3 channels.
 
@@ -322,8 +404,9 @@ def evaluate_displacement(
     step_px : (float, float)
         Sample spacing (sy, sx), px.
     component_blur_px2 : ndarray (2, 2, 2), optional
-        Covariance (px^2, (x, y) order) of a blur already applied to each
+        Covariance (px^2, (x, y) order) of a Gaussian blur already applied to each
         component; it is subtracted from the smoothing so the total equals sigma.
+        Ignored when ``transfer`` is given.
     frame_rotation : ndarray (2, 2), optional
         ``R`` with components given in a rotated frame: camera-frame delta = R^T delta.
         Channels are rotation invariant; the axis and the returned displacement are
@@ -331,10 +414,24 @@ def evaluate_displacement(
     report_mask : ndarray of bool (h, w), optional
         Where results are reported (default ``valid``); a ring just outside
         ``valid`` receives the smooth first-order extrapolation of the field.
+    transfer : glassdist.analyzer.transfer.InstrumentTransfer, optional
+        The instrument's transfer for each component (the Analyzer's): the smoothing
+        applies ``G_sigma / H_i`` so that the result is the true field convolved with the
+        Gaussian of ``sigma_mm`` (see :mod:`glassdist.analyzer.transfer`).
 
     Returns
     -------
     Channels
+
+    Notes
+    -----
+    The smoothing of component *i* is the linear operator :func:`masked_filter` with the
+    Gaussian ``sigma^2 I - Sigma_i`` (``Sigma_i`` the Gaussian part of the instrument's
+    blur, zero for a plain field) times the inverse of the instrument's non-Gaussian
+    stages. Where the five-point differences of A3 would attenuate what the smoothing
+    passes by more than 1e-4, the fields they difference along x and y are smoothed with
+    the kernel divided by the stencil's transfer along that axis, so the gradients are
+    those of the smoothed field, exactly.
     """
     valid = np.asarray(valid, bool)
     if labels is None:
@@ -342,20 +439,48 @@ def evaluate_displacement(
     labels = np.where(valid, labels, 0)
     det = polynomial_detrend(displacement_mm, labels, detrend_degree, step_px)
     sigma_px = sigma_mm / mm_per_px
-    smooth = np.full(det.shape, np.nan)
+    sy, sx = step_px
+    # A3's stencil passes 1 - w^4/30 (w = 2 pi step nu) of the gradient: correct it where
+    # the smoothed field still holds content it would attenuate by more than 1e-4 (nu up to
+    # where G_sigma falls to 1e-3), as long as that content stays well below the stencil's
+    # cut-off (w < 2; a field smoothed less than that is differenced as it is).
+    s_eff = sigma_px if transfer is None else transfer.effective_sigma_px(sigma_px)
+    w_max = 2.0 * np.pi * np.sqrt(np.log(1e3) / (2.0 * np.pi**2)) / max(s_eff, 1e-9) * max(sy, sx)
+    exact_gradient = 1e-4 < w_max**4 / 30.0 and w_max < 2.0
+    kernels = {"field": None}
+    if exact_gradient:
+        kernels["x"] = lambda fy, fx: 1.0 / np.maximum(difference_response(sx, fx), MIN_RESPONSE)
+        kernels["y"] = lambda fy, fx: 1.0 / np.maximum(difference_response(sy, fy), MIN_RESPONSE)
+    outs = {k: np.full(det.shape, np.nan) for k in kernels}
     for c in range(2):
-        cov = sigma_px**2 * np.eye(2)
-        if component_blur_px2 is not None:
-            w, V = np.linalg.eigh(cov - component_blur_px2[c])
-            cov = (V * np.clip(w, 0.0, None)) @ V.T
-        for r in range(1, int(labels.max(initial=0)) + 1):
-            sel = labels == r
-            if not sel.any():
-                continue
-            s = masked_gaussian(det[..., c], sel.astype(float), cov, step_px)
-            take = np.isfinite(s) & (np.isnan(smooth[..., c]) | sel)
-            smooth[..., c][take] = s[take]
-    eps = strain_tensor(smooth, step_px, mm_per_px=mm_per_px, jacobian=jacobian)
+        if transfer is not None:
+            cov = transfer.residual_cov_px2(c, sigma_px)
+            base = transfer.correction
+        else:
+            cov = sigma_px**2 * np.eye(2)
+            if component_blur_px2 is not None:
+                w, V = np.linalg.eigh(cov - component_blur_px2[c])
+                cov = (V * np.clip(w, 0.0, None)) @ V.T
+            base = None
+        for key, extra in kernels.items():
+            if base is None and extra is None:
+                corr = None
+            elif extra is None:
+                corr = base
+            elif base is None:
+                corr = extra
+            else:
+                corr = lambda fy, fx, a=base, b=extra: a(fy, fx) * b(fy, fx)  # noqa: E731
+            for r in range(1, int(labels.max(initial=0)) + 1):
+                sel = labels == r
+                if not sel.any():
+                    continue
+                s = masked_filter(det[..., c], sel.astype(float), cov, step_px, correction=corr)
+                take = np.isfinite(s) & (np.isnan(outs[key][..., c]) | sel)
+                outs[key][..., c][take] = s[take]
+    smooth = outs["field"]
+    grad_src = (outs["x"], outs["y"]) if exact_gradient else None
+    eps = strain_tensor(smooth, step_px, mm_per_px=mm_per_px, jacobian=jacobian, for_gradient=grad_src)
     disp_out = smooth
     if frame_rotation is not None:
         R = np.asarray(frame_rotation)

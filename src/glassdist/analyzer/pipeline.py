@@ -29,6 +29,7 @@ from ..errors import AnalysisError, InputError
 from . import fourier as F
 from .homography import HomographyFit, apply_inverse, fit_grid_homography, inverse_jacobian
 from .metrics import evaluate_displacement, polynomial_detrend
+from .transfer import InstrumentTransfer
 from .params import AnalyzerParams, load_params
 from .region import Region, contamination_px, guard_band, trim_edges, valid_region
 from .resample import image_grid_valid
@@ -266,7 +267,8 @@ class _AnalysisGrid:
     """Unwrapped phases (rad, per carrier, pass 2 applied for Direct) on the Block A grid.
 
     ``valid``/``labels`` describe whole blocks; ``report`` adds the partial border blocks the
-    fine mask trims later; ``fine_valid`` is the demodulation-grid region when blocks were formed.
+    fine mask trims later; ``fine_valid`` is the demodulation-grid region when blocks were formed;
+    ``transfer`` is the instrument's transfer for each phase map (None: not compensated).
     """
 
     grid: F.SamplingGrid
@@ -275,7 +277,7 @@ class _AnalysisGrid:
     labels: np.ndarray
     report: np.ndarray
     fine_valid: np.ndarray | None
-    blur_px2: np.ndarray | None
+    transfer: InstrumentTransfer | None
 
 
 # --------------------------------------------------------------------------- stages
@@ -419,7 +421,7 @@ def _warn_cubic(ag: _AnalysisGrid, ch, p: AnalyzerParams, p_c: float, mm_per_px:
 
 
 def _smoothing_mm(demod: _Demodulation, p: AnalyzerParams, p_c: float, mm_per_px: float, warn: list[str]):
-    """The reporting smoothing (mm) and the demodulation blur (px^2 per carrier) to compensate."""
+    """The reporting smoothing (mm) and the Gaussian demodulation blur (px^2 per carrier) to compensate."""
     blur = _demodulation_blur_px2(demod.carriers, demod.covariances, p) if p.compensate_demodulation_blur else None
     sigma_mm = p.sigma_mm if p.sigma_mm is not None else p.sigma_periods * p_c
     if blur is not None:
@@ -428,7 +430,8 @@ def _smoothing_mm(demod: _Demodulation, p: AnalyzerParams, p_c: float, mm_per_px
         if worst > s_px**2:
             warn.append(
                 f"sigma_mm = {sigma_mm:.3g} mm ({s_px:.1f} px) is finer than the demodulation resolution "
-                f"({np.sqrt(worst):.1f} px); the effective smoothing is coarser than requested"
+                f"({np.sqrt(worst):.1f} px = {np.sqrt(worst) * mm_per_px:.3g} mm); the effective smoothing is "
+                f"{np.sqrt(worst) * mm_per_px:.3g} mm along the least resolved direction (summary.json: effective_sigma_mm)"
             )
     return float(sigma_mm), blur
 
@@ -436,13 +439,17 @@ def _smoothing_mm(demod: _Demodulation, p: AnalyzerParams, p_c: float, mm_per_px
 def _to_analysis_grid(phases, region: Region, grid: F.SamplingGrid, sigma_px: float, blur, p: AnalyzerParams) -> _AnalysisGrid:
     """Block means of the demodulation grid, as coarse as the reporting smoothing allows.
 
-    The block step stays below half the residual smoothing; the box blur joins the
-    compensated budget.
+    The block step stays below half the residual smoothing. The instrument transfer
+    (Gaussian demodulation blur, block means, interpolation to the pixel grid) goes with
+    the phases, for Block A to divide it out.
     """
     m = _analysis_block(sigma_px, blur, grid, p)
+    agrid = grid if m == 1 else F.block_grid(grid, m)
+    transfer = None if blur is None else InstrumentTransfer(
+        blur, fine_step_px=grid.step, block=m, interp_step_px=None if agrid.is_full else agrid.step,
+    )
     if m == 1:
-        return _AnalysisGrid(grid, phases, region.valid, region.labels, region.valid, None, blur)
-    agrid = F.block_grid(grid, m)
+        return _AnalysisGrid(grid, phases, region.valid, region.labels, region.valid, None, transfer)
     phases, fill = F.block_mean(phases, region.valid, m)
     hb, wb = agrid.shape
     block_label = region.labels.reshape(hb, m, wb * m).max(axis=1).reshape(hb, wb, m).max(axis=2)
@@ -451,9 +458,7 @@ def _to_analysis_grid(phases, region: Region, grid: F.SamplingGrid, sigma_px: fl
     labels = np.where(fill >= 1.0, block_label, 0)
     valid = labels > 0
     report = ndimage.binary_dilation(valid, iterations=1) & (fill > 0)
-    if blur is not None:
-        blur = blur + (m * max(grid.step)) ** 2 / 12.0 * np.eye(2)
-    return _AnalysisGrid(agrid, phases, valid, labels, report, region.valid, blur)
+    return _AnalysisGrid(agrid, phases, valid, labels, report, region.valid, transfer)
 
 
 def _direct_pass2(ag: _AnalysisGrid, carriers: F.CarrierPair, fit: HomographyFit) -> np.ndarray:
@@ -496,16 +501,20 @@ def _channels(ag: _AnalysisGrid, ks, H_jac, p: AnalyzerParams, p_c, mm_per_px, s
         J = p_c * inverse_jacobian(H_jac, xx, yy)
         hc, wc = ag.grid.shape
         R = _polar_rotation(J[hc // 2, wc // 2])
-        ch = evaluate_displacement(delta, ag.valid, jacobian=J, component_blur_px2=ag.blur_px2, frame_rotation=R, **common)
-        a1 = {"T": p_c / (2 * np.pi) * np.eye(2), "W": np.linalg.inv(J), "R": R, "blur": ag.blur_px2}
+        ch = evaluate_displacement(delta, ag.valid, jacobian=J, transfer=ag.transfer, frame_rotation=R, **common)
+        a1 = {"T": p_c / (2 * np.pi) * np.eye(2), "W": np.linalg.inv(J), "R": R, "blur": None if ag.transfer is None else ag.transfer.gaussian_px2}
         return delta @ R, ch, a1
     M = np.array([ks[0].f / ks[0].norm, ks[1].f / ks[1].norm]).T  # columns: unit carriers
     proj_px = ag.phases / (2 * np.pi * np.array([ks[0].norm, ks[1].norm]))
     d_px = proj_px @ np.linalg.inv(M)  # (M^T)^{-1} p in row-vector form
     delta_cam = d_px * mm_per_px
-    blur = ag.blur_px2
-    iso_blur = None if blur is None else np.repeat((np.trace(blur, axis1=1, axis2=2).mean() / 2 * np.eye(2))[None], 2, 0)
-    ch = evaluate_displacement(delta_cam, ag.valid, component_blur_px2=iso_blur, **common)
+    tr = ag.transfer
+    iso_blur = None
+    if tr is not None:  # camera-frame components mix both carriers: their mean blur, isotropic
+        g = tr.gaussian_px2
+        iso_blur = np.repeat((np.trace(g, axis1=1, axis2=2).mean() / 2 * np.eye(2))[None], 2, 0)
+        tr = replace(tr, gaussian_px2=iso_blur)
+    ch = evaluate_displacement(delta_cam, ag.valid, transfer=tr, **common)
     T = mm_per_px * np.linalg.inv(M).T / (2 * np.pi * np.array([ks[0].norm, ks[1].norm]))[None, :]
     return delta_cam, ch, {"T": T, "W": np.eye(2) / mm_per_px, "R": None, "blur": iso_blur}
 
@@ -851,6 +860,7 @@ def _result(meas: _Measurement, evaluated, warn: list[str], *, extra_fields: dic
         params=p,
         warnings=tuple(warn),
         sampling_step_px=ag.grid.step,
+        effective_sigma_mm=meas.sigma_mm if ag.transfer is None else ag.transfer.effective_sigma_px(meas.sigma_mm / meas.mm_per_px) * meas.mm_per_px,
         n_regions=meas.n_regions if n_regions is None else n_regions,
         margin_px=meas.margin_px,
         guard_px=meas.guard_px,

@@ -18,7 +18,7 @@ from scipy import ndimage
 
 from . import fourier as F
 
-__all__ = ["grid_fill_indices", "image_grid_valid", "bspline_upsample", "bspline_refine", "upsample_field", "upsample_labels"]
+__all__ = ["grid_fill_indices", "image_grid_valid", "bspline_upsample", "bspline_eval", "upsample_field", "upsample_labels"]
 
 
 def grid_fill_indices(valid: np.ndarray):
@@ -51,50 +51,58 @@ def image_grid_valid(valid: np.ndarray, grid: F.SamplingGrid, user_mask, fine_va
     return valid_full, idx
 
 
-_FINAL_STEP_PX = 3.0  # step of the grid the last, bilinear upsampling starts from
+def _bspline_weights(n: int, t: np.ndarray):
+    """Sparse matrix (len(t), n) of cubic B-spline basis weights at coarse coordinates ``t``.
+
+    Coefficients beyond the ends are the end coefficients replicated (as the ``nearest``
+    prefilter assumes).
+    """
+    from scipy import sparse
+
+    t = np.asarray(t, float)
+    base = np.floor(t).astype(np.int64)
+    u = t - base
+    w = np.stack([(1 - u) ** 3 / 6, (3 * u**3 - 6 * u**2 + 4) / 6, (-3 * u**3 + 3 * u**2 + 3 * u + 1) / 6, u**3 / 6], 1)
+    cols = np.clip(base[:, None] + np.arange(-1, 3)[None, :], 0, n - 1)
+    rows = np.repeat(np.arange(t.size), 4)
+    return sparse.csr_matrix((w.ravel().astype(np.float32), (rows, cols.ravel())), shape=(t.size, n))
+
+
+def bspline_eval(f: np.ndarray, ty: np.ndarray | None, tx: np.ndarray | None) -> np.ndarray:
+    """Cubic B-spline interpolation of a plane ``f`` (h, w) at coarse coordinates ``ty`` (rows) x ``tx`` (columns).
+
+    Separable and exact (Unser 1999): prefilter, then the 4-tap basis along each axis, as
+    sparse products; ``None`` leaves that axis as it is. Its mean transfer,
+    ``sinc(S nu)^4 / ((2 + cos 2 pi S nu) / 3)`` per axis (S the sample step), is part of
+    the instrument transfer Block A divides out (:mod:`glassdist.analyzer.transfer`).
+    """
+    c = np.ascontiguousarray(f, np.float32)
+    for axis, t in ((0, ty), (1, tx)):
+        if t is not None:
+            c = ndimage.spline_filter1d(c, order=3, axis=axis, mode="nearest", output=np.float32)
+    if tx is not None:
+        c = np.asarray((_bspline_weights(c.shape[1], tx) @ c.T).T, np.float32)
+    if ty is not None:
+        c = np.asarray(_bspline_weights(c.shape[0], ty) @ c, np.float32)
+    return np.ascontiguousarray(c)
 
 
 def bspline_upsample(f: np.ndarray, k: int, axis: int) -> np.ndarray:
     """Cubic B-spline interpolation of ``f`` at ``k`` times its density along ``axis``.
 
     Sample positions follow the area convention of :class:`~glassdist.analyzer.fourier.SamplingGrid`:
-    fine sample ``j k + r`` sits at coarse coordinate ``j + (r + 1/2)/k - 1/2``. Each of the
-    ``k`` phases is a fixed 4-tap combination of the spline coefficients (Unser 1999).
+    fine sample ``j k + r`` sits at coarse coordinate ``j + (r + 1/2)/k - 1/2``.
     """
-    c = np.moveaxis(ndimage.spline_filter1d(f, order=3, axis=axis, mode="nearest", output=np.float32), axis, 0)
-    n = c.shape[0]
-    cp = np.concatenate([c[:1], c[:1], c, c[-1:], c[-1:]])  # coefficients beyond the edge: replicated
-    out = np.empty((n * k,) + c.shape[1:], f.dtype)
-    for r in range(k):
-        t = (r + 0.5) / k - 0.5
-        base = int(np.floor(t))
-        u = t - base
-        w = ((1 - u) ** 3 / 6, (3 * u**3 - 6 * u**2 + 4) / 6, (-3 * u**3 + 3 * u**2 + 3 * u + 1) / 6, u**3 / 6)
-        lo = 2 + base - 1
-        acc = out[r::k]
-        np.multiply(cp[lo : lo + n], np.float32(w[0]), out=acc)
-        for i in range(1, 4):
-            acc += np.float32(w[i]) * cp[lo + i : lo + i + n]
-    return np.moveaxis(out, 0, axis)
-
-
-def bspline_refine(f: np.ndarray, k: tuple[int, int]) -> np.ndarray:
-    """``f`` (h, w[, c]) interpolated at ``k = (ky, kx)`` times its density, one plane at a time."""
-    if k[0] <= 1 and k[1] <= 1:
-        return f
-    planes = [f] if f.ndim == 2 else [np.ascontiguousarray(f[..., c]) for c in range(f.shape[2])]
-    out = []
-    for p_ in planes:
-        for axis in (0, 1):
-            if k[axis] > 1:
-                p_ = bspline_upsample(p_, k[axis], axis)
-        out.append(p_)
-    return np.ascontiguousarray(out[0]) if f.ndim == 2 else np.stack(out, axis=-1)
+    t = (np.arange(f.shape[axis] * k) + 0.5) / k - 0.5
+    return bspline_eval(f, t if axis == 0 else None, t if axis == 1 else None)
 
 
 def upsample_field(f: np.ndarray, idx, grid: F.SamplingGrid, invalid: np.ndarray) -> np.ndarray:
-    import cv2
+    """A field of the analysis grid at every image pixel: cubic B-spline interpolation, NaN where ``invalid``.
 
+    Invalid samples are first filled with their nearest valid value (``idx``), so that
+    the spline never mixes NaN into valid pixels near a border.
+    """
     H, W = grid.full_shape
     f = np.ascontiguousarray(f, np.float32)  # (h, w) or (h, w, 2)
     if idx is not None:
@@ -102,14 +110,12 @@ def upsample_field(f: np.ndarray, idx, grid: F.SamplingGrid, invalid: np.ndarray
     if grid.is_full:
         up = f.copy()
     else:
-        # Cubic B-spline to an intermediate grid of ~3 px step, then bilinear: the bilinear
-        # error (h^2/8)|f''| is ~1% of a wave's amplitude at a 13 px step, ~0.05% at 3 px,
-        # and the spline stage works on a grid ~10x smaller than the image.
-        f = bspline_refine(f, tuple(int(st // _FINAL_STEP_PX) for st in grid.step))
-        # Into an array numpy allocated (large ones get huge pages): several times faster
-        # than letting OpenCV allocate 0.1-0.2 GB of fresh pages.
-        up = np.empty((H, W) + f.shape[2:], np.float32)
-        cv2.resize(f, (W, H), dst=up, interpolation=cv2.INTER_LINEAR)
+        sy, sx = grid.step
+        oy, ox = grid.offset
+        ty, tx = (np.arange(H) - oy) / sy, (np.arange(W) - ox) / sx
+        planes = [f] if f.ndim == 2 else [f[..., c] for c in range(f.shape[2])]
+        out = [bspline_eval(p_, ty, tx) for p_ in planes]
+        up = out[0] if f.ndim == 2 else np.stack(out, axis=-1)
     # One plane at a time: a broadcast mask over the channel axis is ~20x slower.
     for plane in [up] if up.ndim == 2 else [up[..., c] for c in range(up.shape[2])]:
         np.copyto(plane, np.float32(np.nan), where=invalid)

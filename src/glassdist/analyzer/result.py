@@ -120,6 +120,10 @@ class AnalysisResult:
         Isotropic scale ``p_c sqrt(|f1||f2|)``, backdrop mm per px.
     sigma_mm, detrend_degree, pitch_mm, distance_m
         The evaluation settings and the physical inputs.
+    effective_sigma_mm : float or None
+        The smoothing the reported fields actually carry, mm: ``sigma_mm``, or the
+        instrument's resolution (its largest demodulation blur) when ``sigma_mm`` is finer
+        (:mod:`glassdist.analyzer.transfer`). None when the blur is not compensated.
     carrier_period_mm : float
         Carrier period on the backdrop (pitch for lines, pitch*sqrt(2) for checkerboards).
     carriers : CarrierPair
@@ -166,6 +170,7 @@ class AnalysisResult:
     margin_px: tuple[float, float] = (0.0, 0.0)
     guard_px: float = 0.0
     noise_std: tuple[float, float | None] = (float("nan"), None)
+    effective_sigma_mm: float | None = None
     _deferred: dict | None = field(default=None, repr=False, compare=False)
 
     def field_specs(self) -> tuple[FieldSpec, ...]:
@@ -256,6 +261,7 @@ class AnalysisResult:
             "mm_per_px": self.mm_per_px,
             "sigma_mm": self.sigma_mm,
             "sigma_px": self.sigma_mm / self.mm_per_px,
+            "effective_sigma_mm": self.effective_sigma_mm,
             "detrend_degree": self.detrend_degree,
             "carriers": self.carriers.to_dict(),
             "homography": None if self.homography_fit is None else self.homography_fit.to_dict(),

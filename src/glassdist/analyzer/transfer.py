@@ -1,0 +1,148 @@
+"""The Analyzer's transfer function for a displacement field, and the exact smoothing that undoes it.
+
+For a displacement (phase) field small enough for the demodulation to be linear,
+every stage between the photo and the reported fields is a linear, shift-invariant
+filter of the displacement component measured by carrier *i*. With ``nu`` a spatial
+frequency in cycles/px (x, y order) and ``s`` the step of the grid each stage runs on:
+
+* F1 bandpass, a Gaussian of frequency covariance ``Sigma_f`` centred on the carrier:
+  ``B_i(nu) = exp(-nu^T Sigma_f^{-1} nu / 2)``, i.e. a spatial Gaussian of covariance
+  ``Sigma_f^{-1} / (4 pi^2)`` px^2;
+* F3 complex smoothing, a Gaussian of ``sigma_3 = lambda_i / 3`` px;
+* the m x m block means of the analysis grid (fine step ``s``): the Dirichlet kernel
+  ``D_m(nu) = sin(pi m s nu) / (m sin(pi s nu))`` per axis;
+* the cubic B-spline interpolation of the fields to the image's pixel grid (grid step
+  ``S``): ``beta^3(S nu) / b_3(S nu)`` per axis, ``beta^3(t) = sinc(t)^4`` and
+  ``b_3(t) = (2 + cos 2 pi t) / 3`` the transform of the sampled spline;
+* A3's five-point centred difference on the analysis grid: ``(8 sin w - sin 2w) / (6 w)``,
+  ``w = 2 pi S nu``, for the derivative along that axis.
+
+The product of the first four is the *instrument transfer* ``H_i(nu)``. The A2 smoothing
+then applies ``G_sigma(nu) / H_i(nu)`` (``G_sigma`` the requested Gaussian), so the
+reported field is the true one convolved with ``G_sigma``, exactly where the
+demodulation is linear. The Gaussian stages are divided out in closed form (a Gaussian
+of covariance ``sigma^2 I - Sigma_i``), the others by their transfer on the FFT grid
+of the smoothing (:func:`glassdist.analyzer.metrics.masked_filter`). Where
+``sigma^2 I - Sigma_i`` is not positive the request is finer than the instrument can
+resolve: the smoothing then stops at the instrument's own blur along those directions
+(:meth:`InstrumentTransfer.effective_sigma_px`), and the Analyzer says so.
+
+References
+----------
+Unser (1999), "Splines: a perfect fit for signal and image processing", IEEE Signal
+Proc. Mag. 16(6) (B-spline interpolation). Paper §2.2 (F1-F3, metric-anchored smoothing).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = [
+    "InstrumentTransfer",
+    "gaussian_response",
+    "dirichlet_response",
+    "bspline_response",
+    "difference_response",
+]
+
+#: Smallest non-Gaussian transfer divided out; below it the correction is capped
+#: (the block-mean and interpolation responses stay above 0.6 up to the grid's Nyquist
+#: frequency, so the cap only acts on content the smoothing has already removed).
+MIN_RESPONSE = 0.25
+
+
+def gaussian_response(cov_px2: np.ndarray, fy: np.ndarray, fx: np.ndarray) -> np.ndarray:
+    """Transfer of a Gaussian of spatial covariance ``cov_px2`` (px^2, (x, y) order) at ``(fy, fx)`` cycles/px."""
+    c = np.asarray(cov_px2, float)
+    q = c[0, 0] * fx**2 + 2.0 * c[0, 1] * fx * fy + c[1, 1] * fy**2
+    return np.exp(-2.0 * np.pi**2 * q)
+
+
+def dirichlet_response(m: int, step_px: float, f: np.ndarray) -> np.ndarray:
+    """Transfer of the mean of ``m`` samples ``step_px`` apart, at frequency ``f`` (cycles/px)."""
+    if m <= 1:
+        return np.ones_like(np.asarray(f, float))
+    a = np.pi * step_px * np.asarray(f, float)
+    num = np.sin(m * a)
+    den = m * np.sin(a)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(np.abs(den) > 1e-12, num / np.where(den == 0, 1.0, den), 1.0)
+
+
+def bspline_response(step_px: float, f: np.ndarray) -> np.ndarray:
+    """Mean transfer of cubic B-spline interpolation from samples ``step_px`` apart (baseband term)."""
+    t = step_px * np.asarray(f, float)
+    return np.sinc(t) ** 4 / ((2.0 + np.cos(2.0 * np.pi * t)) / 3.0)
+
+
+def difference_response(step_px: float, f: np.ndarray) -> np.ndarray:
+    """Transfer of the five-point centred difference relative to the exact derivative ``2 pi i f``."""
+    w = 2.0 * np.pi * step_px * np.asarray(f, float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = (8.0 * np.sin(w) - np.sin(2.0 * w)) / (6.0 * np.where(w == 0, 1.0, w))
+    return np.where(np.abs(w) < 1e-9, 1.0, r)
+
+
+@dataclass(frozen=True)
+class InstrumentTransfer:
+    """Linear transfer of the Analyzer's stages before and after the A2 smoothing, per component.
+
+    Attributes
+    ----------
+    gaussian_px2 : ndarray (2, 2, 2)
+        Per displacement component, covariance (px^2, (x, y) order) of the Gaussian
+        stages (F1 bandpass and F3 complex smoothing of that component's carrier).
+    fine_step_px : (float, float)
+        ``(sy, sx)``: step of the demodulation grid the block means are taken on, px.
+    block : int
+        Block factor m of the analysis grid (1: no block means).
+    interp_step_px : (float, float) or None
+        ``(sy, sx)``: step of the grid the fields are interpolated from (cubic
+        B-spline), px; None when the fields are on the pixel grid already.
+    """
+
+    gaussian_px2: np.ndarray
+    fine_step_px: tuple[float, float] = (1.0, 1.0)
+    block: int = 1
+    interp_step_px: tuple[float, float] | None = None
+
+    def non_gaussian(self, fy: np.ndarray, fx: np.ndarray) -> np.ndarray:
+        """Transfer of the block means and the interpolation at ``(fy, fx)`` cycles/px."""
+        sy, sx = self.fine_step_px
+        r = dirichlet_response(self.block, sy, fy) * dirichlet_response(self.block, sx, fx)
+        if self.interp_step_px is not None:
+            iy, ix = self.interp_step_px
+            r = r * bspline_response(iy, fy) * bspline_response(ix, fx)
+        return r
+
+    def response(self, component: int, fy: np.ndarray, fx: np.ndarray) -> np.ndarray:
+        """``H_i(nu)``: end-to-end transfer of displacement component ``component`` (0 or 1)."""
+        return gaussian_response(self.gaussian_px2[component], fy, fx) * self.non_gaussian(fy, fx)
+
+    def residual_cov_px2(self, component: int, sigma_px: float) -> np.ndarray:
+        """Covariance of the Gaussian still to apply, ``sigma^2 I - Sigma_i`` clipped to be positive, px^2."""
+        w, V = np.linalg.eigh(sigma_px**2 * np.eye(2) - np.asarray(self.gaussian_px2[component], float))
+        return (V * np.clip(w, 0.0, None)) @ V.T
+
+    def correction(self, fy: np.ndarray, fx: np.ndarray) -> np.ndarray:
+        """``1 / (non-Gaussian transfer)``, capped at ``1 / MIN_RESPONSE``."""
+        return 1.0 / np.maximum(self.non_gaussian(fy, fx), MIN_RESPONSE)
+
+    def resolution_px(self) -> float:
+        """Finest Gaussian sigma the smoothing can reach: the instrument's largest Gaussian blur, px."""
+        return float(np.sqrt(max(float(np.max(np.linalg.eigvalsh(c))) for c in self.gaussian_px2)))
+
+    def effective_sigma_px(self, sigma_px: float) -> float:
+        """The sigma actually reached: the request, or the instrument's resolution when it is finer."""
+        return max(float(sigma_px), self.resolution_px())
+
+    def to_dict(self) -> dict:
+        return {
+            "gaussian_px2": np.asarray(self.gaussian_px2).tolist(),
+            "fine_step_px": list(self.fine_step_px),
+            "block": int(self.block),
+            "interp_step_px": None if self.interp_step_px is None else list(self.interp_step_px),
+            "resolution_px": self.resolution_px(),
+        }
