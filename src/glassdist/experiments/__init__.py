@@ -8,6 +8,8 @@
   and rotated about its normal.
 * :func:`run_accuracy` — both methods against the exact ray-traced truth on 13
   scenes (docs/accuracy.md).
+* :func:`run_transfer` — the Analyzer's measured transfer function, ray-traced ripples
+  and a large lens (docs/transfer_function.md).
 
 Each takes the rendering options of :class:`RunOptions` as keywords (``engine``,
 ``scale``, ``spp``, ``progress``), renders its scenes once and evaluates them
@@ -31,8 +33,9 @@ from .accuracy import run_accuracy
 from .parity import run_parity
 from .pitch import run_pitch
 from .rotation import run_rotation
+from .transfer import run_transfer
 
-EXPERIMENTS = {"parity": run_parity, "pitch": run_pitch, "rotation": run_rotation, "accuracy": run_accuracy}
+EXPERIMENTS = {"parity": run_parity, "pitch": run_pitch, "rotation": run_rotation, "accuracy": run_accuracy, "transfer": run_transfer}
 
 __all__ = [
     "EXPERIMENTS",
@@ -48,5 +51,6 @@ __all__ = [
     "run_parity",
     "run_pitch",
     "run_rotation",
+    "run_transfer",
     "run_accuracy",
 ]

@@ -40,7 +40,7 @@ def register(subparsers):
         "ray-traced truth on 13 scenes (docs/accuracy.md). With --workers N or --scheduler ADDRESS the "
         "scenes render in parallel on Dask workers.",
     )
-    p.add_argument("name", choices=["parity", "pitch", "rotation", "accuracy"], help="experiment to run")
+    p.add_argument("name", choices=["parity", "pitch", "rotation", "accuracy", "transfer"], help="experiment to run")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder (created if needed)")
     p.add_argument("--engine", choices=["exact", "cycles"], default="exact", help="render engine (default exact)")
     p.add_argument("--scale", type=_positive_float, default=1.0, help="image size relative to the scenes' 1024 x 768 px (default 1)")
