@@ -120,7 +120,7 @@ def test_protocol_mismatch_fails(tmp_path):
         (dict(SPEC, criteria=[{"channel": "phi_x", "statistic": "p95_abs", "max_mD": 1}]), "channel"),
         (dict(SPEC, criteria=[]), "criteria"),
         ({"criteria": SPEC["criteria"]}, "name"),
-        ("{not json", "not valid UTF-8 JSON"),
+        ("{not json", "not valid JSON"),
         ("[1, 2]", "JSON object"),
     ],
 )

@@ -9,6 +9,8 @@ import contextlib
 import sys
 from pathlib import Path
 
+from .validation import SIGMA_MM, number_option
+
 __all__ = ["progress_reporter", "apply_render_overrides", "add_render_options", "add_scene_command", "add_analysis_options"]
 
 
@@ -61,5 +63,5 @@ def add_scene_command(subparsers, name: str, run, *, help: str, description: str
 def add_analysis_options(p) -> None:
     """Options shared by predict and validate: analyzer parameters over the scene's ``analysis`` block."""
     p.add_argument("--params", type=Path, metavar="PARAMS.json", help="analyzer parameters overriding the scene's 'analysis'")
-    p.add_argument("--sigma-mm", type=float, help="reporting smoothing scale on the backdrop, mm")
+    p.add_argument("--sigma-mm", type=number_option(SIGMA_MM), help="reporting smoothing scale on the backdrop, mm")
     p.add_argument("--detrend-degree", type=int, help="total degree of the polynomial detrend")

@@ -19,6 +19,7 @@ import numpy as np
 
 from ._version import __version__
 from .errors import GlassdistError, InputError
+from .validation import DISTANCE_M, PITCH_MM, SIGMA_MM, number_option, safe_text
 
 __all__ = ["main", "build_parser"]
 
@@ -55,18 +56,7 @@ class OneLineErrorParser(argparse.ArgumentParser):
         return ns
 
     def error(self, message):
-        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
-
-
-def _positive(text: str) -> float:
-    """argparse type: a positive finite number (argparse prefixes errors with the option's name)."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a number, got '{text}'") from None
-    if not np.isfinite(v) or v <= 0:
-        raise argparse.ArgumentTypeError(f"must be positive, got {text}")
-    return v
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {safe_text(message, 2000)} (see {self.prog} --help)\n")
 
 
 def _register_analyze(sub) -> None:
@@ -79,12 +69,12 @@ def _register_analyze(sub) -> None:
     p.add_argument("image", type=Path, nargs="+",
                    help="photo of the grid through the glass (PNG/TIFF/BMP/JPEG, 8/16-bit); several photos of one set-up "
                    "(repeated exposures, small camera moves) are registered and averaged into one map")
-    p.add_argument("--pitch-mm", type=_positive, help="grid pitch on the backdrop, mm (line spacing, or square size); required unless the --spec protocol pins pitch_mm")
-    p.add_argument("--distance-m", type=_positive, help="glass-to-grid distance L, m; required unless the --spec protocol pins distance_m")
+    p.add_argument("--pitch-mm", type=number_option(PITCH_MM), help="grid pitch on the backdrop, mm (line spacing, or square size); required unless the --spec protocol pins pitch_mm")
+    p.add_argument("--distance-m", type=number_option(DISTANCE_M), help="glass-to-grid distance L, m; required unless the --spec protocol pins distance_m")
     p.add_argument("--reference", type=Path, help="glass-less photo from the same camera position (Comparative Method)")
     p.add_argument("--pattern", choices=["lines", "checkerboard"], help="backdrop pattern (default: from --params, else lines)")
     p.add_argument("--detrend-degree", type=int, help="A2 polynomial detrend total degree N (default 2)")
-    p.add_argument("--sigma-mm", type=_positive, help="reporting smoothing scale on the backdrop, mm (default: 2 carrier periods)")
+    p.add_argument("--sigma-mm", type=number_option(SIGMA_MM), help="reporting smoothing scale on the backdrop, mm (default: 2 carrier periods)")
     p.add_argument("--params", type=Path, help="JSON file of analyzer parameters (unknown keys are errors)")
     p.add_argument("--mask", type=Path, help="image whose non-zero pixels mark the region to analyse")
     p.add_argument("--out", type=Path, required=True, help="output folder (created if needed)")
@@ -244,7 +234,7 @@ def main(argv: list[str] | None = None) -> int:
     except GlassdistError as exc:
         if args.debug:
             raise
-        print(f"glassdist: error: {exc}", file=sys.stderr)
+        print(f"glassdist: error: {safe_text(exc, 2000)}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print("glassdist: interrupted", file=sys.stderr)
@@ -255,5 +245,5 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as exc:  # noqa: BLE001 - last resort: one line, traceback with --debug
         if args.debug:
             raise
-        print(f"glassdist: internal error: {type(exc).__name__}: {exc} (run with --debug for details)", file=sys.stderr)
+        print(f"glassdist: internal error: {type(exc).__name__}: {safe_text(exc, 2000)} (run with --debug for details)", file=sys.stderr)
         return EXIT_INTERNAL

@@ -11,14 +11,13 @@ carrier period :math:`\\lambda_i^{px}` or of the carrier frequency :math:`|f_i|`
 
 from __future__ import annotations
 
-import json
 from importlib import resources
 from pathlib import Path
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, Field, field_validator
 
-from ..errors import InputError
+from ..validation import MODEL_CONFIG, SIGMA_MM, load_mapping, safe_text, validate_model
 
 __all__ = ["AnalyzerParams", "load_params", "default_params_path"]
 
@@ -31,7 +30,7 @@ class AnalyzerParams(BaseModel):
     specification can fix them in one file; the command line may override them.
     """
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = MODEL_CONFIG
 
     pattern: Literal["lines", "checkerboard"] = Field(
         "lines",
@@ -42,11 +41,12 @@ class AnalyzerParams(BaseModel):
     sigma_mm: float | None = Field(
         None,
         gt=0,
+        le=SIGMA_MM.hi,
         description="A2: metric-anchored smoothing scale on the backdrop, mm; "
         "None = sigma_periods carrier periods",
     )
     sigma_periods: float = Field(
-        2.0, gt=0, description="default smoothing scale in carrier periods, used when sigma_mm is None"
+        2.0, gt=0, le=1000, description="default smoothing scale in carrier periods, used when sigma_mm is None"
     )
     compensate_demodulation_blur: bool = Field(
         True,
@@ -62,7 +62,7 @@ class AnalyzerParams(BaseModel):
     )
     isotropic_bandpass: bool = Field(False, description="ablation: use an isotropic bandpass of width bandpass_sigma_along")
     smoothing_periods: float = Field(1.0 / 3.0, gt=0, le=2.0, description="F3: complex smoothing sigma, carrier periods")
-    min_period_px: float = Field(3.0, gt=2.0, description="F1: shortest carrier period accepted, px")
+    min_period_px: float = Field(3.0, gt=2.0, le=1000, description="F1: shortest carrier period accepted, px")
     modulation_threshold: float = Field(
         0.3, gt=0, lt=1, description="valid region: local modulation / median modulation must exceed this"
     )
@@ -74,12 +74,12 @@ class AnalyzerParams(BaseModel):
         0.5, ge=0, lt=1, description="valid region: phase coherence |G*z|/G*|z| of the smoothed signal must exceed this"
     )
     border_periods: float | None = Field(
-        None, ge=0,
+        None, ge=0, le=100,
         description="valid region: margin around excluded areas (occluders, frames), carrier periods; "
         "null: derived from the demodulation kernel for margin_phase_error_periods",
     )
     edge_margin_periods: float | None = Field(
-        None, ge=0,
+        None, ge=0, le=100,
         description="valid region: margin at the image edges, carrier periods (the periodic FFT mixes the opposite edge in); "
         "null: derived like border_periods",
     )
@@ -89,7 +89,7 @@ class AnalyzerParams(BaseModel):
         "margin, worst case (an unrelated signal of equal amplitude behind the boundary)",
     )
     guard_band_sigmas: float = Field(
-        1.5, ge=0,
+        1.5, ge=0, le=100,
         description="quality map: measured samples within this many reporting smoothing scales (sigma) of an excluded "
         "area or the image edge are reported but left out of statistics and specifications",
     )
@@ -100,9 +100,9 @@ class AnalyzerParams(BaseModel):
         "along-carrier bandpass passes a quarter of the amplitude)",
     )
     min_region_fraction: float = Field(0.01, ge=0, lt=1, description="valid region: drop connected regions smaller than this fraction of the image")
-    ransac_threshold_periods: float = Field(0.1, gt=0, description="I2: RANSAC inlier threshold, carrier periods")
-    ransac_max_trials: int = Field(2000, ge=10)
-    ransac_seed: int = Field(0, description="I2: seed of the RANSAC sampler (results are reproducible)")
+    ransac_threshold_periods: float = Field(0.1, gt=0, le=10, description="I2: RANSAC inlier threshold, carrier periods")
+    ransac_max_trials: int = Field(2000, ge=10, le=1_000_000)
+    ransac_seed: int = Field(0, ge=0, le=2**32 - 1, description="I2: seed of the RANSAC sampler (results are reproducible)")
     a1_mode: Literal["projective", "isotropic"] = Field(
         "projective",
         description="A1: 'projective' differentiates with respect to backdrop mm through the local "
@@ -119,8 +119,8 @@ class AnalyzerParams(BaseModel):
     @field_validator("decimation")
     @classmethod
     def _check_decimation(cls, v):
-        if v != "auto" and int(v) < 1:
-            raise ValueError("decimation must be 'auto' or an integer >= 1")
+        if v != "auto" and not 1 <= int(v) <= 64:
+            raise ValueError("decimation must be 'auto' or an integer from 1 to 64")
         return v
 
     def resolved(self) -> dict:
@@ -131,19 +131,6 @@ class AnalyzerParams(BaseModel):
 def default_params_path() -> Path:
     """Path of the shipped defaults JSON (a template users can copy)."""
     return Path(str(resources.files("glassdist") / "data" / "analyzer_defaults.json"))
-
-
-def _format_validation_error(exc: ValidationError, source: str) -> str:
-    parts = []
-    for err in exc.errors():
-        loc = ".".join(str(x) for x in err["loc"]) or "(root)"
-        if err["type"] == "extra_forbidden":
-            parts.append(f"unknown key '{loc}'")
-        else:
-            parts.append(f"'{loc}': {err['msg']}")
-    return f"invalid parameters in {source}: " + "; ".join(parts) + (
-        f"; see {default_params_path().name} for the valid keys and defaults"
-    )
 
 
 def load_params(source: str | Path | dict | None = None, **overrides) -> AnalyzerParams:
@@ -184,19 +171,8 @@ def load_params(source: str | Path | dict | None = None, **overrides) -> Analyze
     if isinstance(source, dict):
         data = dict(source)
     elif source is not None:
-        p = Path(source)
-        label = f"'{p}'"
-        if not p.is_file():
-            raise InputError(f"parameter file '{p}' does not exist; check the --params path")
-        try:
-            data = json.loads(p.read_text(encoding="utf-8"))
-        except json.JSONDecodeError as exc:
-            raise InputError(f"parameter file '{p}' is not valid JSON (line {exc.lineno}: {exc.msg})") from None
-        if not isinstance(data, dict):
-            raise InputError(f"parameter file '{p}' must hold a JSON object of key: value pairs")
-        data.pop("$comment", None)
+        label = f"'{safe_text(Path(source))}'"
+        data = load_mapping(source, "parameter file", option="--params", fmt="json", expect="parameter: value pairs")
     data.update({k: v for k, v in overrides.items() if v is not None})
-    try:
-        return AnalyzerParams(**data)
-    except ValidationError as exc:
-        raise InputError(_format_validation_error(exc, label)) from None
+    return validate_model(AnalyzerParams, data, "parameters", label,
+                          f"see {default_params_path().name} for the valid keys and defaults")

@@ -11,20 +11,9 @@ from pathlib import Path
 from ..distributed import add_scheduler_options, open_executor
 from ..io import prepare_output_dir
 from .._cli_shared import progress_reporter
+from ..validation import SIGMA_MM, Range, number_option
 
 __all__ = ["register", "run"]
-
-
-def _positive_float(text: str) -> float:
-    import argparse
-
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a number, got '{text}'") from None
-    if not v > 0:
-        raise argparse.ArgumentTypeError(f"must be positive, got {text}")
-    return v
 
 
 def register(subparsers):
@@ -43,9 +32,9 @@ def register(subparsers):
     p.add_argument("name", choices=["parity", "pitch", "rotation", "accuracy", "transfer"], help="experiment to run")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder (created if needed)")
     p.add_argument("--engine", choices=["exact", "cycles"], default="exact", help="render engine (default exact)")
-    p.add_argument("--scale", type=_positive_float, default=1.0, help="image size relative to the scenes' 1024 x 768 px (default 1)")
+    p.add_argument("--scale", type=number_option(Range(0.0, 16.0, lo_open=True)), default=1.0, help="image size relative to the scenes' 1024 x 768 px (default 1)")
     p.add_argument("--spp", type=int, help="samples per pixel (default: the scenes', 16)")
-    p.add_argument("--sigma-mm", type=_positive_float, help="reporting smoothing scale on the backdrop, mm (default: the experiment's)")
+    p.add_argument("--sigma-mm", type=number_option(SIGMA_MM), help="reporting smoothing scale on the backdrop, mm (default: the experiment's)")
     p.add_argument("--scenes", help="accuracy only: comma-separated subset of its scenes")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_scheduler_options(p)
@@ -72,8 +61,8 @@ def run(args) -> int:
     from ..errors import InputError
     from . import EXPERIMENTS, write_experiment
 
-    if args.spp is not None and args.spp < 1:
-        raise InputError(f"--spp must be at least 1, got {args.spp}")
+    if args.spp is not None and not 1 <= args.spp <= 1024:
+        raise InputError(f"--spp must be from 1 to 1024, got {args.spp}")
     out = prepare_output_dir(args.out)
     kwargs = {"engine": args.engine, "scale": args.scale, "spp": args.spp}
     if args.sigma_mm is not None:

@@ -6,6 +6,7 @@ import logging
 from pathlib import Path
 
 from ..distributed import add_scheduler_options, open_executor
+from ..validation import DISTANCE_M, PITCH_MM, SIGMA_MM, number_option
 from .batch import pane_defaults, panes_from_folder, read_manifest, run_batch
 
 logger = logging.getLogger(__name__)
@@ -29,12 +30,12 @@ def register(subparsers):
     p.add_argument("--spec", metavar="SPEC.json", help="acceptance specification for panes without a 'spec' column")
     p.add_argument("--report", action="store_true", help="write an HTML report per pane")
     p.add_argument("--export", action="store_true", help="write NPZ and 32-bit TIFF fields per pane")
-    p.add_argument("--pitch-mm", type=float, help="grid pitch, mm (default for panes without one)")
-    p.add_argument("--distance-m", type=float, help="glass-to-grid distance L, m (default for panes without one)")
+    p.add_argument("--pitch-mm", type=number_option(PITCH_MM), help="grid pitch, mm (default for panes without one)")
+    p.add_argument("--distance-m", type=number_option(DISTANCE_M), help="glass-to-grid distance L, m (default for panes without one)")
     p.add_argument("--reference", metavar="REF", help="glass-less reference photo (Comparative method) by default")
     p.add_argument("--pattern", choices=["lines", "checkerboard"], help="grid pattern by default")
     p.add_argument("--params", metavar="PARAMS.json", help="analyzer parameters file by default")
-    p.add_argument("--sigma-mm", type=float, help="smoothing scale, mm, by default")
+    p.add_argument("--sigma-mm", type=number_option(SIGMA_MM), help="smoothing scale, mm, by default")
     p.add_argument("--detrend-degree", type=int, help="detrend polynomial degree by default")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_scheduler_options(p)

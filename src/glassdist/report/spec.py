@@ -51,15 +51,15 @@ Paper §4.1 (factory-line acceptance), §4.2 (contractual specification).
 from __future__ import annotations
 
 import hashlib
-import json
 import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, Field, field_validator, model_validator
 
 from ..errors import InputError
+from ..validation import MODEL_CONFIG, SIGMA_MM, check_input_file, load_mapping, safe_text, validate_model
 from .stats import format_limit, valid_percent
 
 __all__ = [
@@ -74,12 +74,12 @@ _STAT_TEXT = {"mean_abs": "mean |{c}|", "std": "std {c}", "p95_abs": "p95 |{c}|"
 class Criterion(BaseModel):
     """One acceptance criterion on one channel statistic."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = MODEL_CONFIG
 
     channel: Literal["phi_eff", "phi_shear", "phi_total"]
     statistic: Literal["mean_abs", "std", "p95_abs", "max_abs", "area_over"]
-    max_mD: float | None = Field(None, ge=0, description="upper limit of the statistic, mD")
-    threshold_mD: float | None = Field(None, ge=0, description="area_over: pixel threshold on |phi|, mD")
+    max_mD: float | None = Field(None, ge=0, le=1e6, description="upper limit of the statistic, mD")
+    threshold_mD: float | None = Field(None, ge=0, le=1e6, description="area_over: pixel threshold on |phi|, mD")
     max_percent: float | None = Field(None, ge=0, le=100, description="area_over: largest allowed area, percent")
     label: str | None = Field(None, description="name printed in verdicts (default: built from the criterion)")
     zone: str | None = Field(None, description="name of a zone of the spec's 'zones' (default: the analysed region)")
@@ -119,13 +119,13 @@ class Protocol(BaseModel):
     the protocol would not be one on the glass.
     """
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = MODEL_CONFIG
 
     method: Literal["comparative", "direct"] | None = None
     distance_m: float | None = Field(None, gt=0, allow_inf_nan=False, description="glass-to-grid distance L, m")
     pitch_mm: float | None = Field(None, gt=0, allow_inf_nan=False, description="printed grid pitch, mm")
     pattern: Literal["lines", "checkerboard"] | None = None
-    sigma_mm: float | None = Field(None, gt=0, allow_inf_nan=False, description="smoothing scale, mm")
+    sigma_mm: float | None = Field(None, gt=0, le=SIGMA_MM.hi, allow_inf_nan=False, description="smoothing scale, mm")
     sigma_periods: float | None = Field(None, gt=0, allow_inf_nan=False,
                                         description="smoothing scale, carrier periods (instead of sigma_mm)")
     detrend_degree: int | None = Field(None, ge=0, le=8)
@@ -152,7 +152,7 @@ class Pane(BaseModel):
     frame's origin is the top-left corner, x along the top edge, y along the left edge.
     """
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = MODEL_CONFIG
 
     corners_px: tuple[tuple[float, float], tuple[float, float], tuple[float, float], tuple[float, float]]
     size_mm: tuple[float, float]
@@ -186,7 +186,7 @@ class Zone(BaseModel):
     share of the zone.
     """
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = MODEL_CONFIG
 
     name: str = Field(..., pattern=_NAME_RE, description="letters, digits, '_', '.', '-'")
     edge_band_mm: float | None = Field(None, gt=0, allow_inf_nan=False)
@@ -218,7 +218,7 @@ class Zone(BaseModel):
 class WorstRegions(BaseModel):
     """Settings of the worst-region list (see :mod:`glassdist.report.regions`)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = MODEL_CONFIG
 
     threshold_mD: dict[Literal["phi_eff", "phi_shear", "phi_total"], float] = Field(
         default_factory=dict, description="per channel threshold on |phi|, mD (default: the spec's limit)")
@@ -235,7 +235,7 @@ class Figures(BaseModel):
     number in mD.
     """
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = MODEL_CONFIG
 
     colour_limit: Literal["auto", "spec"] | float = "auto"
 
@@ -250,7 +250,7 @@ class Figures(BaseModel):
 class Spec(BaseModel):
     """An acceptance specification (see the module docstring for the JSON form)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = MODEL_CONFIG
 
     name: str = Field(..., min_length=1)
     description: str = ""
@@ -298,7 +298,7 @@ class Check:
         else:
             value = str(self.value)
         tail = f"; {self.note}" if self.note else ""
-        return f"{'PASS' if self.passed else 'FAIL'}  {self.criterion}  (value {value}{tail})"
+        return f"{'PASS' if self.passed else 'FAIL'}  {safe_text(self.criterion)}  (value {safe_text(value)}{safe_text(tail)})"
 
 
 @dataclass(frozen=True)
@@ -324,7 +324,7 @@ class Verdict:
         """Console lines: one per check, then ``VERDICT: PASS|FAIL (n/m criteria passed) spec '<name>'``."""
         n_ok = sum(c.passed for c in self.checks)
         return [c.line() for c in self.checks] + [
-            f"VERDICT: {self.label} ({n_ok}/{len(self.checks)} criteria passed) spec '{self.spec_name}'"
+            f"VERDICT: {self.label} ({n_ok}/{len(self.checks)} criteria passed) spec '{safe_text(self.spec_name)}'"
         ]
 
     def to_dict(self):
@@ -339,18 +339,6 @@ class Verdict:
             "result": self.label, "passed": self.passed, "spec_name": self.spec_name,
             "spec_path": self.spec_path, "spec_sha256": self.spec_sha256, "checks": checks,
         }
-
-
-def _one_line_errors(exc: ValidationError):
-    parts = []
-    for err in exc.errors():
-        loc = ".".join(str(x) for x in err["loc"]) or "(root)"
-        if err["type"] == "extra_forbidden":
-            parts.append(f"unknown key '{loc}'")
-        else:
-            msg = err["msg"].removeprefix("Value error, ")
-            parts.append(f"'{loc}': {msg}")
-    return "; ".join(parts)
 
 
 def load_spec(path):
@@ -372,24 +360,10 @@ def load_spec(path):
     InputError
         Missing file, invalid JSON, unknown key, missing or out-of-range limit.
     """
-    p = Path(path)
-    if not p.is_file():
-        raise InputError(f"specification file '{p}' does not exist; check the --spec path")
+    p = check_input_file(path, "specification file", option="--spec")
+    data = load_mapping(p, "specification file", option="--spec", fmt="json", expect="'name' and 'criteria'")
+    spec = validate_model(Spec, data, "specification", f"'{safe_text(p)}'", "see docs/industrial_workflow.md for the format")
     raw = p.read_bytes()
-    try:
-        data = json.loads(raw.decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        where = f" (line {exc.lineno}: {exc.msg})" if isinstance(exc, json.JSONDecodeError) else ""
-        raise InputError(f"specification file '{p}' is not valid UTF-8 JSON{where}") from None
-    if not isinstance(data, dict):
-        raise InputError(f"specification file '{p}' must hold a JSON object with 'name' and 'criteria'")
-    data.pop("$comment", None)
-    try:
-        spec = Spec(**data)
-    except ValidationError as exc:
-        raise InputError(
-            f"invalid specification '{p}': {_one_line_errors(exc)}; see docs/industrial_workflow.md for the format"
-        ) from None
     return spec, hashlib.sha256(raw).hexdigest()
 
 
@@ -411,11 +385,8 @@ def as_spec(spec):
         return spec, ""
     if isinstance(spec, dict):
         data = {k: v for k, v in spec.items() if k != "$comment"}
-        try:
-            return Spec(**data), ""
-        except ValidationError as exc:
-            raise InputError(f"invalid specification: {_one_line_errors(exc)}; see docs/industrial_workflow.md "
-                             "for the format") from None
+        return validate_model(Spec, data, "specification", "the given mapping",
+                              "see docs/industrial_workflow.md for the format"), ""
     return load_spec(spec)
 
 

@@ -2,15 +2,15 @@
 
 from __future__ import annotations
 
-import json
 import math
-from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, Field, model_validator
 
-from ..errors import InputError
+from ..validation import (
+    DISTANCE_M, MODEL_CONFIG, Angle_deg, Length_mm, PositiveLength_mm, load_mapping, validate_model,
+)
 from .surfaces import FaceShape, Term
 
 __all__ = [
@@ -29,7 +29,7 @@ __all__ = [
     "rotation_yaw_pitch",
 ]
 
-_FROZEN = ConfigDict(extra="forbid", frozen=True)
+_FROZEN = MODEL_CONFIG
 
 
 def rotation_yaw_pitch(yaw_deg: float, pitch_deg: float) -> np.ndarray:
@@ -73,7 +73,7 @@ class Frame(BaseModel):
     """Opaque frame band along the pane's edges (width in mm, intensity in [0, 1])."""
 
     model_config = _FROZEN
-    width_mm: float = Field(gt=0)
+    width_mm: PositiveLength_mm
     intensity: float = Field(0.05, ge=0, le=1)
 
 
@@ -85,10 +85,10 @@ class Pane(BaseModel):
     """
 
     model_config = _FROZEN
-    size_mm: tuple[float, float]
-    thickness_mm: float = Field(gt=0)
+    size_mm: tuple[Length_mm, Length_mm]
+    thickness_mm: PositiveLength_mm
     refractive_index: float = Field(gt=1.0, lt=3.0)
-    center_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    center_mm: tuple[Length_mm, Length_mm, Length_mm] = (0.0, 0.0, 0.0)
     yaw_deg: float = Field(0.0, ge=-80, le=80)
     pitch_deg: float = Field(0.0, ge=-80, le=80)
     transmittance: float = Field(1.0, gt=0, le=1)
@@ -120,11 +120,11 @@ class Backdrop(BaseModel):
 
     model_config = _FROZEN
     pattern: Literal["lines", "checkerboard"]
-    pitch_mm: float = Field(gt=0)
-    line_width_mm: float | None = Field(None, gt=0)
-    rotation_deg: float = 0.0
-    offset_mm: tuple[float, float] = (0.0, 0.0)
-    distance_m: float = Field(gt=0)
+    pitch_mm: PositiveLength_mm
+    line_width_mm: PositiveLength_mm | None = None
+    rotation_deg: Angle_deg = 0.0
+    offset_mm: tuple[Length_mm, Length_mm] = (0.0, 0.0)
+    distance_m: float = Field(ge=DISTANCE_M.lo, le=DISTANCE_M.hi)
     black: float = Field(0.05, ge=0, le=1)
     white: float = Field(0.95, ge=0, le=1)
 
@@ -148,10 +148,10 @@ class Camera(BaseModel):
     """
 
     model_config = _FROZEN
-    focal_length_mm: float = Field(gt=0)
-    sensor_width_mm: float = Field(gt=0)
-    pixels: tuple[int, int]
-    position_mm: tuple[float, float, float]
+    focal_length_mm: PositiveLength_mm
+    sensor_width_mm: PositiveLength_mm
+    pixels: tuple[Annotated[int, Field(ge=8, le=100_000)], Annotated[int, Field(ge=8, le=100_000)]]
+    position_mm: tuple[Length_mm, Length_mm, Length_mm]
     yaw_deg: float = Field(0.0, ge=-80, le=80)
     pitch_deg: float = Field(0.0, ge=-80, le=80)
 
@@ -180,8 +180,8 @@ class Noise(BaseModel):
     """Sensor noise: Poisson shot noise at ``full_well_e`` electrons for intensity 1, Gaussian read noise (intensity units)."""
 
     model_config = _FROZEN
-    full_well_e: float | None = Field(None, gt=0)
-    read_noise: float = Field(0.0, ge=0)
+    full_well_e: float | None = Field(None, gt=0, le=1e9)
+    read_noise: float = Field(0.0, ge=0, le=10)
 
 
 class Lighting(BaseModel):
@@ -189,7 +189,7 @@ class Lighting(BaseModel):
 
     model_config = _FROZEN
     gradient: float = Field(0.0, ge=0, lt=1)
-    direction_deg: float = 0.0
+    direction_deg: Angle_deg = 0.0
 
 
 class Imaging(BaseModel):
@@ -207,7 +207,7 @@ class RenderSettings(BaseModel):
 
     model_config = _FROZEN
     samples_per_pixel: int = Field(16, ge=1, le=1024)
-    seed: int = Field(0, ge=0)
+    seed: int = Field(0, ge=0, le=2**32 - 1)
 
 
 class Scene(BaseModel):
@@ -234,6 +234,37 @@ class Scene(BaseModel):
             raise ValueError("camera.position_mm must lie in front of the pane (z smaller than pane.center_mm z)")
         return self
 
+    @model_validator(mode="after")
+    def _geometry(self):
+        """Physical consistency of a tilted, deformed pane with the camera and the backdrop.
+
+        The faces are sampled on a 33 x 33 grid of the pane (mm): the camera must lie in
+        front of the front face along the pane normal ``w``, the faces must not cross, and
+        the whole pane must lie before the backdrop plane.
+        """
+        pane = self.pane
+        hw, hh = pane.size_mm[0] / 2, pane.size_mm[1] / 2
+        u, v = np.meshgrid(np.linspace(-hw, hw, 33), np.linspace(-hh, hh, 33))
+        front = -pane.thickness_mm / 2 + pane.deformation.front_shape.height(u, v)
+        back = pane.thickness_mm / 2 + pane.deformation.back_shape.height(u, v)
+        if not (np.all(np.isfinite(front)) and np.all(np.isfinite(back))):
+            raise ValueError("the pane's deformation gives non-finite heights; check the deformation terms")
+        if np.any(back - front <= 0):
+            raise ValueError("the pane's deformed faces cross (thickness <= 0 somewhere); reduce the deformation amplitudes")
+        rot = pane.rotation
+        w_cam = float(rot[:, 2] @ (np.asarray(self.camera.position_mm) - np.asarray(pane.center_mm)))
+        if w_cam >= float(front.min()):
+            raise ValueError(
+                f"the camera is inside or behind the tilted pane ({w_cam:.4g} mm along the pane normal, front face "
+                f"from {float(front.min()):.4g} mm); move camera.position_mm in front of the pane"
+            )
+        corners = np.asarray(pane.center_mm)[:, None] + rot @ np.array(
+            [[su * hw, sv * hh, sw] for su in (-1, 1) for sv in (-1, 1)
+             for sw in (float(front.min()), float(back.max()))]).T
+        if float(corners[2].max()) >= self.backdrop_z_mm:
+            raise ValueError("the tilted pane reaches the backdrop plane; increase backdrop.distance_m or reduce the tilt")
+        return self
+
     @property
     def backdrop_z_mm(self) -> float:
         """World z of the backdrop plane, mm."""
@@ -250,27 +281,9 @@ class Scene(BaseModel):
         return scene_from_dict(data, source=f"scene '{self.name}'")
 
 
-def _format_error(exc: ValidationError, source: str) -> str:
-    parts = []
-    for err in exc.errors()[:3]:
-        loc = ".".join(str(x) for x in err["loc"]) or "(root)"
-        if err["type"] == "extra_forbidden":
-            parts.append(f"unknown key '{loc}'")
-        elif err["type"] == "missing":
-            parts.append(f"missing key '{loc}'")
-        else:
-            parts.append(f"'{loc}': {err['msg']}")
-    return f"invalid scene in {source}: " + "; ".join(parts) + "; see docs/virtual_pipeline.md for the scene format"
-
-
 def scene_from_dict(data: dict, *, source: str = "scene") -> Scene:
     """Validate a parsed scene mapping; raises :class:`InputError` on any problem."""
-    if not isinstance(data, dict):
-        raise InputError(f"{source} must hold a mapping of sections (pane, backdrop, camera, ...)")
-    try:
-        return Scene(**data)
-    except ValidationError as exc:
-        raise InputError(_format_error(exc, source)) from None
+    return validate_model(Scene, data, "scene", source, "see docs/virtual_pipeline.md for the scene format")
 
 
 def load_scene(path) -> Scene:
@@ -279,7 +292,8 @@ def load_scene(path) -> Scene:
     Raises
     ------
     InputError
-        Missing file, unparsable content, unknown key, missing or out-of-range value.
+        Missing file, unparsable content (see :func:`glassdist.validation.load_document`),
+        unknown key, missing, non-finite or out-of-range value, inconsistent geometry.
 
     Examples
     --------
@@ -302,18 +316,8 @@ def load_scene(path) -> Scene:
     ('wavy_slab_tiny', (48, 64), 72.6)
     >>> folder.cleanup()
     """
-    p = Path(path)
-    if not p.is_file():
-        raise InputError(f"scene file '{p}' does not exist; check the path (examples are in examples/scenes/)")
-    text = p.read_text(encoding="utf-8")
-    try:
-        if p.suffix.lower() == ".json":
-            data = json.loads(text)
-        else:
-            import yaml
+    from ..validation import safe_text
 
-            data = yaml.safe_load(text)
-    except Exception as exc:  # noqa: BLE001 - any parser error is a user file problem
-        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise InputError(f"scene file '{p}' cannot be parsed ({first}); check its YAML/JSON syntax") from None
-    return scene_from_dict(data, source=f"'{p}'")
+    data = load_mapping(path, "scene file", expect="sections (pane, backdrop, camera, ...)",
+                        hint="check its YAML/JSON syntax (examples are in examples/scenes/)")
+    return scene_from_dict(data, source=f"'{safe_text(path)}'")

@@ -24,7 +24,9 @@ import math
 from typing import Annotated, Literal, Union
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, Field, model_validator
+
+from ..validation import MODEL_CONFIG, Angle_deg, Length_mm, PositiveLength_mm
 
 __all__ = [
     "Harmonic",
@@ -37,7 +39,9 @@ __all__ = [
     "FaceShape",
 ]
 
-_FROZEN = ConfigDict(extra="forbid", frozen=True)
+_FROZEN = MODEL_CONFIG
+#: a slope of a plane term (dimensionless, at most 45 deg)
+Slope = Annotated[float, Field(ge=-1, le=1)]
 
 
 class _TermBase(BaseModel):
@@ -62,8 +66,8 @@ class Harmonic(BaseModel):
 
     model_config = _FROZEN
     order: int = Field(ge=2, le=32)
-    amplitude_mm: float
-    phase_deg: float = 0.0
+    amplitude_mm: Length_mm
+    phase_deg: Angle_deg = 0.0
 
 
 class RollerWave(_TermBase):
@@ -80,10 +84,10 @@ class RollerWave(_TermBase):
     """
 
     kind: Literal["roller_wave"]
-    amplitude_mm: float
-    wavelength_mm: float = Field(gt=0)
-    direction_deg: float = 0.0
-    phase_deg: float = 0.0
+    amplitude_mm: Length_mm
+    wavelength_mm: PositiveLength_mm
+    direction_deg: Angle_deg = 0.0
+    phase_deg: Angle_deg = 0.0
     harmonics: tuple[Harmonic, ...] = ()
 
     def _modes(self):
@@ -134,9 +138,9 @@ class Pillow(_TermBase):
     """
 
     kind: Literal["pillow"]
-    amplitude_mm: float
-    size_mm: tuple[float, float]
-    center_mm: tuple[float, float] = (0.0, 0.0)
+    amplitude_mm: Length_mm
+    size_mm: tuple[Length_mm, Length_mm]
+    center_mm: tuple[Length_mm, Length_mm] = (0.0, 0.0)
 
     @model_validator(mode="after")
     def _positive(self):
@@ -188,9 +192,9 @@ class SphericalCap(_TermBase):
     """
 
     kind: Literal["spherical_cap"]
-    radius_mm: float
-    aperture_mm: float = Field(gt=0)
-    center_mm: tuple[float, float] = (0.0, 0.0)
+    radius_mm: Length_mm
+    aperture_mm: PositiveLength_mm
+    center_mm: tuple[Length_mm, Length_mm] = (0.0, 0.0)
 
     @model_validator(mode="after")
     def _radius(self):
@@ -230,9 +234,9 @@ class GaussianBump(_TermBase):
     """Localised Gaussian defect: :math:`h = A\\exp(-\\rho^2 / 2s^2)`, ``s = sigma_mm``."""
 
     kind: Literal["gaussian"]
-    amplitude_mm: float
-    sigma_mm: float = Field(gt=0)
-    center_mm: tuple[float, float] = (0.0, 0.0)
+    amplitude_mm: Length_mm
+    sigma_mm: PositiveLength_mm
+    center_mm: tuple[Length_mm, Length_mm] = (0.0, 0.0)
 
     def _parts(self, u, v):
         du, dv = u - self.center_mm[0], v - self.center_mm[1]
@@ -259,8 +263,8 @@ class Plane(_TermBase):
     """
 
     kind: Literal["plane"]
-    slope: tuple[float, float] = (0.0, 0.0)
-    offset_mm: float = 0.0
+    slope: tuple[Slope, Slope] = (0.0, 0.0)
+    offset_mm: Length_mm = 0.0
 
     def height(self, u, v):
         return self.offset_mm + self.slope[0] * u + self.slope[1] * v

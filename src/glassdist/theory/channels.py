@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import json
 import math
-from pathlib import Path
 
 import numpy as np
 
@@ -30,19 +28,12 @@ def analysis_params(scene: Scene, params_file=None, **overrides):
     """
     from ..analyzer.params import load_params
 
+    from ..validation import load_mapping
+
     data = dict(scene.analysis)
     if params_file is not None:
-        p = Path(params_file)
-        if not p.is_file():
-            raise InputError(f"parameter file '{p}' does not exist; check the --params path")
-        try:
-            extra = json.loads(p.read_text(encoding="utf-8"))
-        except json.JSONDecodeError as exc:
-            raise InputError(f"parameter file '{p}' is not valid JSON (line {exc.lineno}: {exc.msg})") from None
-        if not isinstance(extra, dict):
-            raise InputError(f"parameter file '{p}' must hold a JSON object of key: value pairs")
-        extra.pop("$comment", None)
-        data.update(extra)
+        data.update(load_mapping(params_file, "parameter file", option="--params", fmt="json",
+                                 expect="parameter: value pairs"))
     data["pattern"] = scene.backdrop.pattern
     return load_params(data, **overrides)
 
