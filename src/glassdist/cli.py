@@ -19,7 +19,7 @@ import numpy as np
 
 from ._version import __version__
 from .errors import GlassdistError, InputError
-from .validation import DISTANCE_M, PITCH_MM, SIGMA_MM, number_option, safe_text
+from .validation import DISTANCE_M, PITCH_MM, SIGMA_MM, check_sigma_extent, number_option, safe_text
 
 __all__ = ["main", "build_parser"]
 
@@ -148,6 +148,8 @@ def _read_inputs(args):
             f"the reference '{args.reference}' is {reference.shape[1]}x{reference.shape[0]} px but the image is "
             f"{image.shape[1]}x{image.shape[0]} px; both photos must come from the same camera, same size"
         )
+    check_sigma_extent(params.sigma_mm, image.shape, args.pitch_mm, pattern=params.pattern,
+                       min_period_px=params.min_period_px)
     mask = read_mask(args.mask, image.shape) if args.mask is not None else None
     return spec, protocol, params, images, reference, mask
 

@@ -16,51 +16,121 @@ from pathlib import Path, PurePosixPath
 import numpy as np
 
 from .errors import InputError
+from .validation import check_input_file, limits, safe_text
 
 __all__ = ["read_image", "read_mask", "write_png16", "prepare_output_dir"]
 
 _READABLE = {".png", ".tif", ".tiff", ".bmp", ".jpg", ".jpeg"}
 
 
-def _imread_any(path: Path) -> np.ndarray:
+def _imread_any(path: Path, max_pixels: float) -> tuple[np.ndarray, int | None]:
+    """Decode an image file (RGB(A) channel order); returns the array and its bits per sample (TIFF)."""
     import cv2
 
     if path.suffix.lower() in {".tif", ".tiff"}:
-        import tifffile
-
-        try:
-            return np.asarray(tifffile.imread(path))
-        except Exception as exc:  # noqa: BLE001 - any decoder failure is a user file problem
-            raise InputError(f"cannot read TIFF image '{path}': {exc}; check the file is a valid TIFF") from None
+        return _tiff_frame(path, max_pixels)
+    _check_pixels(path, *_header_size(path), max_pixels)
     data = np.fromfile(str(path), dtype=np.uint8)
     img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
     if img is None:
         raise InputError(
-            f"cannot decode image '{path}'; supported formats are PNG, TIFF, BMP and JPEG (8 or 16 bit)"
+            f"cannot decode image '{safe_text(path)}'; supported formats are PNG, TIFF, BMP and JPEG (8 or 16 bit)"
         )
     if img.ndim == 3:
         img = img[..., ::-1] if img.shape[2] in (3, 4) else img  # BGR(A) -> RGB(A)
-    return img
+    return img, None
 
 
-def read_image(path: str | os.PathLike) -> np.ndarray:
+def _tiff_frame(p: Path, max_pixels: float) -> tuple[np.ndarray, int | None]:
+    """Page 0 of a single-frame TIFF as (H, W) or (H, W, S) and its BitsPerSample, size checked first."""
+    import tifffile
+
+    shown = safe_text(p)
+    try:
+        with tifffile.TiffFile(p) as tif:
+            # reduced-resolution pages (thumbnails, previews) are not frames
+            frames = [pg for pg in tif.pages if not (getattr(pg, "subfiletype", 0) & 1)]
+            if not frames:
+                raise InputError(f"TIFF image '{shown}' holds no image page; export it again")
+            if len(frames) > 1:
+                raise InputError(
+                    f"TIFF image '{shown}' holds {len(frames)} pages (a stack); glassdist analyses one photo: "
+                    "save the frame to analyse as a single-page TIFF"
+                )
+            page = frames[0]
+            _check_pixels(p, int(page.imagewidth), int(page.imagelength), max_pixels)
+            if np.dtype(page.dtype).kind == "c":
+                raise InputError(f"TIFF image '{shown}' holds complex numbers; give a real-valued (intensity) image")
+            data = page.asarray()
+            axes = page.axes
+    except (InputError, MemoryError):
+        raise
+    except Exception as exc:  # noqa: BLE001 - any decoder failure is a user file problem
+        raise InputError(
+            f"cannot read TIFF image '{shown}': {safe_text(exc, 200)}; check the file is a valid TIFF"
+        ) from None
+    # drop length-1 axes; planar (separate) colour planes come first ('SYX'): samples go last
+    dims = [(n, a) for n, a in zip(data.shape, axes) if a in "SYX" or n != 1]
+    data = data.reshape([n for n, _ in dims])
+    if "".join(a for _, a in dims) == "SYX":
+        data = np.moveaxis(data, 0, -1)
+    bits = page.bitspersample if np.issubdtype(data.dtype, np.integer) else None
+    return data, bits
+
+
+def _check_pixels(p: Path, width: int, height: int, max_pixels: float) -> None:
+    if width * height > max_pixels:
+        raise InputError(
+            f"image '{safe_text(p)}' is {width}x{height} px ({width * height / 1e6:.0f} megapixels), more than the "
+            f"{max_pixels / 1e6:g} megapixels accepted; crop or bin it, or raise the limit (GLASSDIST_MAX_MEGAPIXELS)"
+        )
+
+
+def _header_size(p: Path) -> tuple[int, int]:
+    """(width, height) from a PNG/BMP/JPEG header, without decoding the pixels."""
+    from PIL import Image, UnidentifiedImageError
+
+    bomb = Image.MAX_IMAGE_PIXELS
+    Image.MAX_IMAGE_PIXELS = None  # glassdist applies its own, configurable limit
+    try:
+        with Image.open(p) as im:
+            return im.size
+    except (UnidentifiedImageError, OSError, SyntaxError, ValueError):
+        raise InputError(
+            f"cannot decode image '{safe_text(p)}'; supported formats are PNG, TIFF, BMP and JPEG (8 or 16 bit)"
+        ) from None
+    finally:
+        Image.MAX_IMAGE_PIXELS = bomb
+
+
+def read_image(path: str | os.PathLike, *, max_megapixels: float | None = None) -> np.ndarray:
     """Read an image file as a grey ``float64`` array in [0, 1], indexed (row, col).
 
     Parameters
     ----------
     path : str or path-like
-        PNG, TIFF, BMP or JPEG file; 8- or 16-bit integer or floating point;
-        grey, RGB or RGBA (alpha is ignored).
+        PNG, TIFF, BMP or JPEG file; 8- to 16-bit integer or floating point;
+        grey, RGB or RGBA (alpha is ignored), colour planes contiguous or separate
+        (planar TIFF). A TIFF must hold one frame (reduced-resolution previews aside).
+    max_megapixels : float, optional
+        Largest image accepted, megapixels, checked from the file's header before the
+        pixels are decoded; default :attr:`glassdist.validation.Limits.megapixels`
+        (250, or the ``GLASSDIST_MAX_MEGAPIXELS`` environment variable).
 
     Returns
     -------
     image : ndarray, shape (H, W), float64
-        Luminance scaled by the integer type's maximum (floats are kept as is).
+        Luminance scaled by the largest value of the file's bit depth: ``2**b - 1``
+        for a TIFF of ``b`` bits per sample (a 10-, 12- or 14-bit camera image reaches
+        1.0 at its own full scale), else the integer type's maximum (8-bit: 255, 16-bit:
+        65535). Floats are kept as they are.
 
     Raises
     ------
     InputError
-        If the file is missing, unreadable, or not a 2-D image.
+        If the file is missing, not a regular file, unreadable, empty, larger than the
+        limit, not decodable, not a single 2-D frame, complex-valued, or holds NaN or
+        infinite values.
 
     Examples
     --------
@@ -76,16 +146,21 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
     >>> image = read_image(path)
     >>> image.shape, image.dtype, float(image[0, 0]), float(image[0, -1])
     ((48, 64), dtype('float64'), 0.0, 1.0)
+
+    A 12-bit camera TIFF reaches 1.0 at its own full scale (4095):
+
+    >>> import tifffile
+    >>> path = Path(folder.name) / "camera12bit.tif"
+    >>> tifffile.imwrite(path, np.full((8, 8), 4095, np.uint16), bitspersample=12)
+    >>> float(read_image(path).max())
+    1.0
     >>> folder.cleanup()
     """
-    p = Path(path)
-    if not p.exists():
-        raise InputError(f"image file '{p}' does not exist; check the path")
-    if p.is_dir():
-        raise InputError(f"'{p}' is a folder, not an image file; give the path of a PNG/TIFF/BMP/JPEG file")
+    p = check_input_file(path, "image file")
     if p.suffix.lower() not in _READABLE:
-        raise InputError(f"'{p}' has an unsupported extension '{p.suffix}'; use PNG, TIFF, BMP or JPEG")
-    raw = _imread_any(p)
+        raise InputError(f"'{safe_text(p)}' has an unsupported extension '{safe_text(p.suffix, 20)}'; use PNG, TIFF, BMP or JPEG")
+    mpx = limits().megapixels if max_megapixels is None else float(max_megapixels)
+    raw, bits = _imread_any(p, mpx * 1e6)
     if raw.ndim == 3 and raw.shape[2] >= 3:
         rgb = raw[..., :3].astype(np.float64)
         grey = 0.299 * rgb[..., 0] + 0.587 * rgb[..., 1] + 0.114 * rgb[..., 2]
@@ -94,11 +169,16 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
     elif raw.ndim == 2:
         grey = raw.astype(np.float64)
     else:
-        raise InputError(f"'{p}' is not a 2-D image (array shape {raw.shape}); give a single grey or colour frame")
+        raise InputError(f"'{safe_text(p)}' is not a 2-D image (array shape {raw.shape}); give a single grey or colour frame")
     if np.issubdtype(raw.dtype, np.integer):
-        grey /= float(np.iinfo(raw.dtype).max)
+        full = float(np.iinfo(raw.dtype).max)
+        if bits is not None and 1 <= bits < np.iinfo(raw.dtype).bits:
+            full = float(2**bits - 1)  # a 10/12/14-bit camera image in a 16-bit container
+        grey /= full
+    elif raw.dtype == bool:
+        grey = grey.astype(np.float64)
     if not np.all(np.isfinite(grey)):
-        raise InputError(f"'{p}' contains NaN or infinite pixel values; export it again as an integer image")
+        raise InputError(f"'{safe_text(p)}' contains NaN or infinite pixel values; export it again as an integer image")
     return grey
 
 
@@ -108,7 +188,8 @@ def read_mask(path: str | os.PathLike, shape: tuple[int, int] | None = None) -> 
     Parameters
     ----------
     path : str or path-like
-        Any image :func:`read_image` accepts (or a ``.npy`` boolean array).
+        Any image :func:`read_image` accepts (or a ``.npy`` array of booleans or
+        finite numbers).
     shape : (int, int), optional
         Expected (H, W); a mask of another size is an error.
 
@@ -118,21 +199,40 @@ def read_mask(path: str | os.PathLike, shape: tuple[int, int] | None = None) -> 
     """
     p = Path(path)
     if p.suffix.lower() == ".npy":
-        if not p.exists():
-            raise InputError(f"mask file '{p}' does not exist; check the path")
-        mask = np.load(p).astype(bool)
+        mask = _read_npy_mask(check_input_file(p, "mask file", option="--mask"))
     else:
         mask = read_image(p) > 0.5 / 255.0
+    shown = safe_text(p)
     if mask.ndim != 2:
-        raise InputError(f"mask '{p}' must be a 2-D image, got shape {mask.shape}")
+        raise InputError(f"mask '{shown}' must be a 2-D image, got shape {mask.shape}")
     if shape is not None and mask.shape != tuple(shape):
         raise InputError(
-            f"mask '{p}' is {mask.shape[1]}x{mask.shape[0]} px but the image is {shape[1]}x{shape[0]} px; "
+            f"mask '{shown}' is {mask.shape[1]}x{mask.shape[0]} px but the image is {shape[1]}x{shape[0]} px; "
             "make the mask the same size as the image"
         )
     if not mask.any():
-        raise InputError(f"mask '{p}' excludes every pixel; white (non-zero) pixels mark the region to analyse")
+        raise InputError(f"mask '{shown}' excludes every pixel; white (non-zero) pixels mark the region to analyse")
     return mask
+
+
+def _read_npy_mask(p: Path) -> np.ndarray:
+    """A ``.npy`` mask: header (shape, dtype) checked before the data is read; NaN refused."""
+    shown = safe_text(p)
+    try:
+        with open(p, "rb") as fh:
+            version = np.lib.format.read_magic(fh)
+            shape, _, dtype = np.lib.format._read_array_header(fh, version)
+            if dtype.kind not in "biuf" or len(shape) != 2:
+                raise InputError(f"mask '{shown}' must be a 2-D array of booleans or numbers, got {dtype} {shape}")
+            _check_pixels(p, int(shape[1]), int(shape[0]), limits().megapixels * 1e6)
+        arr = np.load(p, allow_pickle=False)
+    except InputError:
+        raise
+    except (OSError, ValueError, EOFError) as exc:
+        raise InputError(f"cannot read mask '{shown}': {safe_text(exc, 200)}; save it with numpy.save") from None
+    if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
+        raise InputError(f"mask '{shown}' holds NaN or infinite values; give 0 (excluded) or 1 (analysed)")
+    return arr.astype(bool)
 
 
 def write_png16(path: str | os.PathLike, image: np.ndarray) -> None:

@@ -462,6 +462,8 @@ def check_number(value, name: str, rng: Range) -> float:
         raise InputError(f"{name} must be a number, got '{safe_text(value, 40)}'") from None
     if not math.isfinite(v):
         raise InputError(f"{name} must be a finite number, got {safe_text(value, 40)}")
+    if v <= 0 <= rng.lo:
+        raise InputError(f"{name} must be positive, got {safe_text(value, 40)}")
     if v < rng.lo or (rng.lo_open and v <= rng.lo) or v > rng.hi:
         raise InputError(f"{name} must be {rng.text()}, got {safe_text(value, 40)}")
     return v
@@ -481,19 +483,32 @@ def number_option(rng: Range):
     return parse
 
 
-def check_sigma_extent(sigma_mm: float | None, image_shape, carrier_period_mm: float, min_period_px: float) -> None:
+def check_sigma_extent(sigma_mm: float | None, image_shape, pitch_mm: float, *, pattern: str = "lines",
+                       min_period_px: float = 3.0) -> None:
     """Refuse a smoothing scale larger than the image's extent on the backdrop.
 
-    The backdrop extent of an image is at most ``max(H, W) * carrier_period_mm /
-    min_period_px`` mm (its carrier period is at least ``min_period_px`` px); a
-    Gaussian of a larger sigma would average the whole image into its mean.
+    The carrier period on the backdrop is ``pitch_mm`` (lines) or ``pitch_mm * sqrt(2)``
+    (checkerboard) and spans at least ``min_period_px`` pixels, so an image covers at
+    most ``max(H, W) * period / min_period_px`` mm of the backdrop; a Gaussian of a
+    larger sigma would average the whole image into its mean (and cost memory growing
+    with sigma squared).
+
+    Parameters
+    ----------
+    sigma_mm : float or None
+        Requested smoothing scale, mm (None: the default of a few carrier periods).
+    image_shape : tuple
+        ``(H, W, ...)`` of the image, px.
+    pitch_mm : float
+        Grid pitch, mm.
     """
     if sigma_mm is None:
         return
-    extent = max(image_shape[:2]) * carrier_period_mm / min_period_px
+    period = pitch_mm * (math.sqrt(2.0) if pattern == "checkerboard" else 1.0)
+    extent = max(image_shape[:2]) * period / min_period_px
     if sigma_mm > extent:
         raise InputError(
-            f"--sigma-mm {sigma_mm:g} mm is larger than the image's whole extent on the backdrop "
-            f"(at most {extent:.4g} mm for a {image_shape[1]}x{image_shape[0]} px image of this grid); "
+            f"--sigma-mm {sigma_mm:g} is larger than the image's whole extent on the backdrop "
+            f"(at most {extent:.4g} mm for a {image_shape[1]}x{image_shape[0]} px image of a {pitch_mm:g} mm grid); "
             "give a smoothing scale of a few grid periods"
         )
