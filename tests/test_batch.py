@@ -169,8 +169,9 @@ def test_manifest_paths_defaults_and_comments(tmp_path):
     assert panes[1].pitch_mm == 7.0 and panes[1].distance_m == 2.0 and panes[1].detrend_degree == 4
     assert panes[1].spec == (tmp_path.cwd() / "spec.json").absolute()  # option paths: from where the user is
     args = panes[1].analyze_args(tmp_path / "o", report=True)
-    assert args[:2] == ["analyze", str(tmp_path / "m" / "two.bmp")]
-    assert "--detrend-degree" in args and "--report" in args and args[-2:] == ["--out", str(tmp_path / "o")]
+    # options as --name=value, the image last after '--' (a cell such as '-h' cannot become an option)
+    assert args[0] == "analyze" and args[-2:] == ["--", str(tmp_path / "m" / "two.bmp")]
+    assert "--detrend-degree=4" in args and "--report" in args and f"--out={tmp_path / 'o'}" in args
 
 
 @pytest.mark.parametrize(

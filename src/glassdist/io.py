@@ -18,7 +18,7 @@ import numpy as np
 from .errors import InputError
 from .validation import check_input_file, limits, safe_text
 
-__all__ = ["read_image", "read_mask", "write_png16", "prepare_output_dir"]
+__all__ = ["read_image", "image_shape", "read_mask", "write_png16", "prepare_output_dir"]
 
 _READABLE = {".png", ".tif", ".tiff", ".bmp", ".jpg", ".jpeg"}
 
@@ -41,41 +41,53 @@ def _imread_any(path: Path, max_pixels: float) -> tuple[np.ndarray, int | None]:
     return img, None
 
 
-def _tiff_frame(p: Path, max_pixels: float) -> tuple[np.ndarray, int | None]:
-    """Page 0 of a single-frame TIFF as (H, W) or (H, W, S) and its BitsPerSample, size checked first."""
+def _tiff_page(tif, p: Path, max_pixels: float):
+    """The one frame of an open TIFF, its size and sample type checked (nothing decoded)."""
+    shown = safe_text(p)
+    # reduced-resolution pages (thumbnails, previews) are not frames
+    frames = [pg for pg in tif.pages if not (getattr(pg, "subfiletype", 0) & 1)]
+    if not frames:
+        raise InputError(f"TIFF image '{shown}' holds no image page; export it again")
+    if len(frames) > 1:
+        raise InputError(
+            f"TIFF image '{shown}' holds {len(frames)} pages (a stack); glassdist analyses one photo: "
+            "save the frame to analyse as a single-page TIFF"
+        )
+    page = frames[0]
+    _check_pixels(p, int(page.imagewidth), int(page.imagelength), max_pixels)
+    if np.dtype(page.dtype).kind == "c":
+        raise InputError(f"TIFF image '{shown}' holds complex numbers; give a real-valued (intensity) image")
+    return page
+
+
+def _open_tiff(p: Path, use):
+    """``use(TiffFile)``, any decoder failure reported as a one-line InputError."""
     import tifffile
 
-    shown = safe_text(p)
     try:
         with tifffile.TiffFile(p) as tif:
-            # reduced-resolution pages (thumbnails, previews) are not frames
-            frames = [pg for pg in tif.pages if not (getattr(pg, "subfiletype", 0) & 1)]
-            if not frames:
-                raise InputError(f"TIFF image '{shown}' holds no image page; export it again")
-            if len(frames) > 1:
-                raise InputError(
-                    f"TIFF image '{shown}' holds {len(frames)} pages (a stack); glassdist analyses one photo: "
-                    "save the frame to analyse as a single-page TIFF"
-                )
-            page = frames[0]
-            _check_pixels(p, int(page.imagewidth), int(page.imagelength), max_pixels)
-            if np.dtype(page.dtype).kind == "c":
-                raise InputError(f"TIFF image '{shown}' holds complex numbers; give a real-valued (intensity) image")
-            data = page.asarray()
-            axes = page.axes
+            return use(tif)
     except (InputError, MemoryError):
         raise
     except Exception as exc:  # noqa: BLE001 - any decoder failure is a user file problem
         raise InputError(
-            f"cannot read TIFF image '{shown}': {safe_text(exc, 200)}; check the file is a valid TIFF"
+            f"cannot read TIFF image '{safe_text(p)}': {safe_text(exc, 200)}; check the file is a valid TIFF"
         ) from None
+
+
+def _tiff_frame(p: Path, max_pixels: float) -> tuple[np.ndarray, int | None]:
+    """Page 0 of a single-frame TIFF as (H, W) or (H, W, S) and its BitsPerSample, size checked first."""
+    def decode(tif):
+        page = _tiff_page(tif, p, max_pixels)
+        return page.asarray(), page.axes, page.bitspersample
+
+    data, axes, bits = _open_tiff(p, decode)
     # drop length-1 axes; planar (separate) colour planes come first ('SYX'): samples go last
     dims = [(n, a) for n, a in zip(data.shape, axes) if a in "SYX" or n != 1]
     data = data.reshape([n for n, _ in dims])
     if "".join(a for _, a in dims) == "SYX":
         data = np.moveaxis(data, 0, -1)
-    bits = page.bitspersample if np.issubdtype(data.dtype, np.integer) else None
-    return data, bits
+    return data, (bits if np.issubdtype(data.dtype, np.integer) else None)
 
 
 def _check_pixels(p: Path, width: int, height: int, max_pixels: float) -> None:
@@ -101,6 +113,37 @@ def _header_size(p: Path) -> tuple[int, int]:
         ) from None
     finally:
         Image.MAX_IMAGE_PIXELS = bomb
+
+
+def image_shape(path: str | os.PathLike, *, max_megapixels: float | None = None) -> tuple[int, int]:
+    """``(H, W)`` of an image file from its header, with every check of :func:`read_image` that needs no decoding.
+
+    For checking many inputs before any work (``glassdist batch``): the file is a
+    readable regular file of a supported format, a single frame (TIFF), real-valued
+    and within the size limit.
+    """
+    p = _checked_image_path(path)
+    max_pixels = _max_pixels(max_megapixels)
+    if p.suffix.lower() in {".tif", ".tiff"}:
+        def size(tif):
+            page = _tiff_page(tif, p, max_pixels)
+            return int(page.imagelength), int(page.imagewidth)
+
+        return _open_tiff(p, size)
+    width, height = _header_size(p)
+    _check_pixels(p, width, height, max_pixels)
+    return height, width
+
+
+def _checked_image_path(path) -> Path:
+    p = check_input_file(path, "image file")
+    if p.suffix.lower() not in _READABLE:
+        raise InputError(f"'{safe_text(p)}' has an unsupported extension '{safe_text(p.suffix, 20)}'; use PNG, TIFF, BMP or JPEG")
+    return p
+
+
+def _max_pixels(max_megapixels: float | None) -> float:
+    return 1e6 * (limits().megapixels if max_megapixels is None else float(max_megapixels))
 
 
 def read_image(path: str | os.PathLike, *, max_megapixels: float | None = None) -> np.ndarray:
@@ -156,11 +199,8 @@ def read_image(path: str | os.PathLike, *, max_megapixels: float | None = None) 
     1.0
     >>> folder.cleanup()
     """
-    p = check_input_file(path, "image file")
-    if p.suffix.lower() not in _READABLE:
-        raise InputError(f"'{safe_text(p)}' has an unsupported extension '{safe_text(p.suffix, 20)}'; use PNG, TIFF, BMP or JPEG")
-    mpx = limits().megapixels if max_megapixels is None else float(max_megapixels)
-    raw, bits = _imread_any(p, mpx * 1e6)
+    p = _checked_image_path(path)
+    raw, bits = _imread_any(p, _max_pixels(max_megapixels))
     if raw.ndim == 3 and raw.shape[2] >= 3:
         rgb = raw[..., :3].astype(np.float64)
         grey = 0.299 * rgb[..., 0] + 0.587 * rgb[..., 1] + 0.114 * rgb[..., 2]
@@ -219,13 +259,13 @@ def _read_npy_mask(p: Path) -> np.ndarray:
     """A ``.npy`` mask: header (shape, dtype) checked before the data is read; NaN refused."""
     shown = safe_text(p)
     try:
-        with open(p, "rb") as fh:
-            version = np.lib.format.read_magic(fh)
-            shape, _, dtype = np.lib.format._read_array_header(fh, version)
-            if dtype.kind not in "biuf" or len(shape) != 2:
-                raise InputError(f"mask '{shown}' must be a 2-D array of booleans or numbers, got {dtype} {shape}")
-            _check_pixels(p, int(shape[1]), int(shape[0]), limits().megapixels * 1e6)
-        arr = np.load(p, allow_pickle=False)
+        head = np.load(p, mmap_mode="r", allow_pickle=False)  # the header only; data mapped, not read
+        if not isinstance(head, np.ndarray) or head.dtype.kind not in "biuf" or head.ndim != 2:
+            raise InputError(f"mask '{shown}' must be a 2-D array of booleans or numbers, "
+                             f"got {getattr(head, 'dtype', '?')} {getattr(head, 'shape', '')}")
+        _check_pixels(p, int(head.shape[1]), int(head.shape[0]), limits().megapixels * 1e6)
+        arr = np.array(head)
+        del head
     except InputError:
         raise
     except (OSError, ValueError, EOFError) as exc:

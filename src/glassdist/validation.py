@@ -451,7 +451,7 @@ PITCH_MM = Range(1e-3, 1e4, unit="mm")
 #: glass-to-grid distance L, m (1 mm to 10 km)
 DISTANCE_M = Range(1e-3, 1e4, unit="m")
 #: reporting smoothing scale, mm (also bounded by the image's extent, :func:`check_sigma_extent`)
-SIGMA_MM = Range(0.0, 1e7, lo_open=True, unit="mm")
+SIGMA_MM = Range(1e-3, 1e7, unit="mm")
 
 
 def check_number(value, name: str, rng: Range) -> float:

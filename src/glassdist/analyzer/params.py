@@ -40,7 +40,7 @@ class AnalyzerParams(BaseModel):
     detrend_degree: int = Field(2, ge=0, le=8, description="A2: total degree N of the polynomial detrend")
     sigma_mm: float | None = Field(
         None,
-        gt=0,
+        ge=SIGMA_MM.lo,
         le=SIGMA_MM.hi,
         description="A2: metric-anchored smoothing scale on the backdrop, mm; "
         "None = sigma_periods carrier periods",

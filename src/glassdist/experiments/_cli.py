@@ -32,7 +32,7 @@ def register(subparsers):
     p.add_argument("name", choices=["parity", "pitch", "rotation", "accuracy", "transfer"], help="experiment to run")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder (created if needed)")
     p.add_argument("--engine", choices=["exact", "cycles"], default="exact", help="render engine (default exact)")
-    p.add_argument("--scale", type=number_option(Range(0.0, 16.0, lo_open=True)), default=1.0, help="image size relative to the scenes' 1024 x 768 px (default 1)")
+    p.add_argument("--scale", type=number_option(Range(0.05, 16.0)), default=1.0, help="image size relative to the scenes' 1024 x 768 px (default 1)")
     p.add_argument("--spp", type=int, help="samples per pixel (default: the scenes', 16)")
     p.add_argument("--sigma-mm", type=number_option(SIGMA_MM), help="reporting smoothing scale on the backdrop, mm (default: the experiment's)")
     p.add_argument("--scenes", help="accuracy only: comma-separated subset of its scenes")

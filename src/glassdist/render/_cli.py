@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
 import time
@@ -12,6 +13,7 @@ import numpy as np
 from .._cli_shared import add_render_options, add_scene_command, apply_render_overrides, progress_reporter
 from .._version import __version__
 from ..errors import InputError
+from ..validation import safe_text
 from ..io import prepare_output_dir, write_png16
 from ..scene import load_scene
 
@@ -36,10 +38,38 @@ def register(subparsers):
     return p
 
 
+def _check_save_blend(path, scene_path, out_dir) -> None:
+    """Refuse a ``--save-blend`` path that would overwrite a file glassdist did not write there itself.
+
+    A file may be replaced only if ``OUT/render.json`` of an earlier render records it
+    (same resolved path, same SHA-256) as that render's saved Blender scene.
+    """
+    p = Path(path)
+    shown = safe_text(p)
+    if p.suffix.lower() != ".blend":
+        raise InputError(f"--save-blend '{shown}' must name a .blend file")
+    if not (p.exists() or p.is_symlink()):
+        return
+    if p.resolve() == Path(scene_path).resolve():
+        raise InputError(f"--save-blend '{shown}' is the scene file being rendered; give a new .blend path")
+    if p.is_file() and not p.is_symlink():
+        try:
+            earlier = json.loads((Path(out_dir) / "render.json").read_text(encoding="utf-8")).get("save_blend") or {}
+        except (OSError, ValueError, AttributeError):
+            earlier = {}
+        if (isinstance(earlier, dict) and earlier.get("path") == str(p.resolve())
+                and earlier.get("sha256") == hashlib.sha256(p.read_bytes()).hexdigest()):
+            return  # this folder's own earlier output
+    raise InputError(f"--save-blend '{shown}' already exists and was not written by an earlier render into "
+                     f"'{safe_text(out_dir)}'; give a new .blend path (glassdist never overwrites other files)")
+
+
 def run(args) -> int:
     from . import get_renderer, landing_points, render_scene
 
     scene = apply_render_overrides(load_scene(args.scene), args)
+    if args.save_blend is not None:
+        _check_save_blend(args.save_blend, args.scene, args.out)
     engine = get_renderer(args.engine)
     if args.save_blend is not None:
         if not hasattr(engine, "save_blend"):
@@ -64,6 +94,9 @@ def run(args) -> int:
         "engine": engine.name,
         "timings": timings,
     }
+    if args.save_blend is not None and Path(args.save_blend).is_file():
+        blend = Path(args.save_blend).resolve()
+        record["save_blend"] = {"path": str(blend), "sha256": hashlib.sha256(blend.read_bytes()).hexdigest()}
     (out / "render.json").write_text(json.dumps(record, indent=2), encoding="utf-8")
     h, w = scene.camera.shape
     print(f"rendered {w}x{h} px at {scene.render.samples_per_pixel} spp with engine '{engine.name}' "

@@ -70,6 +70,7 @@ from typing import Callable
 import numpy as np
 
 from ..errors import GlassdistError, InputError
+from ..validation import safe_text
 from ..scene import Scene, pixel_directions
 from .imaging import apply_imaging
 
@@ -693,7 +694,28 @@ class CyclesRenderer:
 # ----------------------------------------------------------------------------------------------
 # set-up command: `glassdist cycles-setup` / `python -m glassdist.render.cycles`
 # ----------------------------------------------------------------------------------------------
+def _check_base_python(python: str) -> str:
+    """``python`` as an executable Python 3.11 interpreter (path), or a one-line InputError."""
+    want = f"{BPY_PYTHON[0]}.{BPY_PYTHON[1]}"
+    shown = safe_text(python)
+    found = python if os.sep in python else (shutil.which(python) or python)
+    if not Path(found).is_file():
+        raise InputError(f"--python '{shown}' is not an interpreter file; give the path of a Python {want} interpreter")
+    if not os.access(found, os.X_OK):
+        raise InputError(f"--python '{shown}' is not executable; give the path of a Python {want} interpreter")
+    try:
+        r = subprocess.run([found, "-c", "import sys; print(*sys.version_info[:2])"], capture_output=True, text=True,
+                           timeout=60)
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        raise InputError(f"--python '{shown}' cannot be run ({safe_text(exc, 200)}); give a Python {want} interpreter") from None
+    if r.returncode != 0 or r.stdout.split() != [str(BPY_PYTHON[0]), str(BPY_PYTHON[1])]:
+        raise InputError(f"--python '{shown}' is not a Python {want} interpreter; bpy needs exactly Python {want}")
+    return found
+
+
 def _setup_main(args: argparse.Namespace) -> int:
+    if args.python is not None:
+        _check_base_python(args.python)
     if os.environ.get(ENV_PYTHON):
         py = find_cycles_python()
     else:

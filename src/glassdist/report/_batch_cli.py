@@ -6,8 +6,8 @@ import logging
 from pathlib import Path
 
 from ..distributed import add_scheduler_options, open_executor
-from ..validation import DISTANCE_M, PITCH_MM, SIGMA_MM, number_option
-from .batch import pane_defaults, panes_from_folder, read_manifest, run_batch
+from ..validation import DISTANCE_M, PITCH_MM, SIGMA_MM, number_option, safe_text
+from .batch import check_panes, pane_defaults, panes_from_folder, read_manifest, run_batch
 
 logger = logging.getLogger(__name__)
 
@@ -57,7 +57,8 @@ def run(args):
     elif source.suffix.lower() == ".csv":
         panes = read_manifest(source, defaults)
     else:
-        raise InputError(f"'{source}' is neither a folder nor a .csv manifest")
+        raise InputError(f"'{safe_text(source)}' is neither a folder nor a .csv manifest")
+    check_panes(panes)
     with open_executor(args.scheduler, args.workers) as executor:
         code = run_batch(panes, args.out, report=args.report, export=args.export, progress=not args.no_progress,
                          executor=executor)

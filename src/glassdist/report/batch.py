@@ -56,6 +56,7 @@ from html import escape
 from pathlib import Path
 
 from ..errors import InputError
+from ..validation import DISTANCE_M, PITCH_MM, SIGMA_MM, check_number, read_csv_rows, safe_text
 from .exports import atomic_write_text
 from .outputs import EXIT_SPEC_FAIL
 
@@ -70,6 +71,7 @@ __all__ = [
     "subprocess_runner",
     "write_index",
     "pane_defaults",
+    "check_panes",
 ]
 
 logger = logging.getLogger(__name__)
@@ -104,23 +106,25 @@ class Pane:
         """Arguments of ``glassdist analyze`` for this pane, writing into ``out_dir``.
 
         The pane's ``id`` is its ``--pane-id``; pitch and distance may be left to the
-        pane's specification when its protocol pins them.
+        pane's specification when its protocol pins them. Every option is given as
+        ``--name=value`` and the image comes last after ``--``, so that no manifest cell
+        (an image or a site named ``-h``...) can be read as an option.
         """
-        args = ["analyze", str(self.image)]
+        args = ["analyze"]
         for flag, value in (("--pitch-mm", self.pitch_mm), ("--distance-m", self.distance_m)):
             if value is not None:
-                args += [flag, repr(value)]
+                args.append(f"{flag}={value!r}")
         for flag, value in (("--reference", self.reference), ("--pattern", self.pattern), ("--params", self.params),
                             ("--mask", self.mask), ("--spec", self.spec), ("--sigma-mm", self.sigma_mm),
                             ("--detrend-degree", self.detrend_degree), ("--pane-id", self.id), ("--site", self.site),
                             ("--operator", self.operator)):
             if value is not None:
-                args += [flag, str(value)]
+                args.append(f"{flag}={value}")
         if report:
             args.append("--report")
         if export:
             args.append("--export")
-        return args + ["--out", str(out_dir)]
+        return args + [f"--out={out_dir}", "--", str(self.image)]
 
     def fingerprint(self, *, report=False, export=False):
         """SHA-256 of the settings, the input files' bytes, the output options and the version."""
@@ -151,20 +155,17 @@ _PATH_COLS = ("image", "reference", "params", "mask", "spec")
 _COLUMNS = {f.name for f in fields(Pane)}
 
 
+_RANGES = {"pitch_mm": PITCH_MM, "distance_m": DISTANCE_M, "sigma_mm": SIGMA_MM}
+
+
 def _parse_cell(name, text, where):
     if name in _FLOAT_COLS:
-        try:
-            value = float(text)
-        except ValueError:
-            raise InputError(f"{where}: '{name}' must be a number, got '{text}'") from None
-        if not value > 0:
-            raise InputError(f"{where}: '{name}' must be positive, got {text}")
-        return value
+        return check_number(text, f"{where}: '{name}'", _RANGES[name])
     if name == "detrend_degree":
         try:
             return int(text)
         except ValueError:
-            raise InputError(f"{where}: 'detrend_degree' must be an integer, got '{text}'") from None
+            raise InputError(f"{where}: 'detrend_degree' must be an integer, got '{safe_text(text, 40)}'") from None
     return text
 
 
@@ -181,11 +182,11 @@ def _make_pane(values, defaults, base, where):
     merged.setdefault("distance_m", None)
     for name in _PATH_COLS:
         if merged.get(name) is not None:
-            p = Path(merged[name]).expanduser()
-            merged[name] = p if p.is_absolute() else (base / p)
+            # resolved, so that a resumed batch finds its panes however the manifest path is spelt
+            merged[name] = Path(os.path.realpath(Path(base) / Path(merged[name]).expanduser()))
     merged.setdefault("id", Path(merged["image"]).stem)
     if not _ID_RE.match(merged["id"]):
-        raise InputError(f"{where}: pane id '{merged['id']}' must be 1-100 letters, digits, '.', '_' or '-'")
+        raise InputError(f"{where}: pane id '{safe_text(merged['id'], 100)}' must be 1-100 letters, digits, '.', '_' or '-'")
     return Pane(**merged)
 
 
@@ -210,25 +211,20 @@ def read_manifest(path, defaults=None):
         Unknown column, unparsable or missing value, duplicate pane id.
     """
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"manifest '{path}' does not exist; give a CSV file or a folder of images")
-    with path.open(newline="", encoding="utf-8-sig") as fh:
-        reader = csv.DictReader(fh)
-        header = [h.strip() for h in (reader.fieldnames or [])]
-        unknown = sorted(set(header) - _COLUMNS)
-        if unknown:
-            raise InputError(f"manifest '{path}': unknown column(s) {', '.join(unknown)}; "
-                             f"valid columns are {', '.join(sorted(_COLUMNS))}")
-        if "image" not in header:
-            raise InputError(f"manifest '{path}' has no 'image' column (first row must be the header)")
-        panes = []
-        for lineno, row in enumerate(reader, start=2):
-            cells = {(k or "").strip(): (v or "").strip() for k, v in row.items() if k is not None}
-            if not any(cells.values()) or next(iter(cells.values()), "").startswith("#"):
-                continue
-            where = f"manifest '{path.name}' line {lineno}"
-            values = {k: _parse_cell(k, v, where) for k, v in cells.items() if v}
-            panes.append(_make_pane(values, defaults, path.parent, where))
+    header, rows = read_csv_rows(path, "manifest")
+    unknown = sorted(set(header) - _COLUMNS)
+    if unknown:
+        raise InputError(f"manifest '{safe_text(path)}': unknown column(s) {safe_text(', '.join(unknown), 200)}; "
+                         f"valid columns are {', '.join(sorted(_COLUMNS))}")
+    if "image" not in header:
+        raise InputError(f"manifest '{safe_text(path)}' has no 'image' column (first row must be the header)")
+    panes = []
+    for lineno, cells in rows:
+        if next(iter(cells.values()), "").startswith("#"):
+            continue
+        where = f"manifest '{safe_text(path.name)}' line {lineno}"
+        values = {k: _parse_cell(k, v, where) for k, v in cells.items() if v}
+        panes.append(_make_pane(values, defaults, path.parent, where))
     return _check_unique(panes, f"manifest '{path}'")
 
 
@@ -257,6 +253,55 @@ def _check_unique(panes, where):
     if not panes:
         raise InputError(f"{where} lists no pane")
     return panes
+
+
+def check_panes(panes):
+    """Check every pane's inputs before any pane is analysed.
+
+    Parameters, specification, image, reference and mask of each pane are validated
+    the way ``glassdist analyze`` does, from the files' headers (no image is decoded),
+    so that a bad option or manifest cell is a bad input of the batch (exit 2) found
+    at once, not a failure of every pane (exit 4) found one analysis at a time.
+
+    Raises
+    ------
+    InputError
+        The first problem, prefixed with the pane's id.
+    """
+    from ..analyzer.params import load_params
+    from ..io import image_shape
+    from ..validation import check_input_file, check_sigma_extent
+    from .spec import load_spec
+
+    params, specs, shapes = {}, set(), {}
+
+    def shape(path):
+        if path not in shapes:
+            shapes[path] = image_shape(path)
+        return shapes[path]
+
+    for pane in panes:
+        try:
+            key = (pane.params, pane.pattern, pane.detrend_degree, pane.sigma_mm)
+            if key not in params:
+                params[key] = load_params(pane.params, pattern=pane.pattern, detrend_degree=pane.detrend_degree,
+                                          sigma_mm=pane.sigma_mm)
+            p = params[key]
+            if pane.spec is not None and pane.spec not in specs:
+                load_spec(pane.spec)
+                specs.add(pane.spec)
+            hw = shape(pane.image)
+            for what, path in (("reference", pane.reference), ("mask", pane.mask)):
+                if path is None:
+                    continue
+                if what == "mask" and Path(path).suffix.lower() == ".npy":
+                    check_input_file(path, "mask file")
+                elif shape(path) != hw:
+                    raise InputError(f"the {what} '{safe_text(path)}' is {shape(path)[1]}x{shape(path)[0]} px but the "
+                                     f"image is {hw[1]}x{hw[0]} px; both must have the same size")
+            check_sigma_extent(p.sigma_mm, hw, pane.pitch_mm, pattern=p.pattern, min_period_px=p.min_period_px)
+        except InputError as exc:
+            raise InputError(f"pane '{pane.id}': {exc}") from None
 
 
 # ---------------------------------------------------------------- running panes
@@ -489,7 +534,7 @@ def run_batch(panes, out, *, report=False, export=False, runner=None, progress=T
             def finished(pane, rec):
                 records[pane.id] = rec
                 label = rec.get("verdict") or ("analysed" if rec["status"] == "done" else "ERROR")
-                tail = f": {rec['error']}" if rec["status"] == "error" else ""
+                tail = f": {safe_text(rec['error'])}" if rec["status"] == "error" else ""
                 echo(f"[{len(records)}/{len(panes)}] {pane.id}  {label}  ({rec['seconds']:.1f} s){tail}")
                 write_index(panes, out, figures=False)
                 bar.advance(task)
@@ -568,14 +613,27 @@ def _round(v):
     return "" if v is None else f"{float(v):.4g}"
 
 
+_FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
+
+
+def _csv_cell(value):
+    """A text cell that a spreadsheet would run as a formula (``=``, ``+``, ``-``, ``@``, tab, CR) gets a ``'``."""
+    if isinstance(value, str) and value.startswith(_FORMULA_START):
+        try:
+            float(value)
+        except ValueError:
+            return "'" + value
+    return value
+
+
 def _write_csv(path, rows):
-    """Write rows (dicts with the same keys) as a CSV file, atomically."""
+    """Write rows (dicts with the same keys) as a CSV file, atomically; formula-like text cells neutralised."""
     import io
 
     buf = io.StringIO()
     writer = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
     writer.writeheader()
-    writer.writerows(rows)
+    writer.writerows({k: _csv_cell(v) for k, v in row.items()} for row in rows)
     return atomic_write_text(path, buf.getvalue())
 
 
@@ -662,8 +720,8 @@ Machine-readable copy: <a href="index.csv">index.csv</a>.</p>
 def pane_defaults(**values):
     """Command-line defaults for :func:`read_manifest` / :func:`panes_from_folder`.
 
-    ``None`` values are unset; paths are made absolute (relative to the current
+    ``None`` values are unset; paths are resolved (relative to the current
     folder, where the user typed them), unlike manifest cells.
     """
-    return {k: (Path(v).expanduser().absolute() if k in _PATH_COLS and v is not None else v)
+    return {k: (Path(os.path.realpath(Path(v).expanduser())) if k in _PATH_COLS and v is not None else v)
             for k, v in values.items()}
