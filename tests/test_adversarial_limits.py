@@ -130,19 +130,36 @@ def test_index_csv_neutralises_formulas(tmp_path):
     assert cells == ["'" + e for e in errors]
 
 
-def test_bad_input_is_found_before_any_pane_runs(tmp_path):
+def test_bad_settings_are_found_before_any_pane_runs(tmp_path):
     cv2.imwrite(str(tmp_path / "a.png"), np.zeros((64, 64), np.uint8))
-    cv2.imwrite(str(tmp_path / "small.png"), np.zeros((32, 32), np.uint8))
     (tmp_path / "bad.json").write_text('{"sigma_mm": 1e999}')
+    (tmp_path / "empty.png").write_bytes(b"")
     good = Pane(id="a", image=tmp_path / "a.png", pitch_mm=5.0, distance_m=1.0)
     for bad, words in ((Pane(id="b", image=tmp_path / "a.png", pitch_mm=5.0, distance_m=1.0, params=tmp_path / "bad.json"),
                         "floating-point range"),
-                       (Pane(id="b", image=tmp_path / "a.png", pitch_mm=5.0, distance_m=1.0, reference=tmp_path / "small.png"),
-                        "same size"),
+                       (Pane(id="b", image=tmp_path / "a.png", pitch_mm=5.0, distance_m=1.0, spec=tmp_path / "bad.json"),
+                        "floating-point range"),
                        (Pane(id="b", image=tmp_path / "a.png", pitch_mm=5.0, distance_m=1.0, sigma_mm=8000.0), "extent")):
         with pytest.raises(InputError, match=words) as info:
             check_panes([good, bad])
         assert str(info.value).startswith("pane 'b'")
+    with pytest.raises(InputError, match="empty"):
+        check_panes([good], {"reference": tmp_path / "empty.png"})
+    check_panes([good, Pane(id="c", image=tmp_path / "missing.png", pitch_mm=5.0, distance_m=1.0)])  # the pane's own
+
+
+def test_a_manifest_cell_cannot_become_an_option_of_analyze(tmp_path, monkeypatch, capsys):
+    from glassdist.cli import main
+
+    (tmp_path / "m.csv").write_text("id,image,pitch_mm,distance_m\na,-h,8,10\nb,--help,8,10\n")
+    monkeypatch.chdir(tmp_path)
+    assert main(["batch", "m.csv", "--no-progress", "--out", "out"]) == 4  # both panes fail: no such image
+    capsys.readouterr()
+    with open(tmp_path / "out" / "index.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [r["status"] for r in rows] == ["error", "error"]
+    assert all("does not exist" in r["error"] for r in rows)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.csv", "out"]
 
 
 def test_resume_does_not_depend_on_how_the_manifest_path_is_spelt(tmp_path, monkeypatch):

@@ -58,7 +58,7 @@ def run(args):
         panes = read_manifest(source, defaults)
     else:
         raise InputError(f"'{safe_text(source)}' is neither a folder nor a .csv manifest")
-    check_panes(panes)
+    check_panes(panes, defaults)
     with open_executor(args.scheduler, args.workers) as executor:
         code = run_batch(panes, args.out, report=args.report, export=args.export, progress=not args.no_progress,
                          executor=executor)

@@ -255,13 +255,15 @@ def _check_unique(panes, where):
     return panes
 
 
-def check_panes(panes):
-    """Check every pane's inputs before any pane is analysed.
+def check_panes(panes, defaults=None):
+    """Check the batch's settings before any pane is analysed.
 
-    Parameters, specification, image, reference and mask of each pane are validated
-    the way ``glassdist analyze`` does, from the files' headers (no image is decoded),
-    so that a bad option or manifest cell is a bad input of the batch (exit 2) found
-    at once, not a failure of every pane (exit 4) found one analysis at a time.
+    Every pane's numbers, parameter file and specification, and the image files given
+    as command-line options (``defaults``: reference, mask) are validated the way
+    ``glassdist analyze`` does, from the files' headers (no image is decoded), so that a
+    bad option or document is a bad input of the batch (exit 2) found at once, not a
+    failure of every pane (exit 4) found one analysis at a time. A pane's own image
+    files (manifest cells, folder images) are the pane's: a bad one fails that pane.
 
     Raises
     ------
@@ -273,33 +275,29 @@ def check_panes(panes):
     from ..validation import check_input_file, check_sigma_extent
     from .spec import load_spec
 
-    params, specs, shapes = {}, set(), {}
-
-    def shape(path):
-        if path not in shapes:
-            shapes[path] = image_shape(path)
-        return shapes[path]
-
+    options = {k: v for k, v in (defaults or {}).items() if k in ("reference", "mask") and v is not None}
+    for name, path in options.items():
+        if name == "mask" and Path(path).suffix.lower() == ".npy":
+            check_input_file(path, "mask file", option="--mask")
+        else:
+            image_shape(path)
+    params, specs = {}, set()
     for pane in panes:
         try:
             key = (pane.params, pane.pattern, pane.detrend_degree, pane.sigma_mm)
             if key not in params:
                 params[key] = load_params(pane.params, pattern=pane.pattern, detrend_degree=pane.detrend_degree,
                                           sigma_mm=pane.sigma_mm)
-            p = params[key]
             if pane.spec is not None and pane.spec not in specs:
                 load_spec(pane.spec)
                 specs.add(pane.spec)
-            hw = shape(pane.image)
-            for what, path in (("reference", pane.reference), ("mask", pane.mask)):
-                if path is None:
-                    continue
-                if what == "mask" and Path(path).suffix.lower() == ".npy":
-                    check_input_file(path, "mask file")
-                elif shape(path) != hw:
-                    raise InputError(f"the {what} '{safe_text(path)}' is {shape(path)[1]}x{shape(path)[0]} px but the "
-                                     f"image is {hw[1]}x{hw[0]} px; both must have the same size")
-            check_sigma_extent(p.sigma_mm, hw, pane.pitch_mm, pattern=p.pattern, min_period_px=p.min_period_px)
+            p = params[key]
+            if p.sigma_mm is not None and Path(pane.image).is_file():
+                try:
+                    hw = image_shape(pane.image)
+                except InputError:
+                    continue  # the pane's own image: its run reports it
+                check_sigma_extent(p.sigma_mm, hw, pane.pitch_mm, pattern=p.pattern, min_period_px=p.min_period_px)
         except InputError as exc:
             raise InputError(f"pane '{pane.id}': {exc}") from None
 
