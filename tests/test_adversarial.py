@@ -120,6 +120,8 @@ def _cmd(command, d, tmp):
         "validate": ["validate", d / "scene.yaml", "--no-progress", *out],
         "render": ["render", d / "scene.yaml", "--no-progress", *out],
         "experiment": ["experiment", "parity", "--no-progress", *out],
+        "sweep": ["sweep", d / "scene.yaml", "--vary", "backdrop.pitch_mm=72.6", "--no-progress", *out],
+        "serve": ["serve", "--port", "8765"],
     }[command]
 
 
@@ -127,12 +129,13 @@ NUMBER_OPTIONS = [
     ("analyze", "--pitch-mm"), ("analyze", "--distance-m"), ("analyze", "--sigma-mm"),
     ("batch", "--pitch-mm"), ("batch", "--distance-m"), ("batch", "--sigma-mm"),
     ("predict", "--sigma-mm"), ("validate", "--sigma-mm"),
-    ("experiment", "--scale"), ("experiment", "--sigma-mm"),
+    ("experiment", "--scale"), ("experiment", "--sigma-mm"), ("serve", "--max-upload-mb"),
 ]
 INT_OPTIONS = [
     ("analyze", "--detrend-degree"), ("batch", "--detrend-degree"), ("predict", "--detrend-degree"),
     ("validate", "--detrend-degree"), ("validate", "--spp"), ("validate", "--seed"),
-    ("render", "--spp"), ("render", "--seed"), ("experiment", "--spp"),
+    ("render", "--spp"), ("render", "--seed"), ("experiment", "--spp"), ("sweep", "--spp"),
+    ("serve", "--port"), ("serve", "--max-jobs"),
 ]
 OPTION_CASES = [(c, o, v) for c, o in NUMBER_OPTIONS for v in NUM_BAD] + [(c, o, v) for c, o in INT_OPTIONS for v in INT_BAD]
 
@@ -144,6 +147,20 @@ def test_numbers_out_of_range_are_refused(base, tmp_path, capsys, command, optio
     if option in argv:
         del argv[argv.index(option):argv.index(option) + 2]
     refused(argv + [f"{option}={value}"], capsys, base, tmp_path)
+
+
+VARY_BAD = ["backdrop.pitch_mm=inf", "backdrop.pitch_mm=.inf", "backdrop.pitch_mm=.nan", "backdrop.pitch_mm=1e308",
+            "backdrop.pitch_mm=5e-324", "backdrop.distance_m=1e-300", "pane.size_mm.0=.nan", "pane.size_mm.9=1",
+            "pane.colour=green", "backdrop.pitch_mm=", "backdrop.pitch_mm", "=1,2", "backdrop.pitch_mm=[1, 2]",
+            "camera.pixels.0=" + "9" * 5000, "pane.thickness_mm=-1", "analysis.sigma_mm=.inf",
+            "camera.position_mm.2=0", "pane.yaw_deg=1e308"]
+
+
+@pytest.mark.parametrize("vary", VARY_BAD, ids=[v[:30] for v in VARY_BAD])
+def test_sweep_refuses_bad_variants_before_any_run(base, tmp_path, capsys, vary):
+    argv = _cmd("sweep", base, tmp_path)
+    argv[argv.index("--vary") + 1] = vary
+    refused(argv, capsys, base, tmp_path)
 
 
 def test_sigma_larger_than_the_image_is_refused_before_the_analysis(base, tmp_path, capsys):

@@ -178,3 +178,23 @@ def test_resume_does_not_depend_on_how_the_manifest_path_is_spelt(tmp_path, monk
         monkeypatch.chdir(tmp_path if not spelling.startswith("/") else tmp_path / "data")
         assert run_batch(read_manifest(spelling), tmp_path / "out", runner=runner, progress=False, echo=lambda s: None) == 0
     assert calls == ["a"]
+
+
+@pytest.mark.parametrize("period_px", [2.2, 2.5, 2.9])
+def test_a_grid_finer_than_3_px_is_refused(period_px):
+    from glassdist import analyze
+    from glassdist.synthetic import synthetic_capture
+
+    cap = synthetic_capture((200, 240), pitch_mm=8.0, mm_per_px=8.0 / period_px)
+    with pytest.raises(InputError, match=f"about {period_px:.2f} px, below the 3 px"):
+        analyze(cap.image, pitch_mm=8.0, distance_m=10.0)
+
+
+def test_a_carrier_near_the_sampling_limit_is_warned_about():
+    from glassdist import analyze
+    from glassdist.synthetic import synthetic_capture
+
+    near = analyze(synthetic_capture((200, 240), pitch_mm=8.0, mm_per_px=8.0 / 3.3).image, pitch_mm=8.0, distance_m=10.0)
+    assert any("sampling limit" in w for w in near.warnings)
+    far = analyze(synthetic_capture((200, 240), pitch_mm=8.0, mm_per_px=1.0).image, pitch_mm=8.0, distance_m=10.0)
+    assert not any("sampling limit" in w for w in far.warnings)

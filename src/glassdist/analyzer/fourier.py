@@ -258,6 +258,38 @@ def _spectral_peaks(work: np.ndarray, n: int) -> np.ndarray:
     return np.unique(np.array(out, dtype=np.int64))
 
 
+def _check_no_finer_grid(spectrum: Spectrum, min_period_px: float, carrier_magnitude: float, *, rows: int = 512) -> None:
+    """Refuse a photo whose grid is finer than ``min_period_px``: its own peak lies beyond the carrier band.
+
+    The carriers are searched below ``1 / min_period_px`` cycles/px only; a grid of a
+    shorter period would be read from the aliases of its harmonics at the wrong scale.
+    Bins with ``|fx|`` or ``|fy|`` beyond the band's edge are scanned (in blocks of
+    ``rows`` rows) for a peak 1.2 times as strong as the carrier (the fundamental of a
+    2.5 px line grid is 1.5 times the alias of its second harmonic; the third harmonic of a
+    thin-line 8 px grid, the strongest legitimate peak there, 0.65 times its fundamental).
+    """
+    H, W = spectrum.shape
+    ky_max = int(np.ceil(H / min_period_px))
+    kx_max = min(W // 2, int(np.ceil(W / min_period_px)))
+    rf = spectrum.rfft
+    best, at = 1.2 * float(carrier_magnitude), None
+    for r0 in range(0, H, rows):
+        r1 = min(H, r0 + rows)
+        ky = np.rint(sfft.fftfreq(H)[r0:r1] * H)
+        block = np.abs(rf[r0:r1])
+        block[np.abs(ky) <= ky_max, : kx_max + 1] = 0.0  # the carrier band (and DC)
+        i = int(np.argmax(block))
+        if block.flat[i] > best:
+            r, c = divmod(i, block.shape[1])
+            best, at = float(block.flat[i]), (ky[r] / H, c / W)
+    if at is not None:
+        period = 1.0 / float(np.hypot(*at))
+        raise InputError(
+            f"the grid's period in the photo is about {period:.2f} px, below the {min_period_px:g} px the analysis "
+            "needs (it would be read at the wrong scale); move the camera closer, zoom in or use a coarser grid"
+        )
+
+
 def _carrier_band(spectrum: Spectrum, min_period_px: float) -> tuple[np.ndarray, np.ndarray]:
     """Whitened magnitude of the band that can hold a carrier, and the signed row frequencies (bins).
 
@@ -428,6 +460,7 @@ def find_carriers(spectrum: Spectrum, *, min_period_px: float = 3.0, max_peaks: 
     kxs = cols.astype(float)
     vecs = np.stack([kxs / W, kys / H], axis=1)  # (fx, fy) at integer bins
     i1, i2 = _pick_pair(vecs, strengths, min(H, W))
+    _check_no_finer_grid(spectrum, min_period_px, abs(spectrum.rfft[int(kys[i1]) % H, int(kxs[i1])]))
     c1 = _refine_carrier(spectrum, kys[i1], kxs[i1], float(strengths[i1]))
     c2 = _refine_carrier(spectrum, kys[i2], kxs[i2], float(strengths[i2]))
     if np.linalg.det(np.array([c1.f, c2.f])) < 0:

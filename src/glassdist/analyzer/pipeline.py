@@ -26,6 +26,7 @@ import numpy as np
 from scipy import ndimage
 
 from ..errors import AnalysisError, InputError
+from ..validation import DISTANCE_M, PITCH_MM, check_number
 from . import fourier as F
 from .homography import HomographyFit, apply_inverse, fit_grid_homography, inverse_jacobian
 from .metrics import evaluate_displacement, polynomial_detrend
@@ -66,12 +67,9 @@ class ReferenceModel:
 
 
 def _check_physical(pitch_mm: float, distance_m: float) -> None:
-    if not np.isfinite(pitch_mm) or pitch_mm <= 0:
-        raise InputError(f"pitch must be a positive length in mm (got {pitch_mm}); pass --pitch-mm with the printed grid pitch")
-    if not np.isfinite(distance_m) or distance_m <= 0:
-        raise InputError(
-            f"distance must be a positive length in m (got {distance_m}); pass --distance-m with the glass-to-grid distance L"
-        )
+    # finite and within the physical ranges of the validation layer (a 1e-300 m distance gives NaN channels)
+    check_number(pitch_mm, "pitch_mm (--pitch-mm, the printed grid pitch)", PITCH_MM)
+    check_number(distance_m, "distance_m (--distance-m, the glass-to-grid distance L)", DISTANCE_M)
 
 
 def _check_image(img: np.ndarray, what: str, warn: list[str]) -> np.ndarray:
@@ -341,6 +339,20 @@ def _demodulate(img: np.ndarray, refm: ReferenceModel | None, p: AnalyzerParams)
     mods += list(refm.modulation)
     zs, cohs = _smooth_with_coherence(zs, ks, grid, p)  # F3
     return _Demodulation("comparative", carriers, covs, grid, zs, cohs, mods, noise)
+
+
+def _warn_sampling(carriers: F.CarrierPair, warn: list[str]) -> None:
+    """A carrier period under 3.5 px may be the alias of a grid finer than 2 px per period.
+
+    A grid of frequency f > 0.5 cycles/px shows at 1 - f; for 1 - f < 1/3 (the carrier band)
+    that is a period of 3 to 3.5 px for true periods of 1.4 to 1.5 px, read at the wrong scale.
+    """
+    short = min(carriers.k1.period_px, carriers.k2.period_px)
+    if short < 3.5:
+        warn.append(
+            f"the grid's carrier period is only {short:.2f} px, near the sampling limit: a grid finer than 2 px per "
+            "period would show at this period and give a wrong mm_per_px; check the scale, or photograph the grid larger"
+        )
 
 
 def _check_region(region: Region, mods, warn: list[str]) -> None:
@@ -793,6 +805,7 @@ def _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn
     p, p_c = inp.params, inp.carrier_period_mm
     demod = _demodulate(inp.image, inp.reference, p)
     carriers = demod.carriers
+    _warn_sampling(carriers, warn)
     wrapped = [np.angle(z) for z in demod.signals]
     margins = _margins(carriers, demod.covariances, p, direct=demod.method == "direct")
     region = valid_region(wrapped, demod.coherences, demod.mods, carriers, demod.grid, p, inp.mask, warn,

@@ -34,6 +34,7 @@ from pathlib import Path
 
 from .._version import __version__
 from ..errors import InputError
+from ..validation import safe_text
 
 __all__ = ["Variant", "parse_vary", "expand_variants", "run_sweep", "write_sweep_index"]
 
@@ -84,8 +85,8 @@ def parse_vary(texts) -> dict:
             raise InputError(f"--vary key '{key}' is given twice; list all its values in one --vary")
         try:
             vary[key] = [yaml.safe_load(v.strip()) for v in values.split(",")]
-        except yaml.YAMLError:
-            raise InputError(f"--vary '{text}': a value cannot be read; use numbers, words or true/false") from None
+        except (yaml.YAMLError, ValueError):  # ValueError: an integer of more than 4300 digits
+            raise InputError(f"--vary '{safe_text(text, 80)}': a value cannot be read; use numbers, words or true/false") from None
         if any(v is None or isinstance(v, (dict, list)) for v in vary[key]):
             raise InputError(f"--vary '{text}': every value must be a number, a word or true/false")
     if not vary:

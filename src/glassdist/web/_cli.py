@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from ..validation import Range, number_option
+
 __all__ = ["register", "run"]
 
 
@@ -27,7 +29,7 @@ def register(subparsers):
         "this machine only unless --host says otherwise (there is no login). Needs glassdist[web].")
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1: this machine only)")
     p.add_argument("--port", type=_port, default=8000, help="port (default 8000)")
-    p.add_argument("--max-upload-mb", type=float, default=64.0, help="largest accepted upload per file, MB (default 64)")
+    p.add_argument("--max-upload-mb", type=number_option(Range(1e-3, 1e5, unit="MB")), default=64.0, help="largest accepted upload per file, MB (default 64)")
     p.add_argument("--max-jobs", type=int, default=20, help="jobs kept (older ones and their files are removed; default 20)")
     p.set_defaults(func=run)
     return p
