@@ -1,8 +1,10 @@
 """Image and mask input/output.
 
 Images are returned as ``float64`` arrays indexed ``(row, col)``, scaled so that
-the largest value the file's integer type can hold maps to 1.0 (8-bit: /255,
-16-bit: /65535); colour images are reduced to luminance (ITU-R BT.601 weights).
+the largest value of the file's bit depth maps to 1.0 (8-bit: /255, 16-bit: /65535,
+a 10/12/14-bit camera TIFF: /1023, /4095, /16383 from its BitsPerSample); colour
+images are reduced to luminance (ITU-R BT.601 weights). Every file is checked by
+:mod:`glassdist.validation` first, and its size read from the header before decoding.
 Nothing here ever normalises to the image's own range: intensities keep their
 meaning for saturation and contrast checks.
 """

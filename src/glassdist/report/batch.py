@@ -23,7 +23,8 @@ Exit codes of ``glassdist batch``
 ``0`` every pane analysed and none failed its specification; ``3`` every pane
 analysed, at least one specification FAIL; ``4`` at least one pane could not be
 analysed (the others were; see ``OUT/failed/``); ``2`` bad input (manifest,
-options, output folder).
+options, parameter files and specifications, output folder), found before any
+pane runs (:func:`check_panes`).
 
 Manifest columns
 ----------------
