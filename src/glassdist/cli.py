@@ -148,7 +148,7 @@ def _read_inputs(args):
             f"the reference '{args.reference}' is {reference.shape[1]}x{reference.shape[0]} px but the image is "
             f"{image.shape[1]}x{image.shape[0]} px; both photos must come from the same camera, same size"
         )
-    check_sigma_extent(params.sigma_mm, image.shape, args.pitch_mm, pattern=params.pattern,
+    check_sigma_extent(params.sigma_mm, image.shape, protocol.pitch_mm, pattern=params.pattern,
                        min_period_px=params.min_period_px)
     mask = read_mask(args.mask, image.shape) if args.mask is not None else None
     return spec, protocol, params, images, reference, mask
