@@ -293,7 +293,7 @@ def check_panes(panes, defaults=None):
                 load_spec(pane.spec)
                 specs.add(pane.spec)
             p = params[key]
-            if p.sigma_mm is not None and Path(pane.image).is_file():
+            if p.sigma_mm is not None and pane.pitch_mm is not None and Path(pane.image).is_file():
                 try:
                     hw = image_shape(pane.image)
                 except InputError:
