@@ -363,3 +363,26 @@ def test_statistics_and_regions_use_the_trusted_pixels():
     assert acc.stats["phi_eff"]["max_abs"] == pytest.approx(10.0) and acc.verdict.passed
     assert all(r.peak_mD < 500 for r in acc.regions["phi_eff"]["regions"])
     assert acc.coverage_percent == pytest.approx(100.0 * 240 / 260)
+
+
+def test_api_write_report_from_arrays_and_with_a_spec(lens_photos, tmp_path):
+    import json
+
+    import glassdist
+
+    assert "write_report" in glassdist.__all__
+    res = glassdist.analyze(lens_photos / "pane.png", reference=lens_photos / "reference.png", pitch_mm=2.0,
+                            distance_m=1.0, sigma_mm=1.5)
+    # the result alone: no photo path, no specification
+    path = glassdist.write_report(res, tmp_path / "bare")
+    assert path == tmp_path / "bare" / "report.html" and path.is_file()
+    s = json.loads((tmp_path / "bare" / "summary.json").read_text())
+    assert s["verdict"] is None and "worst_regions" in s
+    # with the spec file, the photo and the pane's facts
+    path = glassdist.write_report(res, tmp_path / "full", spec=lens_photos / "spec.json", image=lens_photos / "pane.png",
+                                  reference=lens_photos / "reference.png", pane_id="P-9", operator="C. D.")
+    s = json.loads((tmp_path / "full" / "summary.json").read_text())
+    assert s["verdict"]["result"] == "PASS" and s["verdict"]["spec_sha256"]
+    assert s["metadata"]["pane_id"] == "P-9" and set(s["zones"]) == {"edge", "vision"}
+    html = path.read_text()
+    assert "P-9" in html and "C. D." in html

@@ -27,7 +27,7 @@ from .analyzer import (
     load_params,
     prepare_reference,
 )
-from ._api import evaluate_spec
+from ._api import evaluate_spec, write_report
 from .errors import AnalysisError, GlassdistError, InputError
 from .io import read_image, read_mask
 from .report.outputs import load_result, write_outputs
@@ -39,6 +39,7 @@ __all__ = [
     "analyze",
     "analyze_captures",
     "evaluate_spec",
+    "write_report",
     "prepare_reference",
     "AnalysisResult",
     "AnalyzerParams",

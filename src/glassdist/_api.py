@@ -2,12 +2,14 @@
 
 :func:`evaluate_spec` is what ``glassdist analyze --spec`` prints, for a result in hand
 (``glassdist.evaluate_spec``); the engine underneath is
-:func:`glassdist.report.acceptance.assess`.
+:func:`glassdist.report.acceptance.assess`. :func:`write_report` writes the record
+(``report.html`` and the rest of the output folder) through the one output stage,
+:func:`glassdist.report.outputs.write_outputs`.
 """
 
 from __future__ import annotations
 
-__all__ = ["evaluate_spec"]
+__all__ = ["evaluate_spec", "write_report"]
 
 
 def evaluate_spec(result, spec, *, mask=None):
@@ -64,3 +66,62 @@ def evaluate_spec(result, spec, *, mask=None):
     s, sha = as_spec(spec)
     path = "" if isinstance(spec, dict) or hasattr(spec, "criteria") else str(spec)
     return assess(result, s, spec_path=path, spec_sha256=sha, mask=mask).verdict
+
+
+def write_report(result, out, *, spec=None, image=None, reference=None, mask=None, pane_id=None, site=None,
+                 operator=None, export=False, fields="analysis", echo=None):
+    """Write the self-contained HTML report of an analysis, with the rest of its output folder.
+
+    Parameters
+    ----------
+    result : AnalysisResult
+    out : path
+        Output folder (created; an earlier glassdist run's files there are replaced).
+    spec : Spec, dict or path, optional
+        Acceptance specification: verdict, zones, worst regions over its limits.
+    image, reference : path, optional
+        The photo and glass-less reference files analysed: recorded with their SHA-256
+        (the photo is drawn with the analysed region outlined).
+    mask : path or ndarray of bool, optional
+        The region the analysis was asked for: coverage is of it.
+    pane_id, site, operator : str, optional
+        Stated in the report and ``summary.json``.
+    export : bool
+        Also ``fields.npz`` and ``tiff/``.
+    fields : {'analysis', 'pixel'}
+        Layout of ``result.npz``.
+    echo : callable, optional
+        Receives the lines the command line prints (verdict, zones); default: none.
+
+    Returns
+    -------
+    pathlib.Path
+        ``out/report.html``.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib, glassdist
+    >>> from glassdist.synthetic import lens_displacement, synthetic_capture
+    >>> cap = synthetic_capture((192, 256), pitch_mm=10.0, mm_per_px=1.25,
+    ...                         displacement=lens_displacement(0.05, 2.0, radius_mm=40.0))
+    >>> res = glassdist.analyze(cap.image, pitch_mm=10.0, distance_m=2.0, reference=cap.reference)
+    >>> out = pathlib.Path(tempfile.mkdtemp()) / "pane"
+    >>> glassdist.write_report(res, out, pane_id="P-1").name
+    'report.html'
+    """
+    from pathlib import Path
+
+    from .report.outputs import write_outputs
+    from .report.spec import as_spec
+
+    from .io import read_mask
+
+    loaded = as_spec(spec) if spec is not None else None
+    spec_path = None if spec is None or isinstance(spec, dict) or hasattr(spec, "criteria") else Path(spec)
+    mask_path = Path(mask) if isinstance(mask, (str, Path)) else None
+    if mask_path is not None:
+        mask = read_mask(mask_path, result.valid.shape)
+    write_outputs(result, out, fields=fields, report=True, export=export, spec_path=spec_path, spec=loaded, mask=mask,
+                  metadata={"pane_id": pane_id, "site": site, "operator": operator}, image_path=image,
+                  reference_path=reference, mask_path=mask_path, echo=echo or (lambda line: None))
+    return Path(out) / "report.html"

@@ -144,8 +144,9 @@ def _acceptance_sections(acc):
         sources = acc.protocol.get("sources", {})
         rows = "".join(f"<tr><th>{escape(k)}</th><td>{_num(v)}</td><td>{_num(pinned.get(k))}</td>"
                        f"<td>{escape(str(sources.get(k, '')))}</td></tr>" for k, v in used.items())
-        extra = "".join(f"<tr><th>{escape(k)}</th><td>—</td><td>{_num(v)}</td><td>capture limit</td></tr>"
-                        for k, v in pinned.items() if k not in used)
+        extra = "".join(f"<tr><th>{escape(k)}</th><td>{_num(used.get('px_per_period')) if k == 'min_px_per_period' else '—'}"
+                        f"</td><td>{_num(v)}</td><td>{'capture limit (px per period)' if k == 'min_px_per_period' else 'pinned'}"
+                        "</td></tr>" for k, v in pinned.items() if k not in used)
         proto = ('<table id="protocol"><tr><th>setting</th><th>used</th><th>pinned by the specification</th>'
                  f"<th>from</th></tr>{rows}{extra}</table>")
     f = acc.frame
@@ -272,7 +273,7 @@ def render_report(result, *, stats, figures, inputs, verdict=None, valid_percent
     carriers = result.carriers.to_dict()
     fit_facts = _fit_facts(result)
     warnings = tuple(result.warnings)
-    image_name = inputs["image"]["name"]
+    image_name = inputs["image"]["name"] if inputs.get("image") else "image given as an array"
     title = f"Glass distortion report: {image_name}"
     pane_id = (acceptance.metadata.get("pane_id") if acceptance is not None else None)
     if pane_id:
