@@ -32,11 +32,10 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import ndimage
 
 from .stats import CHANNEL_FIELDS, channel_statistics
 
-__all__ = ["PaneFrame", "pane_frame", "pane_frame_from_corners", "pane_frame_from_region", "zone_masks",
+__all__ = ["PaneFrame", "distance_to_outside", "fill_holes", "pane_frame", "pane_frame_from_corners", "pane_frame_from_region", "zone_masks",
            "zone_statistics", "measured_region", "region_statistics"]
 
 
@@ -104,13 +103,11 @@ class PaneFrame:
 
     def area_mm2(self, mask):
         """Area (mm^2) of the pixels of ``mask`` (bool, shape (H, W))."""
-        yy, xx = np.nonzero(mask)
-        if yy.size == 0:
-            return 0.0
         H = self.px_to_mm
         if H[2, 0] == 0 and H[2, 1] == 0:  # affine: one area for every pixel
-            return float(yy.size * abs(np.linalg.det(H) / H[2, 2] ** 3))
-        return float(self.pixel_area_mm2(xx, yy).sum())
+            return float(np.count_nonzero(mask) * abs(np.linalg.det(H) / H[2, 2] ** 3))
+        yy, xx = np.nonzero(mask)
+        return float(self.pixel_area_mm2(xx, yy).sum()) if yy.size else 0.0
 
     def to_dict(self):
         """JSON form for ``summary.json`` (``"pane"``)."""
@@ -173,6 +170,43 @@ def _outline_polygons(region):
                  for c in sorted(contours, key=cv2.contourArea, reverse=True) if len(c) >= 3)
 
 
+def fill_holes(mask):
+    """``mask`` with its holes filled: the pixels not reached from outside the image through the background.
+
+    Same as :func:`scipy.ndimage.binary_fill_holes` (the background connected through
+    edge neighbours, 4-connectivity), by one flood fill of OpenCV (at 24 Mpx about 20x
+    faster than the iterated dilation).
+
+    Examples
+    --------
+    >>> m = np.zeros((5, 5), bool); m[1:4, 1:4] = True; m[2, 2] = False
+    >>> bool(fill_holes(m)[2, 2]), int(fill_holes(m).sum())
+    (True, 9)
+    """
+    import cv2
+
+    mask = np.asarray(mask, dtype=bool)
+    background = np.pad(~mask, 1, constant_values=True).view(np.uint8).copy()
+    cv2.floodFill(background, None, (0, 0), 2, flags=4)
+    return background[1:-1, 1:-1] != 2
+
+
+def distance_to_outside(mask):
+    """Euclidean distance (px, float32) from each pixel of ``mask`` to the nearest pixel outside it (0 outside).
+
+    Exact Euclidean distance transform (OpenCV's ``DIST_MASK_PRECISE``, the algorithm of
+    Felzenszwalb & Huttenlocher, 2012), as :func:`scipy.ndimage.distance_transform_edt`
+    but about 10x faster at camera resolution. The image border is not an outside pixel;
+    where ``mask`` has no outside pixel at all, the distance is ``inf``.
+    """
+    import cv2
+
+    mask = np.asarray(mask, dtype=bool)
+    if mask.all():
+        return np.full(mask.shape, np.inf, np.float32)
+    return cv2.distanceTransform(np.ascontiguousarray(mask).view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+
+
 def pane_frame_from_region(valid, mm_per_px, *, grow_px=0.0):
     """The pane's outline found in the image: the region where the grid is visible.
 
@@ -194,11 +228,10 @@ def pane_frame_from_region(valid, mm_per_px, *, grow_px=0.0):
         ``units = "backdrop_mm"``.
     """
     valid = np.asarray(valid, dtype=bool)
-    filled = ndimage.binary_fill_holes(valid)
+    filled = fill_holes(valid)
     region = filled
     if grow_px > 0 and filled.any():
-        region = ndimage.distance_transform_edt(~filled) <= grow_px
-        region = ndimage.binary_fill_holes(region)
+        region = fill_holes(distance_to_outside(~filled) <= grow_px)
     border = np.concatenate([region[0], region[-1], region[:, 0], region[:, -1]])
     warning = ""
     if not filled.any() or border.any():
@@ -210,9 +243,11 @@ def pane_frame_from_region(valid, mm_per_px, *, grow_px=0.0):
     else:
         source = "image"
     # distance from a pixel centre to the region's edge (half a pixel beyond the last pixel centre inside)
-    dist_px = ndimage.distance_transform_edt(region) - 0.5
-    dist = np.where(region, dist_px * mm_per_px, np.nan).astype(np.float32)
-    rows, cols = np.nonzero(region)
+    dist = distance_to_outside(region)
+    dist -= 0.5
+    dist *= mm_per_px
+    dist[~region] = np.nan
+    rows, cols = np.flatnonzero(region.any(axis=1)), np.flatnonzero(region.any(axis=0))
     if rows.size:
         x0, y0 = cols.min() - 0.5, rows.min() - 0.5
         size = ((cols.max() + 0.5 - x0) * mm_per_px, (rows.max() + 0.5 - y0) * mm_per_px)
