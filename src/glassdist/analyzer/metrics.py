@@ -496,26 +496,41 @@ def evaluate_displacement(
     return Channels(phi_eff, phi_shear, phi_total, axis, disp_out, eps)
 
 
-def channel_statistics(field: np.ndarray, valid: np.ndarray | None = None) -> dict:
-    """Summary statistics of a channel over the valid region.
+def channel_statistics(field: np.ndarray, valid: np.ndarray | None = None, *, over_limits=()) -> dict:
+    """Summary statistics of a channel over the valid region, from one extraction of its values.
+
+    Parameters
+    ----------
+    field : ndarray
+        The channel (any units); NaN where invalid.
+    valid : ndarray of bool, optional
+        Region the statistics are taken over (with the finite values).
+    over_limits : sequence of float
+        Thresholds ``T`` for the share of the region where ``|field| > T``.
 
     Returns
     -------
     dict
-        ``mean_abs`` (mean |phi|), ``std`` (of signed phi), ``p95_abs``, ``max_abs``
-        (same units as ``field``) and ``n_valid``. NaN values when nothing is valid.
+        ``mean_abs`` (mean |phi|), ``mean`` and ``std`` (of signed phi), ``p95_abs``,
+        ``max_abs`` (same units as ``field``), ``n_valid`` and, with ``over_limits``,
+        ``over_percent``: ``{T: percent}``. NaN values when nothing is valid.
     """
     v = np.asarray(field)
     if v.dtype.kind != "f":
         v = v.astype(float)
     m = np.isfinite(v) if valid is None else (np.asarray(valid, bool) & np.isfinite(v))
     x = v[m]
+    limits = sorted(set(float(t) for t in over_limits))
     if x.size == 0:
         nan = float("nan")
-        return {"mean_abs": nan, "std": nan, "p95_abs": nan, "max_abs": nan, "n_valid": 0}
+        out = {"mean_abs": nan, "mean": nan, "std": nan, "p95_abs": nan, "max_abs": nan, "n_valid": 0}
+        return {**out, "over_percent": {t: nan for t in limits}} if limits else out
     # In the field's own precision (numpy's pairwise sums keep float32 means to ~1e-6):
     # float64 copies of a 24 Mpx field cost more than the statistics themselves.
     a = np.abs(x)
-    mean_abs, max_abs = float(a.mean()), float(a.max())
-    p95 = float(np.percentile(a, 95, overwrite_input=True))  # reorders a: after the other statistics
-    return {"mean_abs": mean_abs, "std": float(x.std()), "p95_abs": p95, "max_abs": max_abs, "n_valid": int(x.size)}
+    out = {"mean_abs": float(a.mean()), "mean": float(x.mean()), "std": float(x.std()), "max_abs": float(a.max()),
+           "n_valid": int(x.size)}
+    if limits:
+        out["over_percent"] = {t: float(100.0 * np.count_nonzero(a > t) / a.size) for t in limits}
+    out["p95_abs"] = float(np.percentile(a, 95, overwrite_input=True))  # reorders a: after the other statistics
+    return out

@@ -143,6 +143,9 @@ class Acceptance:
 def colour_limits(result, spec=None, channels=("phi_eff", "phi_shear")):
     """Colour limit (mD) of each heatmap: the spec's choice (``figures.colour_limit``), else a shared p99.
 
+    The shared p99 is taken where the heatmaps are drawn from: the trusted samples of the
+    analysis grid (a result without one: its trusted pixels).
+
     Returns
     -------
     dict
@@ -150,8 +153,12 @@ def colour_limits(result, spec=None, channels=("phi_eff", "phi_shear")):
     """
     from .figures import CHANNELS, shared_limit
 
-    valid = measured_region(result)
-    shared = shared_limit(*(getattr(result, CHANNELS[c][0]) for c in channels), valid=valid)
+    try:
+        maps = [result.grid_field(CHANNELS[c][0]) for c in channels]
+        valid = np.asarray(result.grid_valid, bool) & np.asarray(result.grid_trusted, bool)
+    except AttributeError:  # fields on the pixel grid only
+        valid, maps = measured_region(result), [getattr(result, CHANNELS[c][0]) for c in channels]
+    shared = shared_limit(*maps, valid=valid)
     choice = spec.figures.colour_limit if spec is not None else "auto"
     if choice == "auto":
         return {c: shared for c in channels}
@@ -207,7 +214,7 @@ def assess(result, spec=None, *, spec_path="", spec_sha256="", protocol=None, ma
     if spec is not None:
         verdict = evaluate_spec(spec, stats, result, spec_path=spec_path, spec_sha256=spec_sha256, zones=zones,
                                 coverage_percent=None if mask is None else coverage)
-    regions = all_worst_regions(result, frame, spec, channels=REGION_CHANNELS)
+    regions = all_worst_regions(result, frame, spec, channels=REGION_CHANNELS, statistics=stats)
     meta = {k: v for k, v in (metadata or {}).items() if v is not None}
     if image_path is not None:
         meta["camera"] = camera_metadata(image_path)

@@ -92,9 +92,9 @@ def worst_regions(field, valid, frame, threshold_mD, *, channel="phi_eff", max_c
     >>> r.area_mm2, r.centroid_mm, r.peak_mD
     (50.0, (20.0, 7.5), 7.0)
     """
-    field = np.asarray(field, dtype=np.float64)
+    field = np.asarray(field)
     a = np.abs(field)
-    over = np.asarray(valid, dtype=bool) & np.isfinite(a) & (a > threshold_mD)
+    over = np.asarray(valid, dtype=bool) & (a > threshold_mD)  # NaN compares False
     labels, n = ndimage.label(over, structure=np.ones((3, 3), bool))
     if n == 0:
         return ()
@@ -102,7 +102,7 @@ def worst_regions(field, valid, frame, threshold_mD, *, channel="phi_eff", max_c
     lab = labels[yy, xx]
     u, v = frame.to_mm(xx, yy)
     w = frame.pixel_area_mm2(xx, yy)
-    vals = a[yy, xx]
+    vals = a[yy, xx].astype(np.float64)
     area = np.bincount(lab, weights=w, minlength=n + 1)[1:]
     count = np.bincount(lab, minlength=n + 1)[1:]
     cu = np.bincount(lab, weights=w * u, minlength=n + 1)[1:] / area
@@ -127,8 +127,11 @@ def worst_regions(field, valid, frame, threshold_mD, *, channel="phi_eff", max_c
     return tuple(out)
 
 
-def region_thresholds(result, spec=None, channels=REGION_CHANNELS):
+def region_thresholds(result, spec=None, channels=REGION_CHANNELS, *, statistics=None):
     """Threshold (mD) per channel: the specification's, else the 95th percentile of ``|phi|``.
+
+    ``statistics``, the channels' statistics over the analysed region already computed
+    (``{channel: {"p95_abs": ...}}``), saves taking the percentile again.
 
     Returns
     -------
@@ -149,6 +152,8 @@ def region_thresholds(result, spec=None, channels=REGION_CHANNELS):
             out[ch] = (float(given[ch]), "worst_regions")
         elif limits.get(ch):
             out[ch] = (float(min(limits[ch])), "spec limit")
+        elif statistics is not None and ch in statistics:
+            out[ch] = (float(statistics[ch]["p95_abs"]), "p95")
         else:
             f = np.abs(np.asarray(getattr(result, CHANNEL_FIELDS[ch]), dtype=np.float64))
             ok = valid & np.isfinite(f)
@@ -156,8 +161,10 @@ def region_thresholds(result, spec=None, channels=REGION_CHANNELS):
     return out
 
 
-def all_worst_regions(result, frame, spec=None, *, channels=REGION_CHANNELS):
+def all_worst_regions(result, frame, spec=None, *, channels=REGION_CHANNELS, statistics=None):
     """Worst regions of each channel over the analysed region, with the thresholds used.
+
+    ``statistics`` as for :func:`region_thresholds`.
 
     Returns
     -------
@@ -169,7 +176,7 @@ def all_worst_regions(result, frame, spec=None, *, channels=REGION_CHANNELS):
     settings = spec.worst_regions if spec is not None else None
     valid = measured_region(result)
     out = {}
-    for ch, (t, source) in region_thresholds(result, spec, channels).items():
+    for ch, (t, source) in region_thresholds(result, spec, channels, statistics=statistics).items():
         regions = () if not np.isfinite(t) else worst_regions(
             getattr(result, CHANNEL_FIELDS[ch]), valid, frame, t, channel=ch,
             max_count=settings.max_count if settings else 10, min_area_mm2=settings.min_area_mm2 if settings else 0.0)

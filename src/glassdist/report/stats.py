@@ -90,11 +90,8 @@ def channel_statistics(field, valid=None, *, over_limits_mD=()):
     """
     from ..analyzer.metrics import channel_statistics as base_statistics
 
-    out = base_statistics(field, valid)
-    v = _values(field, valid)
-    out["mean"] = float(v.mean()) if v.size else float("nan")
-    for lim in sorted(set(float(x) for x in over_limits_mD)):
-        out[format_limit(lim)] = area_over_percent(field, valid, lim)
+    out = base_statistics(field, valid, over_limits=over_limits_mD)
+    out.update({format_limit(t): pct for t, pct in out.pop("over_percent", {}).items()})
     return out
 
 
