@@ -248,8 +248,12 @@ class AnalysisResult:
         counts = np.bincount(np.asarray(self.quality).ravel(), minlength=len(LABELS))
         return {LABELS[k]: int(counts[k]) for k in LABELS}
 
-    def summary(self) -> dict:
-        """JSON-serialisable record of the run (written as ``summary.json``)."""
+    def summary(self, statistics: dict | None = None) -> dict:
+        """JSON-serialisable record of the run (written as ``summary.json``).
+
+        ``statistics``: :meth:`statistics` already computed (with more entries, e.g. the
+        area over a specification's limits), instead of computing them again.
+        """
         return {
             "glassdist_version": self.version,
             "method": self.method,
@@ -273,7 +277,7 @@ class AnalysisResult:
             "noise_std": {"image": self.noise_std[0], "reference": self.noise_std[1]},
             "n_regions": self.n_regions,
             "sampling_step_px": list(self.sampling_step_px),
-            "statistics": self.statistics(),
+            "statistics": self.statistics() if statistics is None else statistics,
             # the smoothing actually used (the default, null, means 2 carrier periods)
             "parameters": {**self.params.resolved(), "sigma_mm": self.sigma_mm},
             "warnings": list(self.warnings),

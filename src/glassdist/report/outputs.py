@@ -65,7 +65,7 @@ from ..errors import InputError
 from .exports import atomic_write_bytes, atomic_write_text, to_jsonable, write_fields_npz, write_fields_tiff
 from .exports import write_statistics_csv
 from .spec import load_spec, spec_limits
-from .stats import valid_percent
+from .stats import CHANNEL_FIELDS, valid_percent
 
 __all__ = [
     "EXIT_OK", "EXIT_SPEC_FAIL", "FIELD_LAYOUTS", "GRID_KEYS", "OutputFolder", "StoredResult", "a4_figures",
@@ -477,9 +477,12 @@ def write_outputs(result, out_dir, *, fields="analysis", report=False, export=Fa
     from .exports import atomic_write
 
     folder, out = out_dir, out_dir.path
+    spec = spec or (load_spec(spec_path) if spec_path is not None else None)
     members = _grid_members(result) if fields == "analysis" else _pixel_members(result)
     npz = atomic_write(out / "result.npz", lambda fh: write_npz(fh, members))
-    summary = result.summary()
+    acc = _assess(result, spec, spec_path, protocol=protocol, mask=mask, metadata=metadata, image_path=image_path)
+    # the acceptance statistics are over the same trusted pixels: one pass over them for both files
+    summary = result.summary(statistics={CHANNEL_FIELDS[ch]: s for ch, s in acc.stats.items()})
     summary["inputs"] = {
         "image": None if image_path is None else str(image_path),
         "image_sha256": None if image_path is None else file_sha256(image_path),
@@ -494,11 +497,19 @@ def write_outputs(result, out_dir, *, fields="analysis", report=False, export=Fa
     atomic_write_text(out / SUMMARY_NAME, json.dumps(to_jsonable(summary), indent=2, allow_nan=False) + "\n")
     code = finish_analysis(result, out_dir=out, image_path=image_path, reference_path=reference_path,
                            spec_path=spec_path, report=report, exports=export, written=[npz], echo=echo,
-                           protocol=protocol, mask=mask, metadata=metadata, spec=spec, image=image)
+                           protocol=protocol, mask=mask, metadata=metadata, spec=spec, image=image, acceptance=acc)
     # The earlier run's files that this one did not write again (its report, masks of another spec).
     names = sorted(set(folder.previous) - set(recorded_outputs(out)))
     folder.removed, folder.problems = remove_outputs(out, folder.previous, names, keep=folder.inputs)
     return code
+
+
+def _assess(result, spec, spec_path, **kw):
+    """:func:`~glassdist.report.acceptance.assess` with the specification ``(Spec, sha256)`` or its path."""
+    from .acceptance import assess
+
+    spec, sha = spec or (load_spec(spec_path) if spec_path is not None else (None, ""))
+    return assess(result, spec, spec_path=spec_path or "", spec_sha256=sha, **kw)
 
 
 def _describe_input(path, shape):
@@ -652,7 +663,7 @@ def _echo_acceptance(acc, report_path, echo):
 
 def finish_analysis(result, *, out_dir, image_path, reference_path=None, spec_path=None, report=False,
                     exports=False, written=(), echo=print, protocol=None, mask=None, metadata=None, spec=None,
-                    image=None):
+                    image=None, acceptance=None):
     """Statistics, verdict, zones, worst regions, A4 figures, report and exports of an analysis.
 
     Parameters
@@ -685,6 +696,8 @@ def finish_analysis(result, *, out_dir, image_path, reference_path=None, spec_pa
         The specification already loaded from ``spec_path`` and its SHA-256.
     image : ndarray, optional
         The photograph (any size), instead of reading ``image_path`` again.
+    acceptance : Acceptance, optional
+        The assessment already made (:func:`glassdist.report.acceptance.assess`).
 
     Returns
     -------
@@ -697,15 +710,14 @@ def finish_analysis(result, *, out_dir, image_path, reference_path=None, spec_pa
         Invalid specification file, or a capture outside its protocol's limits.
     """
     from ..io import read_image
-    from .acceptance import assess
     from .html import render_report
     from .measures import standard_measures
 
     out_dir = Path(out_dir)
     spec, spec_sha = spec or (load_spec(spec_path) if spec_path is not None else (None, ""))
     limits = spec_limits(spec) if spec is not None else {}
-    acc = assess(result, spec, spec_path=spec_path or "", spec_sha256=spec_sha, protocol=protocol, mask=mask,
-                 metadata=metadata, image_path=image_path)
+    acc = acceptance or _assess(result, (spec, spec_sha), spec_path, protocol=protocol, mask=mask, metadata=metadata,
+                                image_path=image_path)
     stats, verdict = acc.stats, acc.verdict
     inputs = {k: _describe_input(v, result.valid.shape) for k, v in (("image", image_path), ("reference", reference_path))}
     cover = valid_percent(result.valid)
