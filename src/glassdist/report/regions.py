@@ -58,6 +58,13 @@ class WorstRegion:
         return d
 
 
+def _per_label(ufunc, values, labels, n):
+    """``ufunc`` (np.minimum or np.maximum) of ``values`` over each label 1..n (unbuffered ``ufunc.at``)."""
+    out = np.full(n, np.inf if ufunc is np.minimum else -np.inf)
+    ufunc.at(out, labels - 1, values)
+    return out
+
+
 def worst_regions(field, valid, frame, threshold_mD, *, channel="phi_eff", max_count=10, min_area_mm2=0.0):
     """Connected regions where ``|field| > threshold_mD``, worst first.
 
@@ -110,12 +117,12 @@ def worst_regions(field, valid, frame, threshold_mD, *, channel="phi_eff", max_c
     cx = np.bincount(lab, weights=xx, minlength=n + 1)[1:] / count
     cy = np.bincount(lab, weights=yy, minlength=n + 1)[1:] / count
     mean = np.bincount(lab, weights=w * vals, minlength=n + 1)[1:] / area
-    idx = np.arange(1, n + 1)
-    umin, umax = ndimage.minimum(u, lab, idx), ndimage.maximum(u, lab, idx)
-    vmin, vmax = ndimage.minimum(v, lab, idx), ndimage.maximum(v, lab, idx)
-    # signed peak: the value at each region's largest |phi|
-    peak_pos = ndimage.maximum_position(vals, lab, idx)
-    peak = np.array([field[yy[p[0]], xx[p[0]]] for p in peak_pos])
+    umin, umax = _per_label(np.minimum, u, lab, n), _per_label(np.maximum, u, lab, n)
+    vmin, vmax = _per_label(np.minimum, v, lab, n), _per_label(np.maximum, v, lab, n)
+    # signed peak: the value at each region's largest |phi| (the first such pixel in raster order)
+    top = vals == _per_label(np.maximum, vals, lab, n)[lab - 1]
+    _, first = np.unique(lab[top], return_index=True)
+    peak = field[yy[top][first], xx[top][first]].astype(np.float64)
     order = sorted((i for i in range(n) if area[i] >= min_area_mm2), key=lambda i: (-abs(peak[i]), -area[i]))
     out = []
     for k, i in enumerate(order[:max_count], start=1):
