@@ -103,7 +103,18 @@ def test_bad_input_gives_one_line_error(photos, tmp_path, args, message):
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1, r.stderr  # no usage block either
     assert re.search(message, lines[0]), lines[0]
-    assert not (out / "result.npz").exists()
+    assert not out.exists()  # a refused run leaves no folder behind, not even an empty one
+
+
+def test_refused_run_keeps_an_existing_folder_and_its_files(photos, tmp_path):
+    out = tmp_path / "existing"
+    out.mkdir()
+    (out / "notes.txt").write_text("site notes")
+    r = _cli("analyze", photos / "blank.png", "--pitch-mm", 8, "--distance-m", 10, "--out", out / "run")
+    assert r.returncode == 2 and not (out / "run").exists()
+    r = _cli("analyze", photos / "blank.png", "--pitch-mm", 8, "--distance-m", 10, "--out", out)
+    assert r.returncode == 2 and sorted(p.name for p in out.iterdir()) == ["notes.txt"]
+    assert (out / "notes.txt").read_text() == "site notes"
 
 
 def test_output_path_that_is_a_file_is_refused_and_untouched(photos, tmp_path):

@@ -278,18 +278,46 @@ class OutputFolder:
     debris_removed: list[str] = field(default_factory=list)
     removed: list[str] = field(default_factory=list)  # an earlier run's files this run removed
     problems: list[str] = field(default_factory=list)  # those it could not remove
+    created: Path | None = None  # the topmost folder this run created, if any
     _lock_fd: int | None = None
 
-    def close(self) -> None:
+    def close(self, failed: bool = False) -> None:
+        """Release the folder; after a failed run, remove the folders it created if they are still empty."""
         if self._lock_fd is not None:
             os.close(self._lock_fd)  # releases the flock
             self._lock_fd = None
+        if failed and self.created is not None:
+            _remove_empty_tree(self.path, self.created)
 
     def __enter__(self):
         return self
 
-    def __exit__(self, *exc):
-        self.close()
+    def __exit__(self, exc_type, *exc):
+        self.close(failed=exc_type is not None)
+
+
+def _first_missing(path: Path) -> Path | None:
+    """The topmost folder of ``path`` that does not exist yet (None if ``path`` exists)."""
+    missing = None
+    for p in (path, *path.parents):
+        if p.exists():
+            break
+        missing = p
+    return missing
+
+
+def _remove_empty_tree(path: Path, top: Path) -> None:
+    """Remove ``path`` and its parents up to ``top`` while they are empty (a refused run leaves no folder)."""
+    path, top = Path(path).absolute(), Path(top).absolute()
+    if top != path and top not in path.parents:
+        return
+    for p in (path, *path.parents):
+        try:
+            p.rmdir()
+        except OSError:  # not empty (or gone): keep it and what is above
+            return
+        if p == top:
+            return
 
 
 def _lock(path: Path) -> int | None:
@@ -343,7 +371,18 @@ def open_output_folder(out_dir, *, planned=(), inputs=()) -> OutputFolder:
     """
     from ..io import prepare_output_dir
 
+    created = _first_missing(Path(out_dir).absolute())
     path = prepare_output_dir(out_dir)
+    try:
+        return _take_folder(path, planned, inputs, created)
+    except BaseException:
+        if created is not None:
+            _remove_empty_tree(path, created)
+        raise
+
+
+def _take_folder(path: Path, planned, inputs, created) -> OutputFolder:
+    """The checks and the lock of :func:`open_output_folder` on the existing folder ``path``."""
     inputs = tuple(Path(p) for p in inputs if p is not None)
     for name in planned:
         target = path / name
@@ -355,7 +394,7 @@ def open_output_folder(out_dir, *, planned=(), inputs=()) -> OutputFolder:
                 )
     _check_writable(path)
     fd = _lock(path)
-    folder = OutputFolder(path, tuple(planned), inputs, {}, _lock_fd=fd)
+    folder = OutputFolder(path, tuple(planned), inputs, {}, created=created, _lock_fd=fd)
     try:
         folder.debris_removed = _remove_debris(path, set(planned))
         folder.previous = recorded_outputs(path)
