@@ -9,7 +9,7 @@ import pytest
 
 from glassdist.errors import InputError
 from glassdist.report.regions import all_worst_regions, regions_csv, worst_regions
-from glassdist.report.spec import Protocol, Spec, Zone, check_capture, evaluate_spec, resolve_protocol, spec_limits
+from glassdist.report.spec import Protocol, Spec, Zone, check_capture, resolve_protocol, spec_limits, spec_verdict
 from glassdist.report.stats import result_statistics
 from glassdist.report.zones import pane_frame, pane_frame_from_corners, pane_frame_from_region, zone_masks
 from glassdist.report.zones import zone_statistics
@@ -166,7 +166,7 @@ def test_per_zone_statistics_and_coverage_against_the_zone():
         {"channel": "phi_eff", "statistic": "max_abs", "max_mD": 5, "zone": "vision"},
         {"channel": "phi_eff", "statistic": "mean_abs", "max_mD": 9.9, "zone": "left"}])
     stats = result_statistics(res, over_limits_mD=spec_limits(spec))
-    v = evaluate_spec(spec, stats, res, zones=zs)
+    v = spec_verdict(spec, stats, res, zones=zs)
     assert [c.passed for c in v.checks] == [False, False]
     assert "in zone 'vision'" in v.checks[0].criterion and v.checks[0].value == pytest.approx(10.0)
 
@@ -182,7 +182,7 @@ def test_zone_coverage_limit_and_unknown_zone():
     res.valid[:, :100] = False
     zs = zone_statistics(res, frame, zones)
     spec = Spec(name="z", zones=zones, criteria=[{"channel": "phi_eff", "statistic": "max_abs", "max_mD": 50}])
-    v = evaluate_spec(spec, result_statistics(res), res, zones=zs)
+    v = spec_verdict(spec, result_statistics(res), res, zones=zs)
     assert v.checks[0].criterion == "analysed area >= 90 % of zone 'vision'" and not v.checks[0].passed
 
 

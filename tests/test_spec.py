@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from glassdist.errors import InputError
-from glassdist.report.spec import evaluate_spec, load_spec, spec_limits
+from glassdist.report.spec import load_spec, spec_limits, spec_verdict
 from glassdist.report.stats import area_over_percent, channel_statistics, result_statistics
 
 
@@ -45,7 +45,7 @@ def _verdict(tmp_path, spec, result=None):
     s, sha = load_spec(_write(tmp_path, spec))
     result = result if result is not None else _known_result()
     stats = result_statistics(result, over_limits_mD=spec_limits(s))
-    return evaluate_spec(s, stats, result, spec_path="spec.json", spec_sha256=sha)
+    return spec_verdict(s, stats, result, spec_path="spec.json", spec_sha256=sha)
 
 
 def test_statistics_match_closed_form():
@@ -160,3 +160,14 @@ def test_example_specifications_and_manifest_use_detrend_3_with_the_direct_metho
     direct = [p for p in panes if p.reference is None]
     assert len(direct) == 2 and all(p.detrend_degree == 3 for p in direct)
     assert all(p.spec.name == "contract_spec.json" for p in direct)
+
+
+def test_one_name_per_evaluate_spec():
+    """``glassdist.evaluate_spec(result, spec)`` is the only function of that name; the engine has its own."""
+    import glassdist
+    import glassdist.report.spec as spec_module
+    from glassdist._api import evaluate_spec
+
+    assert glassdist.evaluate_spec is evaluate_spec
+    assert not hasattr(spec_module, "evaluate_spec")
+    assert "spec_verdict" in spec_module.__all__

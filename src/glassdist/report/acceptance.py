@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .regions import REGION_CHANNELS, all_worst_regions, regions_csv
-from .spec import evaluate_spec, spec_limits
+from .spec import spec_limits, spec_verdict
 from .stats import valid_percent
 from .zones import measured_region, pane_frame, region_statistics, zone_masks, zone_statistics
 
@@ -212,7 +212,7 @@ def assess(result, spec=None, *, spec_path="", spec_sha256="", protocol=None, ma
         coverage = valid_percent(measured)
     verdict = None
     if spec is not None:
-        verdict = evaluate_spec(spec, stats, result, spec_path=spec_path, spec_sha256=spec_sha256, zones=zones,
+        verdict = spec_verdict(spec, stats, result, spec_path=spec_path, spec_sha256=spec_sha256, zones=zones,
                                 coverage_percent=None if mask is None else coverage)
     regions = all_worst_regions(result, frame, spec, channels=REGION_CHANNELS, statistics=stats)
     meta = {k: v for k, v in (metadata or {}).items() if v is not None}

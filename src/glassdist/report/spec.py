@@ -64,7 +64,7 @@ from .stats import format_limit, valid_percent
 
 __all__ = [
     "Criterion", "Protocol", "Pane", "Zone", "WorstRegions", "Figures", "Spec", "Check", "Verdict", "ResolvedProtocol",
-    "load_spec", "as_spec", "evaluate_spec", "spec_limits", "resolve_protocol", "check_capture", "px_per_period",
+    "load_spec", "as_spec", "spec_verdict", "spec_limits", "resolve_protocol", "check_capture", "px_per_period",
 ]
 
 _SYMBOL = {"phi_eff": "phi_eff", "phi_shear": "phi_shear", "phi_total": "phi_total"}
@@ -637,8 +637,12 @@ def _protocol_checks(protocol, result):
     return checks
 
 
-def evaluate_spec(spec, stats, result, *, spec_path="", spec_sha256="", zones=None, coverage_percent=None):
-    """Check every criterion of ``spec`` against an analysis.
+def spec_verdict(spec, stats, result, *, spec_path="", spec_sha256="", zones=None, coverage_percent=None):
+    """Check every criterion of ``spec`` against an analysis whose statistics are already computed.
+
+    The engine under :func:`glassdist.report.acceptance.assess`; from a result alone use
+    the public ``glassdist.evaluate_spec(result, spec)``, which computes the statistics,
+    zones and coverage first.
 
     Parameters
     ----------
