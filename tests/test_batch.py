@@ -162,6 +162,7 @@ def test_manifest_paths_defaults_and_comments(tmp_path):
         "# a comment row,,,,,\n"
         ",two.bmp,,,2.0,4\n"
     )
+    (tmp_path / "m" / "ref.png").write_bytes(b"x")  # a reference cell must name a file (the image cell need not)
     panes = read_manifest(m, pane_defaults(pitch_mm=7.0, spec="spec.json"))
     assert [p.id for p in panes] == ["p1", "two"]
     assert panes[0].image == tmp_path / "m" / "img" / "one.png"
@@ -185,6 +186,9 @@ def test_manifest_paths_defaults_and_comments(tmp_path):
         ("id,image,pitch_mm,distance_m\nbad id,a.png,5,1\n", "pane id 'bad id'"),
         ("pitch_mm,distance_m\n5,1\n", "no 'image' column"),
         ("image,pitch_mm,distance_m\n", "lists no pane"),
+        ("id,image,reference,pitch_mm,distance_m\np1,a.png,,5,1\np2,a.png,no_ref.png,5,1\n",
+         "line 3 (pane 'p2'): reference file"),
+        ("id,image,mask,pitch_mm,distance_m\np1,a.png,no_mask.npy,5,1\n", "line 2 (pane 'p1'): mask file"),
     ],
 )
 def test_bad_manifests(tmp_path, text, words):
@@ -193,6 +197,9 @@ def test_bad_manifests(tmp_path, text, words):
     with pytest.raises(InputError) as info:
         read_manifest(m)
     assert words in str(info.value) and "\n" not in str(info.value)
+    if "file" in words:  # the missing file is named
+        assert ("no_ref.png" if "reference" in words else "no_mask.npy") in str(info.value)
+        assert "does not exist" in str(info.value)
 
 
 def test_folder_source_skips_the_reference(tmp_path):

@@ -22,9 +22,10 @@ Exit codes of ``glassdist batch``
 ---------------------------------
 ``0`` every pane analysed and none failed its specification; ``3`` every pane
 analysed, at least one specification FAIL; ``4`` at least one pane could not be
-analysed (the others were; see ``OUT/failed/``); ``2`` bad input (manifest,
-options, parameter files and specifications, output folder), found before any
-pane runs (:func:`check_panes`).
+analysed (the others were; see ``OUT/failed/``); ``2`` bad input (manifest, a
+reference or mask file it names that does not exist, options, parameter files and
+specifications, output folder), found before any pane runs (:func:`read_manifest`,
+:func:`check_panes`).
 
 Manifest columns
 ----------------
@@ -209,7 +210,9 @@ def read_manifest(path, defaults=None):
     Raises
     ------
     InputError
-        Unknown column, unparsable or missing value, duplicate pane id.
+        Unknown column, unparsable or missing value, duplicate pane id, a ``reference`` or
+        ``mask`` cell that names no readable file (a missing photo in an ``image`` cell is
+        the pane's: its run reports it).
     """
     path = Path(path)
     header, rows = read_csv_rows(path, "manifest")
@@ -225,8 +228,22 @@ def read_manifest(path, defaults=None):
             continue
         where = f"manifest '{safe_text(path.name)}' line {lineno}"
         values = {k: _parse_cell(k, v, where) for k, v in cells.items() if v}
-        panes.append(_make_pane(values, defaults, path.parent, where))
+        pane = _make_pane(values, defaults, path.parent, where)
+        _check_cell_files(pane, values, where)
+        panes.append(pane)
     return _check_unique(panes, f"manifest '{path}'")
+
+
+def _check_cell_files(pane, cells, where):
+    """The reference and mask a manifest row names must be files (stat only); the row's image is the pane's."""
+    from ..validation import check_input_file
+
+    for name in ("reference", "mask"):
+        if name in cells:
+            try:
+                check_input_file(getattr(pane, name), f"{name} file")
+            except InputError as exc:
+                raise InputError(f"{where} (pane '{pane.id}'): {exc}") from None
 
 
 def panes_from_folder(folder, defaults=None):
@@ -263,8 +280,10 @@ def check_panes(panes, defaults=None):
     as command-line options (``defaults``: reference, mask) are validated the way
     ``glassdist analyze`` does, from the files' headers (no image is decoded), so that a
     bad option or document is a bad input of the batch (exit 2) found at once, not a
-    failure of every pane (exit 4) found one analysis at a time. A pane's own image
-    files (manifest cells, folder images) are the pane's: a bad one fails that pane.
+    failure of every pane (exit 4) found one analysis at a time. A pane's own photo
+    (its ``image`` cell, a folder's images) is the pane's: a bad one fails that pane; the
+    manifest's ``reference`` and ``mask`` cells were checked to name files by
+    :func:`read_manifest`.
 
     Raises
     ------
