@@ -302,6 +302,24 @@ def test_thumbnails_share_one_colour_scale_and_trend_groups_lots(tmp_path):
     assert a.shape[:2] == (40, 60)  # no axes, no margin: the field's own pixels
     # one scale: 10 mD is half-way to the top colour, 20 mD is the top colour; grey where not analysed
     assert not np.allclose(a[20, 30], b[20, 30]) and np.allclose(a[0, 0], b[0, 0])
+    # the scale comes from trusted samples only: a biased guard band (label 6) does not stretch it,
+    # in the pixel layout as in the compact one (quality on the pixel grid, fields on the analysis grid)
+    d = tmp_path / "panes" / "c"
+    d.mkdir(parents=True)
+    field = np.full((40, 60), 15.0)
+    field[:, :3] = 900.0
+    quality = np.zeros((40, 60), np.uint8)
+    quality[:, :3] = 6
+    np.savez(d / "result.npz", phi_eff_mD=field, valid=np.ones((40, 60), bool), quality=quality)
+    d = tmp_path / "panes" / "g"
+    d.mkdir(parents=True)
+    qpix = np.zeros((80, 120), np.uint8)
+    qpix[:, :6] = 6
+    np.savez(d / "result.npz", phi_eff_mD=field, grid_valid=np.ones((40, 60), bool), quality=qpix,
+             grid_rows_px=np.arange(40) * 2.0 + 0.5, grid_cols_px=np.arange(60) * 2.0 + 0.5)
+    for pane in ("c", "g"):
+        assert write_thumbnails(tmp_path, [pane])[1] == pytest.approx(15.0), pane
+    assert write_thumbnails(tmp_path, ["a", "b", "c"])[1] == pytest.approx(20.0)
     rows = [{"id": i, "lot": lot, "status": "done", "verdict": v, "phi_eff_p95_abs_mD": "5",
              "phi_shear_p95_abs_mD": "4"} for i, lot, v in (("a", "L1", "PASS"), ("b", "L2", "FAIL"))]
     assert write_trend(tmp_path, rows) == "trend.png" and (tmp_path / "trend.png").stat().st_size > 0

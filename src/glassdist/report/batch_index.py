@@ -3,7 +3,8 @@
 * Thumbnails (``OUT/thumbs/<id>.png``): each pane's ``phi_eff`` without axes, at most
   :data:`THUMB_PX` px wide, all on the same diverging scale ``[-V, V]`` mD so that their
   colours compare across panes; ``V`` is the largest of the panes' 99th percentiles of
-  ``|phi_eff|`` (``OUT/thumbs/colourbar.png`` shows it).
+  ``|phi_eff|`` over their trusted samples (quality label 0: the guard band next to excluded
+  areas, biased by the smoothing, does not set the scale; ``OUT/thumbs/colourbar.png`` shows it).
 * Trend (``OUT/trend.png``): p95 ``|phi_eff|`` and p95 ``phi_shear`` of each analysed pane
   in batch order, grouped by lot (the manifest's ``lot`` column), PASS / FAIL / no
   verdict marked, with each lot's median.
@@ -25,29 +26,48 @@ THUMB_PX = 160
 
 
 def load_phi_eff(pane_dir):
-    """``phi_eff`` (mD, NaN outside the analysed region) from a pane's ``result.npz``, or None.
+    """``phi_eff`` (mD, NaN outside the analysed region) and its trusted samples from a pane's ``result.npz``.
 
     Reads either layout of ``result.npz`` (pixel grid with ``valid``, or analysis grid
-    with ``grid_valid``), subsampled to about :data:`THUMB_PX` px on its longer side.
+    with ``grid_valid`` and pixel coordinates), subsampled to about :data:`THUMB_PX` px
+    on its longer side. Trusted samples are those of quality label 0 (the pixel under an
+    analysis-grid sample); a file without ``quality`` trusts its analysed region.
+
+    Returns
+    -------
+    (ndarray, ndarray of bool) or None
     """
     path = Path(pane_dir) / "result.npz"
     try:
         with np.load(path, allow_pickle=False) as z:
-            if "phi_eff_mD" not in z.files:
+            if "phi_eff_mD" not in z.files or z["phi_eff_mD"].ndim != 2:
                 return None
             f = z["phi_eff_mD"]
-            if f.ndim != 2:
-                return None
             step = max(1, int(np.ceil(max(f.shape) / THUMB_PX)))
-            f = np.asarray(f[::step, ::step], dtype=np.float64)
+            sub = (slice(None, None, step), slice(None, None, step))
+            f = np.asarray(f[sub], dtype=np.float64)
             for key in ("valid", "grid_valid"):
                 if key in z.files and z[key].shape == z["phi_eff_mD"].shape:
-                    f = np.where(z[key][::step, ::step], f, np.nan)
+                    f = np.where(z[key][sub], f, np.nan)
                     break
-            return f
-    except (OSError, ValueError, KeyError):
+            return f, np.isfinite(f) & _trusted(z, sub, z["phi_eff_mD"].shape)
+    except (OSError, ValueError, KeyError, IndexError):
         logger.warning("could not read %s for its thumbnail", path)
         return None
+
+
+def _trusted(z, sub, shape):
+    """Quality label 0 at the samples ``sub`` of a field of ``shape`` (all True without a quality map)."""
+    if "quality" not in z.files:
+        return True
+    q = z["quality"]
+    if q.shape == shape:
+        return q[sub] == 0
+    if "grid_rows_px" in z.files and "grid_cols_px" in z.files:
+        rows = np.clip(np.rint(z["grid_rows_px"][sub[0]]).astype(int), 0, q.shape[0] - 1)
+        cols = np.clip(np.rint(z["grid_cols_px"][sub[1]]).astype(int), 0, q.shape[1] - 1)
+        return q[np.ix_(rows, cols)] == 0
+    return True
 
 
 def write_thumbnails(out, ids):
@@ -71,12 +91,13 @@ def write_thumbnails(out, ids):
     from matplotlib.colors import Normalize
 
     out = Path(out)
-    fields = {i: f for i in ids if (f := load_phi_eff(out / "panes" / i)) is not None}
-    finite = [np.abs(f[np.isfinite(f)]) for f in fields.values()]
-    finite = [a for a in finite if a.size]
-    if not finite:
+    loaded = {i: f for i in ids if (f := load_phi_eff(out / "panes" / i)) is not None}
+    fields = {i: f for i, (f, _) in loaded.items()}
+    if not fields:
         return {}, None
-    vmax = max(float(np.percentile(a, 99)) for a in finite) or 1.0
+    # the scale from trusted samples only: the guard band next to excluded areas is biased
+    trusted = [a for f, t in loaded.values() if (a := np.abs(f[t])).size]
+    vmax = max((float(np.percentile(a, 99)) for a in trusted), default=0.0) or 1.0
     folder = out / "thumbs"
     folder.mkdir(exist_ok=True)
     cmap = matplotlib.colormaps["RdBu_r"].with_extremes(bad=(0.85, 0.85, 0.85, 1.0))
