@@ -98,3 +98,25 @@ def test_threshold_mask_title_reports_area_over_limit():
     field[:, :3] = 5.0  # 30 % of the pixels over 4 mD
     _, ax = figures.plot_threshold_mask(field, None, limit_mD=4.0)
     assert "30.00 %" in ax.get_title()
+
+
+def test_heatmap_caption_speaks_of_trusted_pixels():
+    """The caption's max |phi| is the statistics' (trusted pixels), not the guard band's larger values."""
+    import re
+
+    import glassdist
+    from glassdist.report.acceptance import assess
+    from glassdist.report.outputs import a4_figures
+    from glassdist.synthetic import synthetic_capture, wave_displacement
+
+    cap = synthetic_capture((240, 320), pitch_mm=8.0, mm_per_px=1.0, displacement=wave_displacement(0.6, 90.0, 25.0))
+    img = cap.image.copy()
+    img[100:140, 140:180] = 0.5  # an opaque drop: excluded, with a guard band around it
+    res = glassdist.analyze(img, pitch_mm=8.0, distance_m=10.0, reference=cap.reference)
+    acc = assess(res)
+    figs = {stem: caption for stem, caption, _ in a4_figures(res, heatmaps=True, acceptance=acc)}
+    for name, attr in (("phi_eff", "phi_eff_mD"), ("phi_shear", "phi_shear_mD")):
+        shown = float(re.search(r"max \|phi\| ([0-9.eE+-]+) mD", figs[name]).group(1))
+        assert shown == pytest.approx(acc.stats[name]["max_abs"], rel=1e-2)
+        reported = np.abs(np.asarray(getattr(res, attr)))[res.valid]
+        assert np.nanmax(reported) > acc.stats[name]["max_abs"]  # the guard band holds larger values

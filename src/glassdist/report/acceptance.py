@@ -308,13 +308,18 @@ def draw_overlays(ax, acc, channel, to_axes, extent):
     ax.set_ylim(extent[2], extent[3])
 
 
-def describe_clipping(field, valid, vmax):
-    """Caption text: the largest ``|phi|`` and whether the colour scale clips it."""
+def describe_clipping(field, valid, vmax, top=None):
+    """Caption text: the largest ``|phi|`` and whether the colour scale clips it.
+
+    ``valid``: the samples the caption speaks of (the trusted ones); ``top``: their largest
+    ``|phi|`` when known (the statistics' ``max_abs``, over the trusted pixels), else taken
+    from ``field``.
+    """
     f = np.asarray(field, dtype=np.float64)
     ok = np.asarray(valid, dtype=bool) & np.isfinite(f)
     if not ok.any():
         return ""
-    top = float(np.abs(f[ok]).max())
+    top = float(np.abs(f[ok]).max()) if top is None or not math.isfinite(top) else float(top)
     share = 100.0 * np.count_nonzero(np.abs(f[ok]) > vmax) / np.count_nonzero(ok)
     if top <= vmax or math.isclose(top, vmax):
         return f"max |phi| {top:.3g} mD"

@@ -590,9 +590,12 @@ def _heatmap(result, name, field, gv, v, chosen, axes, acceptance):
     caption = f"{name} in mD; colour limits {span} mD" + ("." if chosen else " shared by both channels.")
     if acceptance is not None:
         draw_overlays(ax, acceptance, name, to_axes, extent)
-        ax.set_title(f"{label}, mD\n{describe_clipping(field, gv, v)}", fontsize="medium")
+        # the maximum and the clipped share over the trusted samples, as the statistics
+        clip = describe_clipping(field, gv & np.asarray(result.grid_trusted, bool), v,
+                                 acceptance.stats.get(name, {}).get("max_abs"))
+        ax.set_title(f"{label}, mD\n{clip}", fontsize="medium")
         n = len(acceptance.regions.get(name, {}).get("regions", ()))
-        caption += (f" Axes in {units}. {describe_clipping(field, gv, v)}. Dashed: zones; numbers: the "
+        caption += (f" Axes in {units}. {clip} (trusted pixels). Dashed: zones; numbers: the "
                     f"{n} worst regions (worst_regions.csv).")
     return name, caption + " Grey: not analysed.", F.figure_png(fig)
 
