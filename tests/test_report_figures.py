@@ -120,3 +120,41 @@ def test_heatmap_caption_speaks_of_trusted_pixels():
         assert shown == pytest.approx(acc.stats[name]["max_abs"], rel=1e-2)
         reported = np.abs(np.asarray(getattr(res, attr)))[res.valid]
         assert np.nanmax(reported) > acc.stats[name]["max_abs"]  # the guard band holds larger values
+
+
+def test_quality_map_legend_names_each_label_present_with_its_share():
+    from glassdist.analyzer import QUALITY_LABELS
+
+    q = np.zeros((40, 60), np.uint8)
+    q[:, :6] = 1
+    q[10:20, 20:30] = 2
+    q[8:22, 18:32][q[8:22, 18:32] == 0] = 6
+    counts = {name: int(np.count_nonzero(q == k)) for k, name in QUALITY_LABELS.items()}
+    fig, ax = figures.plot_quality(q, counts=counts)
+    texts = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert [t.split(":")[0] for t in texts] == ["0", "1", "2", "6"]  # labels without pixels left out
+    assert texts[1] == f"1: {QUALITY_LABELS[1]} (10.0 %)"
+    # each label drawn in its own colour
+    img = ax.get_images()[0]
+    rgba = img.cmap(img.norm(q))
+    assert len({tuple(c) for c in rgba.reshape(-1, 4)}) == 4
+    figures.figure_png(fig)
+
+
+def test_outputs_draw_the_quality_map_and_the_noise_floor(tmp_path):
+    import json
+
+    import glassdist
+    from glassdist.synthetic import synthetic_capture, wave_displacement
+
+    cap = synthetic_capture((200, 260), pitch_mm=8.0, mm_per_px=1.0, displacement=wave_displacement(0.4, 90.0, 20.0),
+                            noise_std=0.02, rng=3)
+    res = glassdist.analyze(cap.image, pitch_mm=8.0, distance_m=10.0, reference=cap.reference)
+    assert glassdist.write_outputs(res, tmp_path / "o", report=True) == 0
+    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    sig = np.asarray(res.grid_field("phi_eff_sigma_mD"), float)
+    want = np.median(sig[res.grid_valid & res.grid_trusted])
+    assert s["noise_floor_mD"]["phi_eff_sigma_mD"]["median"] == pytest.approx(want, rel=1e-9) and want > 0
+    assert (tmp_path / "o" / "quality.png").stat().st_size > 0 and (tmp_path / "o" / "uncertainty.png").exists()
+    html = (tmp_path / "o" / "report.html").read_text()
+    assert f"noise floor (median over the trusted pixels) {want:.3g} mD" in html and "Quality map" in html

@@ -243,6 +243,27 @@ class AnalysisResult:
         """Per-channel statistics over the trusted pixels (see :func:`channel_statistics`)."""
         return {name: channel_statistics(getattr(self, name), self.trusted) for name in CHANNELS}
 
+    def noise_floor(self) -> dict:
+        """Median and 95th percentile of each standard-uncertainty channel over the trusted samples.
+
+        Returns
+        -------
+        dict
+            ``{"phi_eff_sigma_mD": {"median": ..., "p95": ...}, "phi_shear_sigma_mD": ...}`` (mD; NaN
+            where nothing is trusted); empty without uncertainty fields. Taken on the analysis
+            grid: the pixel-grid maps are its interpolation.
+        """
+        out = {}
+        held = {f.name for f in self.field_specs()}
+        for name in ("phi_eff_sigma_mD", "phi_shear_sigma_mD"):
+            if name not in held:
+                continue
+            f = np.asarray(self.grid_field(name), dtype=np.float64)
+            v = f[self.grid_valid & self.grid_trusted & np.isfinite(f)]
+            med, p95 = (np.percentile(v, [50, 95]) if v.size else (np.nan, np.nan))
+            out[name] = {"median": float(med), "p95": float(p95)}
+        return out
+
     def quality_counts(self) -> dict:
         """Pixels per quality label, ``{label name: count}``."""
         counts = np.bincount(np.asarray(self.quality).ravel(), minlength=len(LABELS))
@@ -272,6 +293,7 @@ class AnalysisResult:
             "valid_fraction": self.valid_fraction,
             "trusted_fraction": self.trusted_fraction,
             "quality_counts": self.quality_counts(),
+            "noise_floor_mD": self.noise_floor(),
             "margin_px": {"excluded_areas": self.margin_px[0], "image_edge": self.margin_px[1]},
             "guard_px": self.guard_px,
             "noise_std": {"image": self.noise_std[0], "reference": self.noise_std[1]},

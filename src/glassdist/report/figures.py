@@ -40,6 +40,7 @@ __all__ = [
     "plot_input",
     "plot_threshold_mask",
     "plot_histogram",
+    "plot_quality",
     "save_channel_heatmaps",
     "save_figure",
     "figure_png",
@@ -182,6 +183,62 @@ def plot_channel(field, valid=None, *, signed=True, vmax=None, cmap=None, title=
     _label_image_axes(ax, title, axis_units)
     if colorbar:
         fig.colorbar(im, ax=ax, cax=cax, label="mD", extend="both" if signed else "max", shrink=1.0 if cax else 0.9)
+    return fig, ax
+
+
+#: Colours of the quality labels (``glassdist.analyzer.QUALITY_LABELS``), in label order:
+#: analysed green; guard band a paler green (reported, not trusted); the exclusions in distinct hues.
+QUALITY_COLOURS = ("#1b9e77", "#7f7f7f", "#e7298a", "#d95f02", "#7570b3", "#d9d9d9", "#b8e0c8", "#e6ab02")
+
+
+def plot_quality(labels, *, counts=None, title=None, ax=None, extent=None, axis_units="px"):
+    """Quality map: each pixel's label, in categorical colours with a legend naming each label.
+
+    Parameters
+    ----------
+    labels : ndarray of uint8, shape (H, W)
+        Quality labels 0-7 (:data:`glassdist.analyzer.QUALITY_LABELS`); any size (a
+        reduced map is drawn as it is).
+    counts : dict, optional
+        ``{label name: pixels}`` of the whole map (the result's ``quality_counts``): each
+        legend entry then gives its share; labels with no pixel are left out of the legend.
+    title : str, optional
+    ax : matplotlib Axes, optional
+    extent : (float, float, float, float), optional
+        ``imshow`` extent in ``axis_units``; default pixels.
+    axis_units : str
+
+    Returns
+    -------
+    fig, ax
+    """
+    from matplotlib.colors import BoundaryNorm, ListedColormap
+    from matplotlib.patches import Patch
+
+    from ..analyzer import QUALITY_LABELS
+
+    own = ax is None
+    fig, ax, _ = _map_ax(ax, np.shape(labels), extent, colorbar=False)
+    if own:  # room on the right for the legend: widen the figure, keep the map's size in inches
+        W, H = fig.get_size_inches()
+        extra = 2.8
+        pos = ax.get_position()
+        fig.set_size_inches(W + extra, H)
+        ax.set_position((pos.x0 * W / (W + extra), pos.y0, pos.width * W / (W + extra), pos.height))
+    n = len(QUALITY_LABELS)
+    cmap = ListedColormap(QUALITY_COLOURS[:n])
+    ax.imshow(np.asarray(labels), cmap=cmap, norm=BoundaryNorm(np.arange(n + 1) - 0.5, n), interpolation="nearest",
+              extent=extent)
+    _label_image_axes(ax, title, axis_units)
+    total = sum(counts.values()) if counts else 0
+    handles = []
+    for k, name in QUALITY_LABELS.items():
+        c = counts.get(name, 0) if counts else None
+        if counts and not c:
+            continue
+        text = f"{k}: {name}" + (f" ({100.0 * c / total:.1f} %)" if counts else "")
+        handles.append(Patch(facecolor=QUALITY_COLOURS[k], edgecolor="0.3", label=text))
+    ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize="x-small", frameon=False)
     return fig, ax
 
 

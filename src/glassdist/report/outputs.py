@@ -97,7 +97,7 @@ GRID_KEYS = {
 SUMMARY_NAME = "summary.json"
 # atomic_write's temporary names: .NAME.PID.TOKEN.tmp
 _DEBRIS = re.compile(r"^\.(?P<name>.+)\.(?P<pid>\d+)\.[0-9a-f]{8}\.tmp$")
-_FIGURES = ("phi_eff", "phi_shear", "axis", "input_region", "histograms")
+_FIGURES = ("phi_eff", "phi_shear", "axis", "input_region", "quality", "uncertainty", "histograms")
 
 
 def plan_outputs(specs, *, fields="analysis", report=False, export=False, limits=None) -> tuple[str, ...]:
@@ -600,6 +600,31 @@ def _heatmap(result, name, field, gv, v, chosen, axes, acceptance):
     return name, caption + " Grey: not analysed.", F.figure_png(fig)
 
 
+def _quality_figures(result, gv, extent, max_px=900):
+    """The quality map (labels, reduced by striding to at most ``max_px`` a side) and the phi_eff uncertainty map."""
+    from . import figures as F
+
+    held = {f.name for f in result.field_specs()}
+    out = []
+    if "quality" in held:
+        q = np.asarray(result.quality)
+        k = max(1, -(-max(q.shape) // max_px))
+        fig, _ = F.plot_quality(q[::k, ::k], counts=result.quality_counts(), title="Quality labels", extent=extent)
+        out.append(("quality", "Quality map: every pixel's label (README, quality labels). Statistics, verdicts and "
+                               "the maximum use label 0 only; label 6 is reported but not trusted.", F.figure_png(fig)))
+    if "phi_eff_sigma_mD" in held:
+        sig = _map_of(result, "phi_eff_sigma_mD")
+        trusted = gv & np.asarray(result.grid_trusted, bool)
+        floor = result.noise_floor()["phi_eff_sigma_mD"]["median"]
+        fig, _ = F.plot_channel(sig, gv, signed=False, vmax=F.shared_limit(sig, valid=trusted), cmap="magma",
+                                title=f"standard uncertainty of $\\phi_{{eff}}$, mD\nnoise floor {floor:.3g} mD",
+                                extent=extent)
+        out.append(("uncertainty", f"Standard uncertainty of phi_eff from the image noise (phi_eff_sigma_mD), mD; "
+                                   f"noise floor (median over the trusted pixels) {floor:.3g} mD. Values of |phi_eff| "
+                                   "within about 2 of it are not distinguishable from noise.", F.figure_png(fig)))
+    return out
+
+
 def a4_figures(result, image=None, limits=None, *, heatmaps=True, acceptance=None):
     """Render the A4 figures of a result, from its analysis grid.
 
@@ -659,6 +684,7 @@ def a4_figures(result, image=None, limits=None, *, heatmaps=True, acceptance=Non
         fig, _ = F.plot_axis(_map_of(result, "axis_deg"), maps["phi_shear"], gv, extent=px_extent)
         out.append(("axis", "Astigmatism axis (direction of largest stretch), degrees from +x towards +y (down); "
                             "grey where phi_shear is too small for the axis to be meaningful.", F.figure_png(fig)))
+    out += _quality_figures(result, gv, px_extent)
     for name, lims in limits.items():
         field = maps[name] if name in maps else _map_of(result, F.CHANNELS[name][0])
         for lim in lims:
