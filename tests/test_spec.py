@@ -171,3 +171,27 @@ def test_one_name_per_evaluate_spec():
     assert glassdist.evaluate_spec is evaluate_spec
     assert not hasattr(spec_module, "evaluate_spec")
     assert "spec_verdict" in spec_module.__all__
+
+
+def test_uncertainty_criteria_fail_a_noisy_capture_and_pass_a_clean_one():
+    """A spec may require a precise enough measurement: p95 of phi_eff_sigma_mD under a limit."""
+    import glassdist
+    from glassdist.report.acceptance import assess
+    from glassdist.report.spec import as_spec
+    from glassdist.synthetic import synthetic_capture, wave_displacement
+
+    spec, _ = as_spec({"name": "precision", "criteria": [
+        {"channel": "phi_eff_sigma", "statistic": "p95_abs", "max_mD": 0.02},
+        {"channel": "phi_eff", "statistic": "p95_abs", "max_mD": 1e5}]})
+    sigmas = {}
+    for noise in (0.0, 0.08):
+        cap = synthetic_capture((200, 260), pitch_mm=8.0, mm_per_px=1.0, displacement=wave_displacement(0.4, 90.0, 20.0),
+                                noise_std=noise, rng=5)
+        res = glassdist.analyze(cap.image, pitch_mm=8.0, distance_m=10.0, reference=cap.reference)
+        acc = assess(res, spec)
+        s = np.asarray(res.phi_eff_sigma_mD)[res.trusted]
+        assert acc.stats["phi_eff_sigma"]["p95_abs"] == pytest.approx(np.percentile(s, 95), rel=1e-5)
+        assert acc.verdict.checks[-2].criterion == "p95 |sigma(phi_eff)| <= 0.02 mD"
+        sigmas[noise] = (acc.stats["phi_eff_sigma"]["p95_abs"], acc.verdict.passed)
+    assert sigmas[0.0][1] and not sigmas[0.08][1], sigmas
+    assert "phi_eff_sigma" not in assess(res).stats  # judged only when a criterion asks

@@ -65,7 +65,7 @@ from ..errors import InputError
 from .exports import atomic_write_bytes, atomic_write_text, to_jsonable, write_fields_npz, write_fields_tiff
 from .exports import write_statistics_csv
 from .spec import load_spec, spec_limits
-from .stats import CHANNEL_FIELDS, valid_percent
+from .stats import CHANNEL_FIELDS, STATISTIC_FIELDS, valid_percent
 
 __all__ = [
     "EXIT_OK", "EXIT_SPEC_FAIL", "FIELD_LAYOUTS", "GRID_KEYS", "OutputFolder", "StoredResult", "a4_figures",
@@ -112,7 +112,8 @@ def plan_outputs(specs, *, fields="analysis", report=False, export=False, limits
     if fields not in FIELD_LAYOUTS:
         raise InputError(f"fields must be one of {', '.join(FIELD_LAYOUTS)}, got '{fields}'")
     names = ["result.npz", "statistics.csv", "worst_regions.csv"] + [f"{s}.png" for s in _FIGURES]
-    names += [f"mask_{ch}_{float(lim):g}mD.png" for ch, lims in (limits or {}).items() for lim in lims]
+    names += [f"mask_{ch}_{float(lim):g}mD.png" for ch, lims in (limits or {}).items() if ch in CHANNEL_FIELDS
+              for lim in lims]
     if report:
         names.append("report.html")
     if export:
@@ -521,7 +522,7 @@ def write_outputs(result, out_dir, *, fields="analysis", report=False, export=Fa
     npz = atomic_write(out / "result.npz", lambda fh: write_npz(fh, members))
     acc = _assess(result, spec, spec_path, protocol=protocol, mask=mask, metadata=metadata, image_path=image_path)
     # the acceptance statistics are over the same trusted pixels: one pass over them for both files
-    summary = result.summary(statistics={CHANNEL_FIELDS[ch]: s for ch, s in acc.stats.items()})
+    summary = result.summary(statistics={STATISTIC_FIELDS[ch]: s for ch, s in acc.stats.items()})
     summary["inputs"] = {
         "image": None if image_path is None else str(image_path),
         "image_sha256": None if image_path is None else file_sha256(image_path),
@@ -685,7 +686,7 @@ def a4_figures(result, image=None, limits=None, *, heatmaps=True, acceptance=Non
         out.append(("axis", "Astigmatism axis (direction of largest stretch), degrees from +x towards +y (down); "
                             "grey where phi_shear is too small for the axis to be meaningful.", F.figure_png(fig)))
     out += _quality_figures(result, gv, px_extent)
-    for name, lims in limits.items():
+    for name, lims in ((n, v) for n, v in limits.items() if n in F.CHANNELS):  # masks of the power channels
         field = maps[name] if name in maps else _map_of(result, F.CHANNELS[name][0])
         for lim in lims:
             fig, _ = F.plot_threshold_mask(field, gv, limit_mD=lim, name=name, extent=px_extent)

@@ -26,6 +26,11 @@ Criteria
   the percentage of the valid region where ``|phi| > threshold_mD`` is
   ``<= max_percent``.
 * ``zone`` (optional): the statistic is taken over that zone's analysed pixels.
+* ``channel`` ``phi_eff_sigma`` / ``phi_shear_sigma``: the same statistics of the
+  per-pixel standard uncertainty (``phi_eff_sigma_mD``, ``phi_shear_sigma_mD``, from the
+  image noise): e.g. ``{"channel": "phi_eff_sigma", "statistic": "p95_abs", "max_mD": 5}``
+  requires a measurement precise enough for the limits it is judged against (a noisy
+  capture then fails rather than passing or failing on noise).
 * ``min_valid_percent`` (optional): the analysed region must cover at least this
   percentage of the image (of the user's mask when one is given), so a pane cannot
   pass because little of it was measured; a zone's ``min_valid_percent`` is of the zone.
@@ -64,10 +69,11 @@ from .stats import format_limit, valid_percent
 
 __all__ = [
     "Criterion", "Protocol", "Pane", "Zone", "WorstRegions", "Figures", "Spec", "Check", "Verdict", "ResolvedProtocol",
-    "load_spec", "as_spec", "spec_verdict", "spec_limits", "resolve_protocol", "check_capture", "px_per_period",
+    "load_spec", "as_spec", "spec_verdict", "spec_channels", "spec_limits", "resolve_protocol", "check_capture", "px_per_period",
 ]
 
-_SYMBOL = {"phi_eff": "phi_eff", "phi_shear": "phi_shear", "phi_total": "phi_total"}
+_SYMBOL = {"phi_eff": "phi_eff", "phi_shear": "phi_shear", "phi_total": "phi_total",
+           "phi_eff_sigma": "sigma(phi_eff)", "phi_shear_sigma": "sigma(phi_shear)"}
 _STAT_TEXT = {"mean_abs": "mean |{c}|", "std": "std {c}", "p95_abs": "p95 |{c}|", "max_abs": "max |{c}|"}
 
 
@@ -76,7 +82,7 @@ class Criterion(BaseModel):
 
     model_config = MODEL_CONFIG
 
-    channel: Literal["phi_eff", "phi_shear", "phi_total"]
+    channel: Literal["phi_eff", "phi_shear", "phi_total", "phi_eff_sigma", "phi_shear_sigma"]
     statistic: Literal["mean_abs", "std", "p95_abs", "max_abs", "area_over"]
     max_mD: float | None = Field(None, ge=0, le=1e6, description="upper limit of the statistic, mD")
     threshold_mD: float | None = Field(None, ge=0, le=1e6, description="area_over: pixel threshold on |phi|, mD")
@@ -388,6 +394,11 @@ def as_spec(spec):
         return validate_model(Spec, data, "specification", "the given mapping",
                               "see docs/industrial_workflow.md for the format"), ""
     return load_spec(spec)
+
+
+def spec_channels(spec):
+    """Channels the criteria of ``spec`` judge (those of :data:`glassdist.report.stats.STATISTIC_FIELDS`), in order."""
+    return tuple(dict.fromkeys(c.channel for c in spec.criteria))
 
 
 def spec_limits(spec):

@@ -18,6 +18,8 @@ import numpy as np
 
 __all__ = [
     "CHANNEL_FIELDS",
+    "UNCERTAINTY_FIELDS",
+    "STATISTIC_FIELDS",
     "STATISTICS",
     "channel_statistics",
     "area_over_percent",
@@ -28,6 +30,12 @@ __all__ = [
 
 #: channel name -> attribute of the analysis result holding its field (mD)
 CHANNEL_FIELDS = {"phi_eff": "phi_eff_mD", "phi_shear": "phi_shear_mD", "phi_total": "phi_total_mD"}
+
+#: standard-uncertainty channels a specification may also judge -> their fields (mD)
+UNCERTAINTY_FIELDS = {"phi_eff_sigma": "phi_eff_sigma_mD", "phi_shear_sigma": "phi_shear_sigma_mD"}
+
+#: every channel statistics can be taken of
+STATISTIC_FIELDS = {**CHANNEL_FIELDS, **UNCERTAINTY_FIELDS}
 
 #: statistics every channel reports (mD), in table order
 STATISTICS = ("mean_abs", "mean", "std", "p95_abs", "max_abs")

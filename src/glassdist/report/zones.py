@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .stats import CHANNEL_FIELDS, channel_statistics
+from .stats import CHANNEL_FIELDS, STATISTIC_FIELDS, channel_statistics
 
 __all__ = ["PaneFrame", "distance_to_outside", "fill_holes", "pane_frame", "pane_frame_from_corners", "pane_frame_from_region", "zone_masks",
            "zone_statistics", "measured_region", "region_statistics"]
@@ -318,18 +318,22 @@ def measured_region(result):
                       else result.valid, dtype=bool)
 
 
-def region_statistics(result, region, *, over_limits_mD=None):
-    """``{channel: statistics}`` of every channel of ``result`` over the pixels of ``region`` (bool, (H, W))."""
+def region_statistics(result, region, *, over_limits_mD=None, channels=tuple(CHANNEL_FIELDS)):
+    """``{channel: statistics}`` of ``channels`` of ``result`` (those it holds) over the pixels of ``region`` (bool, (H, W)).
+
+    ``channels``: names of :data:`glassdist.report.stats.STATISTIC_FIELDS` (default the power
+    channels; a specification may add the uncertainty channels).
+    """
     over_limits_mD = over_limits_mD or {}
     stats = {}
-    for name, attr in CHANNEL_FIELDS.items():
-        f = getattr(result, attr, None)
+    for name in channels:
+        f = getattr(result, STATISTIC_FIELDS[name], None)
         if f is not None:
             stats[name] = channel_statistics(f, region, over_limits_mD=over_limits_mD.get(name, ()))
     return stats
 
 
-def zone_statistics(result, frame, zones, *, over_limits_mD=None, masks=None):
+def zone_statistics(result, frame, zones, *, over_limits_mD=None, masks=None, channels=tuple(CHANNEL_FIELDS)):
     """Statistics and coverage of every zone.
 
     Parameters
@@ -342,6 +346,8 @@ def zone_statistics(result, frame, zones, *, over_limits_mD=None, masks=None):
         ``{channel: [T, ...]}`` thresholds for the area-over statistics.
     masks : dict, optional
         :func:`zone_masks` already computed.
+    channels : sequence of str
+        As for :func:`region_statistics`.
 
     Returns
     -------
@@ -359,7 +365,7 @@ def zone_statistics(result, frame, zones, *, over_limits_mD=None, masks=None):
         m = masks[z.name]
         area = frame.area_mm2(m)
         analysed = frame.area_mm2(m & measured)
-        stats = region_statistics(result, measured & m, over_limits_mD=over_limits_mD)
+        stats = region_statistics(result, measured & m, over_limits_mD=over_limits_mD, channels=channels)
         out[z.name] = {
             "definition": z.describe(), "area_mm2": area, "analysed_area_mm2": analysed,
             "coverage_percent": 100.0 * analysed / area if area > 0 else math.nan, "statistics": stats,
