@@ -40,7 +40,8 @@ def fake_result(shape=(96, 128), *, eff_mD=-40.0, shear_mD=12.0, seed=0, method=
     # the result interface on a 1 px analysis grid (the pixel grid itself)
     return SimpleNamespace(
         field_specs=lambda: tuple(f for f in FIELDS if f.name in fields), grid_field=fields.__getitem__,
-        pixel_field=lambda name: fields[name].copy(), grid_valid=valid, analysis_grid=SamplingGrid(shape, shape),
+        pixel_field=lambda name: fields[name].copy(), grid_valid=valid, grid_trusted=valid, trusted=valid,
+        analysis_grid=SamplingGrid(shape, shape),
         method=method, phi_eff_mD=eff, phi_shear_mD=shear, phi_total_mD=np.hypot(eff, shear),
         axis_deg=axis, valid=valid, displacement_mm=disp, displacement_detrended_mm=disp,
         mm_per_px=0.5, sigma_mm=2.0, detrend_degree=2, pitch_mm=5.0, distance_m=1.5,
