@@ -141,6 +141,17 @@ def _gaussian_transfer(shape, cov_idx: np.ndarray) -> np.ndarray:
 _CORRECTION_SUPPORT = 12
 
 
+def _fft_shape(data_shape, cov_idx: np.ndarray, with_correction: bool):
+    """``(shape, wide)``: the FFT shape of :func:`_kernel_spectrum`, and whether the kernel reaches beyond the data."""
+    sd = np.sqrt(np.maximum([cov_idx[1, 1], cov_idx[0, 0]], 0.0))  # (rows, cols), samples
+    extra = _CORRECTION_SUPPORT if with_correction else 0
+    reach = [int(np.ceil(4.0 * s)) + 1 + extra for s in sd]
+    if not any(r > n for r, n in zip(reach, data_shape)):
+        return (sfft.next_fast_len(data_shape[0] + reach[0]), sfft.next_fast_len(data_shape[1] + reach[1], real=True)), False
+    return tuple(sfft.next_fast_len(min(n + r, 2 * n + 2 * extra + 2), real=(i == 1))
+                 for i, (n, r) in enumerate(zip(data_shape, reach))), True
+
+
 def _kernel_spectrum(data_shape, cov_idx: np.ndarray, step_px, correction):
     """FFT shape and kernel transfer (rfft2 layout) for a linear convolution of ``data_shape`` samples.
 
@@ -150,18 +161,10 @@ def _kernel_spectrum(data_shape, cov_idx: np.ndarray, step_px, correction):
     Gaussian transfer on a grid padded by its reach. The cost therefore does not grow
     with sigma.
     """
-    sd = np.sqrt(np.maximum([cov_idx[1, 1], cov_idx[0, 0]], 0.0))  # (rows, cols), samples
-    extra = _CORRECTION_SUPPORT if correction is not None else 0
-    reach = [int(np.ceil(4.0 * s)) + 1 + extra for s in sd]
-    wide = any(r > n for r, n in zip(reach, data_shape))
+    shape, wide = _fft_shape(data_shape, cov_idx, correction is not None)
     if not wide:
-        shape = (sfft.next_fast_len(data_shape[0] + reach[0]), sfft.next_fast_len(data_shape[1] + reach[1], real=True))
         T = _gaussian_transfer(shape, cov_idx)
     else:
-        shape = tuple(
-            sfft.next_fast_len(min(n + r, 2 * n + 2 * extra + 2), real=(i == 1))
-            for i, (n, r) in enumerate(zip(data_shape, reach))
-        )
         # The kernel's samples on the periodic FFT grid (offsets wrapped to [-P/2, P/2)):
         # exact where the convolution of the data can reach.
         dy = (np.arange(shape[0]) + shape[0] // 2) % shape[0] - shape[0] // 2
@@ -186,7 +189,7 @@ def _kernel_spectrum(data_shape, cov_idx: np.ndarray, step_px, correction):
 def masked_filter(
     field: np.ndarray, weight: np.ndarray, cov_px: np.ndarray, step_px=(1.0, 1.0), *, correction=None,
     min_weight: float = 0.02, order: int = 1,
-) -> np.ndarray:
+):
     """Normalised convolution restricted to a region with the kernel ``G_cov * C``.
 
     The kernel's transfer is the Gaussian of covariance ``cov_px`` times
@@ -205,7 +208,8 @@ def masked_filter(
 
     The cost is that of a few FFTs of at most twice the field's size along each axis,
     independent of the kernel's width (a kernel wider than the region is sampled over
-    the region's extent only).
+    the region's extent only). Several corrections (a list) filter the same field with
+    each kernel from one forward transform of the moments.
 
     Parameters
     ----------
@@ -217,40 +221,66 @@ def masked_filter(
         no smoothing.
     step_px : (float, float)
         Sample spacing (sy, sx), px.
-    correction : callable (fy, fx) -> ndarray, optional
+    correction : callable (fy, fx) -> ndarray, or list of (callable or None), optional
         Extra transfer multiplying the Gaussian's, frequencies in cycles/px.
+
+    Returns
+    -------
+    ndarray (h, w), or a list of them (one per correction) when ``correction`` is a list.
 
     References
     ----------
     Knutsson & Westin (1993), "Normalized and differential convolution", CVPR.
     """
-    f = np.where(weight > 0, np.nan_to_num(field), 0.0)
-    wgt = (weight > 0).astype(float)
-    if not np.any(cov_px) and correction is None:
-        return np.where(weight > 0, field, np.nan)
+    many = isinstance(correction, (list, tuple))
+    corrections = list(correction) if many else [correction]
+    if not np.any(cov_px) and all(c is None for c in corrections):
+        out = [np.where(weight > 0, field, np.nan) for _ in corrections]
+        return out if many else out[0]
     sy, sx = step_px
     D = np.diag([1.0 / sx, 1.0 / sy])
     cov_idx = D @ np.asarray(cov_px, float) @ D
+    h, w = np.shape(field)
+    spectra = {}  # the moments' transforms, one per FFT shape (kernels with and without a correction)
+    out = []
+    for corr in corrections:
+        shape, T = _kernel_spectrum((h, w), cov_idx, step_px, corr)
+        if shape not in spectra:
+            spectra[shape] = _moment_spectra(field, weight, shape, order)
+        moment_spectra, xx, yy = spectra[shape]
+        moments = sfft.irfft2(moment_spectra * T, s=shape, axes=(-2, -1), workers=-1)[:, :h, :w]
+        out.append(_normalised(moments, xx, yy, cov_idx, min_weight))
+    return out if many else out[0]
+
+
+def _moment_spectra(field, weight, shape, order):
+    """Forward transforms (rfft2 of ``shape``) of the weighted moments of the normalised convolution.
+
+    Order 1: ``w, w f, w x, w y, w x^2, w x y, w y^2, w f x, w f y`` (x, y about the centre,
+    samples); order 0: ``w, w f``. Returns ``(spectra, xx, yy)`` (``xx``, ``yy`` None at order 0).
+    """
+    f = np.where(weight > 0, np.nan_to_num(field), 0.0)
+    wgt = (weight > 0).astype(float)
     h, w = f.shape
-    shape, T = _kernel_spectrum((h, w), cov_idx, step_px, correction)
+    if order >= 1:
+        yy, xx = np.mgrid[0:h, 0:w].astype(float)
+        xx -= w / 2.0
+        yy -= h / 2.0
+        wx, wy = wgt * xx, wgt * yy
+        arrays = (wgt, f, wx, wy, wx * xx, wx * yy, wy * yy, f * xx, f * yy)
+    else:
+        xx = yy = None
+        arrays = (wgt, f)
+    return sfft.rfft2(np.stack(arrays), s=shape, axes=(-2, -1), workers=-1), xx, yy
 
-    def conv(*arrays):
-        """Convolution of each array with the kernel, as one batched transform."""
-        st = sfft.rfft2(np.stack(arrays), s=shape, axes=(-2, -1), workers=-1)
-        st *= T
-        return sfft.irfft2(st, s=shape, axes=(-2, -1), workers=-1)[:, :h, :w]
 
+def _normalised(moments, xx, yy, cov_idx, min_weight):
+    """The filtered field from its filtered moments (:func:`_moment_spectra`'s, back in space)."""
     with np.errstate(invalid="ignore", divide="ignore"):
-        if order >= 1:
-            yy, xx = np.mgrid[0:h, 0:w].astype(float)
-            xx -= w / 2.0
-            yy -= h / 2.0
-            wx, wy = wgt * xx, wgt * yy
-            c1, cf, cx, cy, cxx, cxy, cyy, cxf, cyf = conv(wgt, f, wx, wy, wx * xx, wx * yy, wy * yy, f * xx, f * yy)
-        else:
-            c1, cf = conv(wgt, f)
+        c1, cf = moments[0], moments[1]
         out = cf / c1
-        if order >= 1:
+        if xx is not None:
+            _, _, cx, cy, cxx, cxy, cyy, cxf, cyf = moments
             # Moments about each sample (shifted to its own position).
             sx_ = cx - xx * c1
             sy_ = cy - yy * c1
@@ -364,6 +394,49 @@ def channels_from_strain(eps: np.ndarray, distance_m: float):
     return phi_eff, phi_shear, phi_total, axis
 
 
+def _stencil_kernels(sigma_px: float, step_px) -> dict:
+    """Corrections the smoothing applies per output: ``"field"`` (none), and ``"x"``, ``"y"`` where needed.
+
+    A3's stencil passes 1 - w^4/30 (w = 2 pi step nu) of the gradient: it is corrected where
+    the smoothed field still holds content it would attenuate by more than 1e-4 (nu up to
+    where G_sigma falls to 1e-3), as long as that content stays well below the stencil's
+    cut-off (w < 2; a field smoothed less than that is differenced as it is): the fields
+    differenced along x and y are then smoothed with the kernel divided by the stencil's
+    transfer along that axis.
+    """
+    sy, sx = step_px
+    w_max = 2.0 * np.pi * np.sqrt(np.log(1e3) / (2.0 * np.pi**2)) / max(sigma_px, 1e-9) * max(sy, sx)
+    kernels = {"field": None}
+    if 1e-4 < w_max**4 / 30.0 and w_max < 2.0:
+        kernels["x"] = lambda fy, fx: 1.0 / np.maximum(difference_response(sx, fx), MIN_RESPONSE)
+        kernels["y"] = lambda fy, fx: 1.0 / np.maximum(difference_response(sy, fy), MIN_RESPONSE)
+    return kernels
+
+
+def _smooth_regions(field, labels, cov, step_px, corrections: dict, outs: dict) -> None:
+    """Smooth ``field`` in each labelled region with each kernel (:func:`masked_filter`), into ``outs`` (views).
+
+    A sample keeps its own region's value; outside every region, the first region whose
+    extrapolation reaches it.
+    """
+    for r in range(1, int(labels.max(initial=0)) + 1):
+        sel = labels == r
+        if not sel.any():
+            continue
+        # every kernel from one transform of the region's moments
+        filtered = masked_filter(field, sel.astype(float), cov, step_px, correction=list(corrections.values()))
+        for key, s in zip(corrections, filtered):
+            take = np.isfinite(s) & (np.isnan(outs[key]) | sel)
+            outs[key][take] = s[take]
+
+
+def _product(a, b):
+    """The product of two transfers ``(fy, fx) -> ndarray`` (either may be None: the other alone)."""
+    if a is None or b is None:
+        return b if a is None else a
+    return lambda fy, fx: a(fy, fx) * b(fy, fx)
+
+
 def evaluate_displacement(
     displacement_mm: np.ndarray,
     valid: np.ndarray,
@@ -439,18 +512,8 @@ def evaluate_displacement(
     labels = np.where(valid, labels, 0)
     det = polynomial_detrend(displacement_mm, labels, detrend_degree, step_px)
     sigma_px = sigma_mm / mm_per_px
-    sy, sx = step_px
-    # A3's stencil passes 1 - w^4/30 (w = 2 pi step nu) of the gradient: correct it where
-    # the smoothed field still holds content it would attenuate by more than 1e-4 (nu up to
-    # where G_sigma falls to 1e-3), as long as that content stays well below the stencil's
-    # cut-off (w < 2; a field smoothed less than that is differenced as it is).
     s_eff = sigma_px if transfer is None else transfer.effective_sigma_px(sigma_px)
-    w_max = 2.0 * np.pi * np.sqrt(np.log(1e3) / (2.0 * np.pi**2)) / max(s_eff, 1e-9) * max(sy, sx)
-    exact_gradient = 1e-4 < w_max**4 / 30.0 and w_max < 2.0
-    kernels = {"field": None}
-    if exact_gradient:
-        kernels["x"] = lambda fy, fx: 1.0 / np.maximum(difference_response(sx, fx), MIN_RESPONSE)
-        kernels["y"] = lambda fy, fx: 1.0 / np.maximum(difference_response(sy, fy), MIN_RESPONSE)
+    kernels = _stencil_kernels(s_eff, step_px)
     outs = {k: np.full(det.shape, np.nan) for k in kernels}
     for c in range(2):
         if transfer is not None:
@@ -462,24 +525,10 @@ def evaluate_displacement(
                 w, V = np.linalg.eigh(cov - component_blur_px2[c])
                 cov = (V * np.clip(w, 0.0, None)) @ V.T
             base = None
-        for key, extra in kernels.items():
-            if base is None and extra is None:
-                corr = None
-            elif extra is None:
-                corr = base
-            elif base is None:
-                corr = extra
-            else:
-                corr = lambda fy, fx, a=base, b=extra: a(fy, fx) * b(fy, fx)  # noqa: E731
-            for r in range(1, int(labels.max(initial=0)) + 1):
-                sel = labels == r
-                if not sel.any():
-                    continue
-                s = masked_filter(det[..., c], sel.astype(float), cov, step_px, correction=corr)
-                take = np.isfinite(s) & (np.isnan(outs[key][..., c]) | sel)
-                outs[key][..., c][take] = s[take]
+        _smooth_regions(det[..., c], labels, cov, step_px, {k: _product(base, e) for k, e in kernels.items()},
+                        {k: o[..., c] for k, o in outs.items()})
     smooth = outs["field"]
-    grad_src = (outs["x"], outs["y"]) if exact_gradient else None
+    grad_src = (outs["x"], outs["y"]) if "x" in outs else None
     eps = strain_tensor(smooth, step_px, mm_per_px=mm_per_px, jacobian=jacobian, for_gradient=grad_src)
     disp_out = smooth
     if frame_rotation is not None:
