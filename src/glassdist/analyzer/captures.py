@@ -315,6 +315,27 @@ def analyze_captures(
     if len(images) == 1:
         return analyze(images[0], pitch_mm=pitch_mm, distance_m=distance_m, reference=reference, params=params,
                        mask=mask, pattern=pattern)
+    _check_same_camera(images)
+    warn: list[str] = []
+    with _routed_warnings(warn):
+        meas = _measured_captures(images, pitch_mm, distance_m, reference, params, mask, pattern, warn)
+        total, count, records = _registered_sums(meas)
+        ag, n = _averaged_grid(meas[0], total, count, len(meas), warn)
+        evaluated = _evaluate(meas[0], ag, warn)
+    for r in records:
+        log.info("capture %(capture)d: grid offset %(grid_offset)s, largest shift %(max_shift_px).2f px", r)
+    res = _result(meas[0], evaluated, warn, extra_fields={"capture_count": count.astype(np.int16)}, n_regions=n)
+    return replace(res, captures=tuple(records))
+
+
+def _check_same_camera(images: list) -> None:
+    """Raise :class:`~glassdist.errors.InputError` unless every capture has the first one's size.
+
+    Parameters
+    ----------
+    images : list of ndarray (H, W)
+        The captures, the first defining the frame.
+    """
     shape = np.shape(images[0])
     for i, img in enumerate(images[1:], start=2):
         if np.shape(img) != shape:
@@ -322,55 +343,116 @@ def analyze_captures(
                 f"capture {i} is {np.shape(img)[1]}x{np.shape(img)[0]} px but the first is {shape[1]}x{shape[0]} px; "
                 "captures of one set-up come from the same camera"
             )
-    warn: list[str] = []
-    with _routed_warnings(warn):
-        if reference is not None and not isinstance(reference, ReferenceModel):
-            reference = prepare_reference(reference, params=_resolve_params(params, pattern))
-        meas = []
-        for i, img in enumerate(images, start=1):
-            w_i: list[str] = []
-            meas.append(_measure(img, pitch_mm, distance_m, reference, params, mask, pattern, w_i))
-            warn.extend(w if i == 1 else f"capture {i}: {w}" for w in w_i if i == 1 or w not in warn)
-        m1 = meas[0]
-        degree = m1.inputs.params.detrend_degree
-        yy, xx = m1.ag.grid.coords()
-        U1_base = np.stack(apply_inverse(m1.baseline, xx, yy), axis=-1)
-        G1 = _grid_homography(m1, _logical(m1))
-        total = np.zeros(m1.ag.phases.shape)
-        count = np.zeros(m1.ag.grid.shape, np.int32)
-        first = _phases(m1)
-        ok = np.all(np.isfinite(first), axis=-1)
-        total[ok] += first[ok]
+
+
+def _measured_captures(images: list, pitch_mm: float, distance_m: float, reference, params, mask, pattern,
+                       warn: list[str]) -> list[_Measurement]:
+    """Every capture measured up to its analysis grid (F1-F4, Block I), the reference prepared once.
+
+    Parameters
+    ----------
+    images : list of ndarray (H, W)
+        Grey photos in [0, 1].
+    pitch_mm, distance_m, reference, params, mask, pattern
+        As for :func:`analyze_captures`.
+    warn : list of str
+        Receives the warnings: the first capture's as they are, a later capture's prefixed
+        with its number and only when the first did not give the same one.
+
+    Returns
+    -------
+    list of _Measurement
+        One per capture, in order.
+    """
+    if reference is not None and not isinstance(reference, ReferenceModel):
+        reference = prepare_reference(reference, params=_resolve_params(params, pattern))
+    meas = []
+    for i, img in enumerate(images, start=1):
+        w_i: list[str] = []
+        meas.append(_measure(img, pitch_mm, distance_m, reference, params, mask, pattern, w_i))
+        warn.extend(w if i == 1 else f"capture {i}: {w}" for w in w_i if i == 1 or w not in warn)
+    return meas
+
+
+def _registered_sums(meas: list[_Measurement]) -> tuple[np.ndarray, np.ndarray, list[dict]]:
+    """Every capture's phases carried onto the first capture's grid and summed where valid.
+
+    Parameters
+    ----------
+    meas : list of _Measurement
+        The captures, the first defining the frame.
+
+    Returns
+    -------
+    total : ndarray (h, w, 2)
+        Sum of the registered phases (rad) on the first capture's analysis grid.
+    count : ndarray (h, w) of int32
+        How many captures each sample sums.
+    records : list of dict
+        One per capture: grid offset, carrier permutation, largest shift (px, over the first
+        capture's trusted samples) and valid fraction.
+    """
+    m1 = meas[0]
+    degree = m1.inputs.params.detrend_degree
+    yy, xx = m1.ag.grid.coords()
+    U1_base = np.stack(apply_inverse(m1.baseline, xx, yy), axis=-1)
+    G1 = _grid_homography(m1, _logical(m1))
+    total = np.zeros(m1.ag.phases.shape)
+    count = np.zeros(m1.ag.grid.shape, np.int32)
+    first = _phases(m1)
+    ok = np.all(np.isfinite(first), axis=-1)
+    total[ok] += first[ok]
+    count += ok
+    records = [{"capture": 1, "grid_offset": [0, 0], "carrier_permutation": np.eye(2).tolist(), "max_shift_px": 0.0,
+                "valid_fraction": float(ok.mean())}]
+    trusted = trusted_on(m1.quality, m1.ag.grid.shape)  # shifts read where capture 1 is trusted
+    for i, mk in enumerate(meas[1:], start=2):
+        o, P, ph, moved = _register_capture(m1, U1_base, G1, mk, degree)
+        ph = _aligned_to_first(ph, first, degree)
+        ok = np.all(np.isfinite(ph), axis=-1)
+        total[ok] += ph[ok]
         count += ok
-        records = [{"capture": 1, "grid_offset": [0, 0], "carrier_permutation": np.eye(2).tolist(), "max_shift_px": 0.0,
-                    "valid_fraction": float(ok.mean())}]
-        trusted = trusted_on(m1.quality, m1.ag.grid.shape)  # shifts read where capture 1 is trusted
-        for i, mk in enumerate(meas[1:], start=2):
-            o, P, ph, moved = _register_capture(m1, U1_base, G1, mk, degree)
-            ph = _aligned_to_first(ph, first, degree)
-            ok = np.all(np.isfinite(ph), axis=-1)
-            total[ok] += ph[ok]
-            count += ok
-            records.append({"capture": i, "grid_offset": [int(o[0]), int(o[1])], "carrier_permutation": (P + 0.0).tolist(),
-                            "max_shift_px": float(np.nanmax(np.where(trusted, moved, np.nan))),
-                            "valid_fraction": float(ok.mean())})
-        valid = count > 0
-        with np.errstate(invalid="ignore", divide="ignore"):
-            avg = np.where(valid[..., None], total / np.maximum(count, 1)[..., None], np.nan).astype(np.float32)
-        p = m1.inputs.params
-        labels, n = label_regions(valid, max(int(p.min_region_fraction * valid.size), 16))
-        valid = labels > 0
-        avg[~valid] = np.nan
-        # Reported: the averaged region and the first capture's partial border blocks around it
-        # (smoothly extended, as for one capture).
-        report = valid | (m1.ag.report & ndimage.binary_dilation(valid))
-        ag = _AnalysisGrid(m1.ag.grid, avg, valid, labels, report, None, m1.ag.transfer)
-        partial = float(np.mean(count[valid] < len(meas))) if valid.any() else 0.0
-        if partial > 0.05:
-            warn.append(f"{100 * partial:.0f}% of the averaged region is covered by fewer than all "
-                        f"{len(meas)} captures (capture_count shows where)")
-        evaluated = _evaluate(m1, ag, warn)
-    for r in records:
-        log.info("capture %(capture)d: grid offset %(grid_offset)s, largest shift %(max_shift_px).2f px", r)
-    res = _result(m1, evaluated, warn, extra_fields={"capture_count": count.astype(np.int16)}, n_regions=n)
-    return replace(res, captures=tuple(records))
+        records.append({"capture": i, "grid_offset": [int(o[0]), int(o[1])], "carrier_permutation": (P + 0.0).tolist(),
+                        "max_shift_px": float(np.nanmax(np.where(trusted, moved, np.nan))),
+                        "valid_fraction": float(ok.mean())})
+    return total, count, records
+
+
+def _averaged_grid(m1: _Measurement, total: np.ndarray, count: np.ndarray, n_captures: int,
+                   warn: list[str]) -> tuple[_AnalysisGrid, int]:
+    """The first capture's analysis grid carrying the average of the registered phases.
+
+    Parameters
+    ----------
+    m1 : _Measurement
+        The first capture.
+    total, count : ndarray
+        As returned by :func:`_registered_sums`.
+    n_captures : int
+        How many captures were summed.
+    warn : list of str
+        Receives a warning when more than 5% of the averaged region misses a capture.
+
+    Returns
+    -------
+    ag : _AnalysisGrid
+        Average phases (rad, float32, NaN outside the region), its regions and the report mask.
+    n : int
+        Number of regions kept.
+    """
+    valid = count > 0
+    with np.errstate(invalid="ignore", divide="ignore"):
+        avg = np.where(valid[..., None], total / np.maximum(count, 1)[..., None], np.nan).astype(np.float32)
+    p = m1.inputs.params
+    labels, n = label_regions(valid, max(int(p.min_region_fraction * valid.size), 16))
+    valid = labels > 0
+    avg[~valid] = np.nan
+    # Reported: the averaged region and the first capture's partial border blocks around it
+    # (smoothly extended, as for one capture).
+    report = valid | (m1.ag.report & ndimage.binary_dilation(valid))
+    ag = _AnalysisGrid(m1.ag.grid, avg, valid, labels, report, None, m1.ag.transfer)
+    partial = float(np.mean(count[valid] < n_captures)) if valid.any() else 0.0
+    if partial > 0.05:
+        warn.append(f"{100 * partial:.0f}% of the averaged region is covered by fewer than all "
+                    f"{n_captures} captures (capture_count shows where)")
+    return ag, n
