@@ -511,7 +511,36 @@ def evaluate_displacement(
         labels = valid.astype(np.int32)
     labels = np.where(valid, labels, 0)
     det = polynomial_detrend(displacement_mm, labels, detrend_degree, step_px)
-    sigma_px = sigma_mm / mm_per_px
+    outs = _smoothed_components(det, labels, sigma_mm / mm_per_px, step_px, transfer, component_blur_px2)
+    grad_src = (outs["x"], outs["y"]) if "x" in outs else None
+    eps = strain_tensor(outs["field"], step_px, mm_per_px=mm_per_px, jacobian=jacobian, for_gradient=grad_src)
+    inval = ~(valid if report_mask is None else np.asarray(report_mask, bool))
+    return _camera_frame_channels(outs["field"], eps, distance_m, frame_rotation, inval)
+
+
+def _smoothed_components(det: np.ndarray, labels: np.ndarray, sigma_px: float, step_px, transfer,
+                         component_blur_px2: np.ndarray | None) -> dict:
+    """The detrended field smoothed to ``sigma_px`` per component, and the stencil-corrected copies A3 differences.
+
+    Parameters
+    ----------
+    det : ndarray (h, w, 2)
+        Detrended displacement, mm.
+    labels : ndarray of int (h, w)
+        Regions smoothed independently (0: outside every region).
+    sigma_px : float
+        Reporting smoothing scale, px.
+    step_px : (float, float)
+        Sample spacing (sy, sx), px.
+    transfer, component_blur_px2
+        As for :func:`evaluate_displacement`.
+
+    Returns
+    -------
+    dict of ndarray (h, w, 2)
+        ``"field"``: the smoothed field (NaN where no region reaches); ``"x"``, ``"y"``: the
+        fields to difference along x and y, where :func:`_stencil_kernels` asks for them.
+    """
     s_eff = sigma_px if transfer is None else transfer.effective_sigma_px(sigma_px)
     kernels = _stencil_kernels(s_eff, step_px)
     outs = {k: np.full(det.shape, np.nan) for k in kernels}
@@ -527,16 +556,36 @@ def evaluate_displacement(
             base = None
         _smooth_regions(det[..., c], labels, cov, step_px, {k: _product(base, e) for k, e in kernels.items()},
                         {k: o[..., c] for k, o in outs.items()})
-    smooth = outs["field"]
-    grad_src = (outs["x"], outs["y"]) if "x" in outs else None
-    eps = strain_tensor(smooth, step_px, mm_per_px=mm_per_px, jacobian=jacobian, for_gradient=grad_src)
+    return outs
+
+
+def _camera_frame_channels(smooth: np.ndarray, eps: np.ndarray, distance_m: float, frame_rotation,
+                           inval: np.ndarray) -> Channels:
+    """A3 channels, with the strain and the displacement turned back to the camera frame, NaN at ``inval``.
+
+    Parameters
+    ----------
+    smooth : ndarray (h, w, 2)
+        Smoothed displacement in the components' frame, mm.
+    eps : ndarray (h, w, 2, 2)
+        Strain tensor in the components' frame.
+    distance_m : float
+        Glass-to-backdrop distance L, m.
+    frame_rotation : ndarray (2, 2) or None
+        As for :func:`evaluate_displacement`.
+    inval : ndarray of bool (h, w)
+        Where nothing is reported.
+
+    Returns
+    -------
+    Channels
+    """
     disp_out = smooth
     if frame_rotation is not None:
         R = np.asarray(frame_rotation)
         eps = R.T @ eps @ R
         disp_out = smooth @ R  # row-vector form of R^T delta
     phi_eff, phi_shear, phi_total, axis = channels_from_strain(eps, distance_m)
-    inval = ~(valid if report_mask is None else np.asarray(report_mask, bool))
     for a in (phi_eff, phi_shear, phi_total, axis):
         a[inval] = np.nan
     disp_out = disp_out.copy()
