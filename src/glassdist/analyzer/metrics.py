@@ -50,6 +50,7 @@ __all__ = [
     "channels_from_strain",
     "evaluate_displacement",
     "channel_statistics",
+    "percentile",
 ]
 
 
@@ -630,5 +631,50 @@ def channel_statistics(field: np.ndarray, valid: np.ndarray | None = None, *, ov
            "n_valid": int(x.size)}
     if limits:
         out["over_percent"] = {t: float(100.0 * np.count_nonzero(a > t) / a.size) for t in limits}
-    out["p95_abs"] = float(np.percentile(a, 95, overwrite_input=True))  # reorders a: after the other statistics
+    out["p95_abs"] = percentile(a, 95.0)
     return out
+
+
+def percentile(values: np.ndarray, q: float) -> float:
+    """``numpy.percentile(values, q)`` (linear method) of a 1-D array, partitioning a bracket only.
+
+    The two order statistics around rank ``q / 100 (n - 1)`` are located from a strided
+    sample of ~65 000 values: a bracket of ranks 6 standard errors wide either side of
+    the sample quantile holds them unless the sample misleads, which a count of the
+    values below the bracket detects (then the whole array is partitioned). On a
+    24 Mpx channel this costs two comparisons and a small partition instead of an
+    introselect over every value. The result is bit-identical to :func:`numpy.percentile`.
+
+    Parameters
+    ----------
+    values : ndarray
+        Finite values, any shape (flattened); not modified.
+    q : float
+        Percentile, 0-100.
+
+    Returns
+    -------
+    float
+    """
+    a = np.asarray(values).ravel()
+    n = a.size
+    if n < 1 << 18:
+        return float(np.percentile(a, q))
+    virtual = (n - 1) * np.true_divide(q, 100)
+    k = int(np.floor(virtual))
+    gamma = float(virtual - k)
+    k1 = min(k + 1, n - 1)
+    s = np.sort(a[:: n >> 16])
+    j = virtual / (n - 1) * (s.size - 1)
+    margin = 6.0 * np.sqrt(s.size * 0.25) + 2.0
+    lo = s[max(int(j - margin), 0)]
+    hi = s[min(int(np.ceil(j + margin)), s.size - 1)]
+    below = int(np.count_nonzero(a < lo))
+    inside = a[(a >= lo) & (a <= hi)]
+    if below <= k and below + inside.size > k1:
+        low, high = np.partition(inside, (k - below, k1 - below))[[k - below, k1 - below]]
+    else:  # the sample misled: every value
+        low, high = np.partition(a, (k, k1))[[k, k1]]
+    # numpy's linear interpolation (_lerp), operation for operation
+    diff = high - low
+    return float(high - diff * (1 - gamma) if gamma >= 0.5 else low + diff * gamma)
