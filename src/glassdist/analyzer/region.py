@@ -218,9 +218,48 @@ def valid_region(
     margin_px, edge_margin_px : float
         Contamination margins at excluded areas and at the image edges, px.
     """
+    period = max(carriers.k1.period_px, carriers.k2.period_px)
+    modulated, half, fast, ok = _signal_tests(phases, coherences, mods, carriers, grid, p, period)
+    labels = _excluded_causes(ok, fast, period, grid)
+    in_mask = np.ones(grid.shape, bool)
+    if user_mask is not None:
+        in_mask = downsample_mask(user_mask, grid)
+    # The user mask excludes no phase: it is applied after the erosion (no margin around it).
+    kept = _kept_beyond_margins(labels, ok, modulated, half, grid, margin_px, edge_margin_px)
+    _warn_beyond_range(labels, in_mask, p, warn)
+    valid = _without_residues(phases, kept & in_mask, labels, warn)
+    min_size = int(p.min_region_fraction * valid.size)
+    regions, n = label_regions(valid, max(min_size, 16))
+    labels[valid & (regions == 0)] = FRAGMENT
+    labels[~in_mask] = USER_MASK
+    return Region(regions > 0, regions, n, labels)
+
+
+def _signal_tests(phases, coherences, mods, carriers: F.CarrierPair, grid: F.SamplingGrid, p,
+                  period: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The per-sample tests of the demodulated signals that decide where the phase is measured.
+
+    Parameters
+    ----------
+    phases, coherences, mods, carriers, grid, p
+        As for :func:`valid_region`.
+    period : float
+        The longer carrier period, px.
+
+    Returns
+    -------
+    modulated : ndarray of bool (h, w)
+        The grid is seen: every modulation clears its global and its local threshold.
+    half : ndarray of bool (h, w)
+        Some modulation is below half its local level (the dark side of an opaque edge).
+    fast : ndarray of bool (h, w)
+        Modulated, but the local grid frequency departs from a carrier beyond
+        ``max_frequency_deviation``.
+    ok : ndarray of bool (h, w)
+        Measurable: modulated, coherent and not fast.
+    """
     import cv2
 
-    period = max(carriers.k1.period_px, carriers.k2.period_px)
     sy, sx = grid.step
     size = (max(3, int(4 * period / sy) | 1), max(3, int(4 * period / sx) | 1))
     box = np.ones(size, np.uint8)
@@ -248,7 +287,21 @@ def valid_region(
         dev = np.maximum(dev, local_frequency_deviation(ph, c, grid))
     fast = modulated & (dev > p.max_frequency_deviation)
     ok = modulated & coherent & ~fast
+    return modulated, half, fast, ok
 
+
+def _excluded_causes(ok: np.ndarray, fast: np.ndarray, period: float, grid: F.SamplingGrid) -> np.ndarray:
+    """Quality labels (uint8): :data:`ANALYSED` where ``ok``, else the cause of the exclusion.
+
+    Parameters
+    ----------
+    ok, fast : ndarray of bool (h, w)
+        As returned by :func:`_signal_tests`.
+    period : float
+        The longer carrier period, px.
+    grid : SamplingGrid
+    """
+    sy, sx = grid.step
     labels = np.full(grid.shape, ANALYSED, np.uint8)
     bad = ~ok
     if bad.any():
@@ -257,10 +310,28 @@ def valid_region(
         r = max(1, int(round(period / min(sy, sx))))
         near_fast = ndimage.binary_dilation(fast, iterations=r) if fast.any() else fast
         labels[bad] = np.where(near_fast[bad], BEYOND_RANGE, LOW_MODULATION)
-    in_mask = np.ones(grid.shape, bool)
-    if user_mask is not None:
-        in_mask = downsample_mask(user_mask, grid)
-    # The user mask excludes no phase: it is applied after the erosion (no margin around it).
+    return labels
+
+
+def _kept_beyond_margins(labels: np.ndarray, ok, modulated, half, grid: F.SamplingGrid, margin_px: float,
+                         edge_margin_px: float) -> np.ndarray:
+    """Measurable samples beyond the contamination margins of the excluded areas and the image edges.
+
+    Parameters
+    ----------
+    labels : ndarray of uint8 (h, w)
+        Quality labels; the margin samples take the cause of the nearest excluded sample and
+        the edge samples :data:`IMAGE_EDGE` (in place).
+    ok, modulated, half : ndarray of bool (h, w)
+        As returned by :func:`_signal_tests`.
+    grid : SamplingGrid
+    margin_px, edge_margin_px : float
+        As for :func:`valid_region`.
+
+    Returns
+    -------
+    ndarray of bool (h, w)
+    """
     # At the image edges a sample stays while part of its cell lies beyond the margin; the
     # pixels inside it are trimmed on the pixel grid (:func:`trim_edges`).
     # Excluded areas are located on the sample grid only (to half a step): that is added to
@@ -281,6 +352,11 @@ def valid_region(
         if ok.all():
             labels[margin] = IMAGE_EDGE
     labels[at_edge] = IMAGE_EDGE
+    return kept
+
+
+def _warn_beyond_range(labels: np.ndarray, in_mask: np.ndarray, p, warn: list[str]) -> None:
+    """Append a warning to ``warn`` when over 1% of the user's region is labelled :data:`BEYOND_RANGE`."""
     beyond = float(np.count_nonzero((labels == BEYOND_RANGE) & in_mask)) / max(int(np.count_nonzero(in_mask)), 1)
     if beyond > 0.01:
         warn.append(
@@ -288,8 +364,27 @@ def valid_region(
             f"more than {100 * p.max_frequency_deviation:.0f}% (beyond the bandpass) and was excluded (quality label "
             f"{BEYOND_RANGE}); use a finer grid or a shorter distance L"
         )
-    valid = kept & in_mask
-    res = np.zeros(grid.shape, bool)
+
+
+def _without_residues(phases, valid: np.ndarray, labels: np.ndarray, warn: list[str]) -> np.ndarray:
+    """``valid`` less the samples next to a phase residue of either wrapped phase.
+
+    Parameters
+    ----------
+    phases : sequence of ndarray (h, w)
+        Wrapped phases, rad.
+    valid : ndarray of bool (h, w)
+        The region so far (updated in place).
+    labels : ndarray of uint8 (h, w)
+        Quality labels; the removed samples become :data:`PHASE_RESIDUE` (in place).
+    warn : list of str
+        Receives a warning when over 1% of the region is removed.
+
+    Returns
+    -------
+    ndarray of bool (h, w)
+    """
+    res = np.zeros(valid.shape, bool)
     for ph in phases:
         res |= residues(ph)
     if res.any():
@@ -299,11 +394,7 @@ def valid_region(
             warn.append(f"{100 * frac:.1f}% of the region has phase residues (noise, occlusion or too strong distortion) and was excluded")
         labels[res & valid] = PHASE_RESIDUE
         valid &= ~res
-    min_size = int(p.min_region_fraction * valid.size)
-    regions, n = label_regions(valid, max(min_size, 16))
-    labels[valid & (regions == 0)] = FRAGMENT
-    labels[~in_mask] = USER_MASK
-    return Region(regions > 0, regions, n, labels)
+    return valid
 
 
 def guard_band(labels: np.ndarray, grid: F.SamplingGrid, guard_px: float) -> np.ndarray:
