@@ -307,12 +307,44 @@ def roll_wave(
     d = _check_field(displacement_mm)
     L = _check_distance(distance_m)
     sy, sx = _step(step_mm)
-    h, w = d.shape[:2]
     ok = np.all(np.isfinite(d), axis=-1)
     nan = float("nan")
     if ok.sum() < 16:
         return RollWave(nan, nan, nan, nan, nan, nan, nan, L)
     f = np.where(ok[..., None], d - d[ok].mean(axis=0), 0.0)
+    k0 = _spectral_peak(f, (sy, sx), min_period_mm, max_period_mm)
+    if k0 is None:
+        return RollWave(nan, nan, nan, nan, nan, nan, 0.0, L)
+    # Refinement: least-squares sinusoid over the valid samples only (masks make the FFT peak leak).
+    yy, xx = np.nonzero(ok)
+    x, y, dv = xx * sx, yy * sy, d[ok]
+    # A regular subset of at most ~40k samples pins five parameters as well as all of them.
+    sub = slice(None, None, max(1, x.size // 40_000))
+    k = _refine_wave_vector(dv[sub], x[sub], y[sub], k0)
+    rss, (_, a, b), tss = _sinusoid_fit(dv, x, y, k)
+    return _fitted_roll_wave(d, (sy, sx), L, k, (a, b), rss, tss)
+
+
+def _spectral_peak(f: np.ndarray, step_mm: tuple[float, float], min_period_mm: float | None,
+                   max_period_mm: float | None) -> np.ndarray | None:
+    """Wave vector ``(kx, ky)`` (cycles/mm) of the peak of the divergence spectrum within the band.
+
+    Parameters
+    ----------
+    f : ndarray (h, w, 2)
+        Displacement less its mean, zero at invalid samples, mm.
+    step_mm : (float, float)
+        Sample spacing (sy, sx), mm.
+    min_period_mm, max_period_mm : float or None
+        As for :func:`roll_wave`.
+
+    Returns
+    -------
+    ndarray (2,) or None
+        The coarse peak, to a fraction of a bin; None when the band holds no power.
+    """
+    sy, sx = step_mm
+    h, w = f.shape[:2]
     # Coarse peak on a zero-padded spectrum (2x: the peak is sampled finely enough for the refinement).
     ny, nx = 2 * h, 2 * w
     D = [np.fft.rfft2(f[..., c], s=(ny, nx)) for c in range(2)]
@@ -324,17 +356,38 @@ def roll_wave(
     hi = 1.0 / (min_period_mm if min_period_mm is not None else 4.0 * max(sy, sx))
     S[(kn < lo) | (kn > hi)] = 0.0
     if not np.any(S > 0):
-        return RollWave(nan, nan, nan, nan, nan, nan, 0.0, L)
+        return None
     iy, ix = np.unravel_index(int(np.argmax(S)), S.shape)
     oy, ox = _parabolic_peak(S, iy, ix)
-    k0 = np.array([fx[0, ix] + ox / (nx * sx), fy[iy, 0] + oy / (ny * sy)])
-    # Refinement: least-squares sinusoid over the valid samples only (masks make the FFT peak leak).
-    yy, xx = np.nonzero(ok)
-    x, y, dv = xx * sx, yy * sy, d[ok]
-    # A regular subset of at most ~40k samples pins five parameters as well as all of them.
-    sub = slice(None, None, max(1, x.size // 40_000))
-    k = _refine_wave_vector(dv[sub], x[sub], y[sub], k0)
-    rss, (_, a, b), tss = _sinusoid_fit(dv, x, y, k)
+    return np.array([fx[0, ix] + ox / (nx * sx), fy[iy, 0] + oy / (ny * sy)])
+
+
+def _fitted_roll_wave(d: np.ndarray, step_mm: tuple[float, float], L: float, k: np.ndarray, ab, rss: float,
+                      tss: float) -> RollWave:
+    """The :class:`RollWave` of the sinusoid fitted with wave vector ``k``.
+
+    Parameters
+    ----------
+    d : ndarray (h, w, 2)
+        Displacement, mm (NaN = invalid).
+    step_mm : (float, float)
+        Sample spacing (sy, sx), mm.
+    L : float
+        Glass-to-backdrop distance, m.
+    k : ndarray (2,)
+        Refined wave vector, cycles/mm.
+    ab : (float, float)
+        Cosine and sine amplitudes of the fit, mm.
+    rss, tss : float
+        Residual and total sums of squares of the fit.
+
+    Returns
+    -------
+    RollWave
+        Direction folded into (-90, 90] deg; peak-to-valley values over the whole field.
+    """
+    sy, sx = step_mm
+    a, b = ab
     kn1 = float(np.hypot(*k))
     e = k / kn1
     period = 1.0 / kn1
