@@ -527,16 +527,67 @@ def resolve_protocol(protocol=None, *, reference_given, pitch_mm=None, distance_
     """
     protocol = protocol or Protocol()
     pinned = protocol.model_dump(exclude_none=True)
+    method = _checked_method(protocol, reference_given, spec_label)
+    given = {"pitch_mm": pitch_mm, "distance_m": distance_m, "pattern": pattern, "sigma_mm": sigma_mm,
+             "detrend_degree": detrend_degree}
+    from_file = _file_settings(params)
+    values, sources = _merged_settings(given, pinned, from_file, spec_label)
+    p_c = _carrier_period_mm(float(values["pitch_mm"]), values["pattern"])
+    overrides = {k: values[k] for k in ("pattern", "detrend_degree") if sources[k] != "default"}
+    values["sigma_mm"], sources["sigma_mm"], passed_on = _sigma_setting(protocol, values, sources, from_file, params,
+                                                                        p_c, spec_label)
+    if passed_on:
+        overrides["sigma_mm"] = values["sigma_mm"]
+    return ResolvedProtocol(method, float(values["pitch_mm"]), float(values["distance_m"]), values["pattern"],
+                            int(values["detrend_degree"]), float(values["sigma_mm"]), overrides, pinned,
+                            {"method": "spec" if protocol.method else "option", "pitch_mm": sources["pitch_mm"],
+                             "distance_m": sources["distance_m"], "pattern": sources["pattern"],
+                             "detrend_degree": sources["detrend_degree"], "sigma_mm": sources["sigma_mm"]})
+
+
+def _checked_method(protocol, reference_given: bool, spec_label: str) -> str:
+    """The analysis method the inputs give (``'comparative'`` with a reference), refused when the protocol pins the other."""
     method = "comparative" if reference_given else "direct"
     if protocol.method is not None and protocol.method != method:
         fix = "give --reference REF (the glass-less photo)" if protocol.method == "comparative" else "leave --reference out"
         raise InputError(f"the protocol of {spec_label} requires the {protocol.method} method; {fix}")
-    given = {"pitch_mm": pitch_mm, "distance_m": distance_m, "pattern": pattern, "sigma_mm": sigma_mm,
-             "detrend_degree": detrend_degree}
+    return method
+
+
+def _file_settings(params) -> dict:
+    """The settings a ``--params`` file sets explicitly (``pattern``, ``sigma_mm``, ``sigma_periods``, ``detrend_degree``)."""
     from_file = {}
     if params is not None:
         from_file = {k: getattr(params, k) for k in ("pattern", "sigma_mm", "sigma_periods", "detrend_degree")
                      if k in params.model_fields_set}
+    return from_file
+
+
+def _merged_settings(given: dict, pinned: dict, from_file: dict, spec_label: str) -> tuple[dict, dict]:
+    """Each option's value from the option, else the pin, else the parameter file, else the default.
+
+    Parameters
+    ----------
+    given : dict
+        The options' values (None: omitted), by setting name.
+    pinned : dict
+        The protocol as written.
+    from_file : dict
+        As returned by :func:`_file_settings`.
+    spec_label : str
+        How errors name the specification.
+
+    Returns
+    -------
+    values, sources : dict
+        The settings known so far (``sigma_mm`` only when given or set in the file) and
+        where each came from.
+
+    Raises
+    ------
+    InputError
+        An option or the file contradicts a pin, or the pitch or distance is given by neither.
+    """
     values, sources = {}, {}
     for key, opt in _OPTION.items():
         pin = pinned.get(key)
@@ -563,8 +614,35 @@ def resolve_protocol(protocol=None, *, reference_given, pitch_mm=None, distance_
     sources.setdefault("pattern", "default")
     values.setdefault("detrend_degree", 2)
     sources.setdefault("detrend_degree", "default")
-    p_c = _carrier_period_mm(float(values["pitch_mm"]), values["pattern"])
-    overrides = {k: values[k] for k in ("pattern", "detrend_degree") if sources[k] != "default"}
+    return values, sources
+
+
+def _sigma_setting(protocol, values: dict, sources: dict, from_file: dict, params, p_c: float,
+                   spec_label: str) -> tuple[float, str, bool]:
+    """The smoothing scale: the protocol's ``sigma_periods`` carrier periods, else the option's or the file's.
+
+    Parameters
+    ----------
+    protocol : Protocol
+    values, sources : dict
+        As returned by :func:`_merged_settings`.
+    from_file : dict
+        As returned by :func:`_file_settings`.
+    params : AnalyzerParams or None
+        The ``--params`` file's parameters.
+    p_c : float
+        Carrier period, mm.
+    spec_label : str
+        How errors name the specification.
+
+    Returns
+    -------
+    sigma_mm : float
+    source : str
+    passed_on : bool
+        Whether the value goes to the analysis as an override (otherwise the parameters'
+        own ``sigma_periods`` gives it).
+    """
     if protocol.sigma_periods is not None:
         want = protocol.sigma_periods * p_c
         have = values.get("sigma_mm")
@@ -573,18 +651,11 @@ def resolve_protocol(protocol=None, *, reference_given, pitch_mm=None, distance_
             raise InputError(f"{via} {have:g} contradicts the protocol of {spec_label} (sigma_periods = "
                              f"{protocol.sigma_periods:g}, i.e. {want:.4g} mm at this pitch and pattern); leave it out "
                              "to use the specification's value")
-        values["sigma_mm"], sources["sigma_mm"] = want, "spec"
-        overrides["sigma_mm"] = want
-    elif "sigma_mm" in values:
-        overrides["sigma_mm"] = values["sigma_mm"]
-    else:
-        periods = from_file.get("sigma_periods", 2.0) if params is not None else 2.0
-        values["sigma_mm"], sources["sigma_mm"] = periods * p_c, ("params" if "sigma_periods" in from_file else "default")
-    return ResolvedProtocol(method, float(values["pitch_mm"]), float(values["distance_m"]), values["pattern"],
-                            int(values["detrend_degree"]), float(values["sigma_mm"]), overrides, pinned,
-                            {"method": "spec" if protocol.method else "option", "pitch_mm": sources["pitch_mm"],
-                             "distance_m": sources["distance_m"], "pattern": sources["pattern"],
-                             "detrend_degree": sources["detrend_degree"], "sigma_mm": sources["sigma_mm"]})
+        return want, "spec", True
+    if "sigma_mm" in values:
+        return values["sigma_mm"], sources["sigma_mm"], True
+    periods = from_file.get("sigma_periods", 2.0) if params is not None else 2.0
+    return periods * p_c, ("params" if "sigma_periods" in from_file else "default"), False
 
 
 def px_per_period(result):
