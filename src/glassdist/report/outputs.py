@@ -779,8 +779,6 @@ def finish_analysis(result, *, out_dir, image_path, reference_path=None, spec_pa
         Invalid specification file, or a capture outside its protocol's limits.
     """
     from ..io import read_image
-    from .html import render_report
-    from .measures import standard_measures
 
     out_dir = Path(out_dir)
     spec, spec_sha = spec or (load_spec(spec_path) if spec_path is not None else (None, ""))
@@ -797,10 +795,8 @@ def finish_analysis(result, *, out_dir, image_path, reference_path=None, spec_pa
     files += [atomic_write_bytes(out_dir / f"{stem}.png", png) for stem, _, png in figs]
     if exports:
         files += [write_fields_npz(result, out_dir / "fields.npz"), *write_fields_tiff(result, out_dir / "tiff")]
-    measures = standard_measures(result).to_dict()
-    if report:
-        html = render_report(result, stats=stats, figures=figs, inputs=inputs, verdict=verdict, valid_percent=cover,
-                             acceptance=acc, measures=measures)
+    measures, html = _measures_and_report(result, acc, figs, inputs, cover, report)
+    if html is not None:
         files.append(atomic_write_text(out_dir / "report.html", html))
     names = [str(p.relative_to(out_dir)) for p in files]
     _update_summary(out_dir / "summary.json", {
@@ -811,6 +807,18 @@ def finish_analysis(result, *, out_dir, image_path, reference_path=None, spec_pa
     _echo_acceptance(acc, out_dir / "report.html" if report else None, echo)
     logger.info("A4 outputs written to %s: %s", out_dir, ", ".join(names))
     return EXIT_SPEC_FAIL if verdict is not None and not verdict.passed else EXIT_OK
+
+
+def _measures_and_report(result, acc, figs, inputs, cover, report):
+    """The standard measures (as a dict) and, when ``report``, the HTML report's text (else None)."""
+    from .html import render_report
+    from .measures import standard_measures
+
+    measures = standard_measures(result).to_dict()
+    if not report:
+        return measures, None
+    return measures, render_report(result, stats=acc.stats, figures=figs, inputs=inputs, verdict=acc.verdict,
+                                   valid_percent=cover, acceptance=acc, measures=measures)
 
 
 @dataclass(frozen=True)
