@@ -519,9 +519,6 @@ def run_batch(panes, out, *, report=False, export=False, runner=None, progress=T
         The batch exit code (0, :data:`~glassdist.report.outputs.EXIT_SPEC_FAIL` or
         :data:`EXIT_PANE_ERRORS`).
     """
-    from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
     runner = runner or subprocess_runner
     out = _prepare_out(out)
     lock = _lock(out)
@@ -539,44 +536,71 @@ def run_batch(panes, out, *, report=False, export=False, runner=None, progress=T
         if records:
             echo(f"resuming: {len(records)} pane(s) already done, {len(todo)} to analyse")
         write_index(panes, out, figures=False)
-        cwd = None
-        if executor is not None and executor.distributed and todo:
-            paths = [out] + [p for pane in todo for p in _input_paths(pane)]
-            cwd = os.getcwd() if any(not Path(p).is_absolute() for p in paths) else None
-            executor.check_paths(files=[p for p in paths[1:] if Path(p).is_file()], folders=[out / "panes"], cwd=cwd)
-            echo(f"analysing {len(todo)} pane(s) on the {executor.description}")
-        columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
-        with Progress(*columns, console=Console(stderr=True), disable=not progress, transient=True) as bar:
-            task = bar.add_task("batch", total=len(panes), completed=len(records))
-
-            def finished(pane, rec):
-                records[pane.id] = rec
-                label = rec.get("verdict") or ("analysed" if rec["status"] == "done" else "ERROR")
-                tail = f": {safe_text(rec['error'])}" if rec["status"] == "error" else ""
-                echo(f"[{len(records)}/{len(panes)}] {pane.id}  {label}  ({rec['seconds']:.1f} s){tail}")
-                write_index(panes, out, figures=False)
-                bar.advance(task)
-
-            if executor is None or not executor.distributed:
-                for pane in todo:
-                    bar.update(task, description=f"analysing {pane.id}")
-                    finished(pane, _run_one(pane, out, runner, report, export))
-            else:
-                bar.update(task, description="analysing")
-                jobs = [(pane, out / "panes", runner, report, export, cwd) for pane in todo]
-                for done in executor.as_completed(_execute_pane, jobs):
-                    pane = todo[done.index]
-                    if done.error is None:
-                        tmp, outcome, seconds = done.value
-                    else:  # the job itself was lost (e.g. its worker died more often than allowed)
-                        tmp, seconds = out / "panes" / f".tmp-{pane.id}-lost", 0.0
-                        outcome = PaneOutcome(1, repr(done.error), f"{type(done.error).__name__}: {done.error}")
-                    finished(pane, _record_pane(pane, out, tmp, outcome, seconds, report, export))
-                for stale in (out / "panes").glob(".tmp-*"):  # of attempts lost with their worker
-                    shutil.rmtree(stale, ignore_errors=True)
+        cwd = _checked_workers(executor, todo, out, echo)
+        _run_panes(panes, todo, out, records, runner, report, export, executor, cwd, progress, echo)
         write_index(panes, out)  # the final index: shared-scale thumbnails and the trend plot
     finally:
         lock.close()
+    return _batch_exit_code(panes, records, echo)
+
+
+def _checked_workers(executor, todo, out, echo):
+    """The working folder the workers resolve relative paths in (None: all absolute, or no cluster).
+
+    On a cluster, every worker is first checked to see the panes' input files and the
+    ``panes`` folder (:meth:`~glassdist.distributed.Executor.check_paths` raises otherwise).
+    """
+    cwd = None
+    if executor is not None and executor.distributed and todo:
+        paths = [out] + [p for pane in todo for p in _input_paths(pane)]
+        cwd = os.getcwd() if any(not Path(p).is_absolute() for p in paths) else None
+        executor.check_paths(files=[p for p in paths[1:] if Path(p).is_file()], folders=[out / "panes"], cwd=cwd)
+        echo(f"analysing {len(todo)} pane(s) on the {executor.description}")
+    return cwd
+
+
+def _run_panes(panes, todo, out, records, runner, report, export, executor, cwd, progress, echo):
+    """Analyse the panes of ``todo`` (here, or as the cluster's futures complete), recording each in ``records``.
+
+    Each finished pane is moved into place (:func:`_record_pane`), echoed, and the index
+    rewritten, so an interrupted batch leaves an index of what is done.
+    """
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
+    with Progress(*columns, console=Console(stderr=True), disable=not progress, transient=True) as bar:
+        task = bar.add_task("batch", total=len(panes), completed=len(records))
+
+        def finished(pane, rec):
+            records[pane.id] = rec
+            label = rec.get("verdict") or ("analysed" if rec["status"] == "done" else "ERROR")
+            tail = f": {safe_text(rec['error'])}" if rec["status"] == "error" else ""
+            echo(f"[{len(records)}/{len(panes)}] {pane.id}  {label}  ({rec['seconds']:.1f} s){tail}")
+            write_index(panes, out, figures=False)
+            bar.advance(task)
+
+        if executor is None or not executor.distributed:
+            for pane in todo:
+                bar.update(task, description=f"analysing {pane.id}")
+                finished(pane, _run_one(pane, out, runner, report, export))
+        else:
+            bar.update(task, description="analysing")
+            jobs = [(pane, out / "panes", runner, report, export, cwd) for pane in todo]
+            for done in executor.as_completed(_execute_pane, jobs):
+                pane = todo[done.index]
+                if done.error is None:
+                    tmp, outcome, seconds = done.value
+                else:  # the job itself was lost (e.g. its worker died more often than allowed)
+                    tmp, seconds = out / "panes" / f".tmp-{pane.id}-lost", 0.0
+                    outcome = PaneOutcome(1, repr(done.error), f"{type(done.error).__name__}: {done.error}")
+                finished(pane, _record_pane(pane, out, tmp, outcome, seconds, report, export))
+            for stale in (out / "panes").glob(".tmp-*"):  # of attempts lost with their worker
+                shutil.rmtree(stale, ignore_errors=True)
+
+
+def _batch_exit_code(panes, records, echo) -> int:
+    """Echo the batch's tally and return its exit code (pane errors before specification failures)."""
     n_err = sum(r["status"] == "error" for r in records.values())
     verdicts = [r.get("verdict") for r in records.values() if r["status"] == "done"]
     echo(f"{len(panes)} panes: {len(verdicts)} analysed ({verdicts.count('PASS')} PASS, {verdicts.count('FAIL')} FAIL, "
