@@ -397,20 +397,25 @@ def coverage_and_uncertainty_sections(folder: Path) -> str:
     ``benchmarks/bench_coverage.py`` and ``benchmarks/calibrate_uncertainty.py`` (they need
     no rendering, so they are not re-run here); absent files give no section.
     """
+    return _coverage_section(folder) + _examples_section(folder) + _calibration_section(folder)
+
+
+def _coverage_section(folder: Path) -> str:
+    """Markdown of ``coverage.json``: coverage against independent peers ("" when absent)."""
     import json
 
-    out = []
     cov = folder / "coverage.json"
-    if cov.is_file():
-        rec = json.loads(cov.read_text())
-        before = {r["case"]: r for r in rec.get("before", {}).get("records", [])}
-        rows = []
-        for r in rec["records"]:
-            b = before.get(r["case"])
-            was = f"{100 * b['analysed']:.1f} / {100 * b['coverage']:.1f} / {100 * b['precision']:.1f} %" if b else "—"
-            rows.append(f"| {r['case']} | {100 * r['agree_area']:.1f} % | {was} | {100 * r['analysed']:.1f} % | "
-                        f"{100 * r['coverage']:.1f} % | {100 * r['precision']:.1f} % | {100 * r['accuracy']:.1f} % |")
-        out.append(f"""
+    if not cov.is_file():
+        return ""
+    rec = json.loads(cov.read_text())
+    before = {r["case"]: r for r in rec.get("before", {}).get("records", [])}
+    rows = []
+    for r in rec["records"]:
+        b = before.get(r["case"])
+        was = f"{100 * b['analysed']:.1f} / {100 * b['coverage']:.1f} / {100 * b['precision']:.1f} %" if b else "—"
+        rows.append(f"| {r['case']} | {100 * r['agree_area']:.1f} % | {was} | {100 * r['analysed']:.1f} % | "
+                    f"{100 * r['coverage']:.1f} % | {100 * r['precision']:.1f} % | {100 * r['accuracy']:.1f} % |")
+    return f"""
 ## Coverage against independent peers
 
 Produced by `{rec['command']}` (the "before" columns: `{rec.get("before", {}).get("command", "—")}`, the analyzer before the quality map). Peers: a
@@ -426,22 +431,29 @@ reported region where glassdist agrees with FCD within {rec['tolerance_periods']
 | case | agree area | before: analysed / coverage / precision | analysed | coverage | precision | accuracy vs FCD |
 |---|---|---|---|---|---|---|
 {chr(10).join(rows)}
-""")
+"""
+
+
+def _examples_section(folder: Path) -> str:
+    """Markdown of ``examples_before_after.json``: real photos before and after the quality map ("" when absent)."""
+    import json
+
     ex = folder / "examples_before_after.json"
-    if ex.is_file():
-        rec = json.loads(ex.read_text())
-        before = {(r["photo"], r["method"]): r for r in rec.get("before", {}).get("records", [])}
+    if not ex.is_file():
+        return ""
+    rec = json.loads(ex.read_text())
+    before = {(r["photo"], r["method"]): r for r in rec.get("before", {}).get("records", [])}
 
-        def cells(r):
-            return (f"{100 * r['valid']:.1f} % | {100 * r['trusted']:.1f} % | {r['p95_eff']:.1f} | {r['max_eff']:.1f} | "
-                    f"{r['max_eff_reported']:.0f}")
+    def cells(r):
+        return (f"{100 * r['valid']:.1f} % | {100 * r['trusted']:.1f} % | {r['p95_eff']:.1f} | {r['max_eff']:.1f} | "
+                f"{r['max_eff_reported']:.0f}")
 
-        rows = []
-        for r in rec["records"]:
-            b = before.get((r["photo"], r["method"]))
-            rows.append(f"| {r['photo']} | {r['method']} | before | {cells(b)} |" if b else "")
-            rows.append(f"| {r['photo']} | {r['method']} | after | {cells(r)} |")
-        out.append(f"""
+    rows = []
+    for r in rec["records"]:
+        b = before.get((r["photo"], r["method"]))
+        rows.append(f"| {r['photo']} | {r['method']} | before | {cells(b)} |" if b else "")
+        rows.append(f"| {r['photo']} | {r['method']} | after | {cells(r)} |")
+    return f"""
 ## Real photos (examples/data): before and after the quality map
 
 Produced by `{rec['command']}`. The factory example's settings (checkerboard, pitch 5 mm, L = 1 m, N = 2);
@@ -453,19 +465,26 @@ after: over the trusted pixels); the last column is the largest |φ_eff| anywher
 | photo | method | version | reported | trusted | p95 \\|φ_eff\\| mD | max \\|φ_eff\\| mD | max in reported region mD |
 |---|---|---|---|---|---|---|---|
 {chr(10).join(x for x in rows if x)}
-""")
+"""
+
+
+def _calibration_section(folder: Path) -> str:
+    """Markdown of ``uncertainty_calibration.json``: calibration of the per-pixel uncertainty ("" when absent)."""
+    import json
+
     cal = folder / "uncertainty_calibration.json"
-    if cal.is_file():
-        rec = json.loads(cal.read_text())
+    if not cal.is_file():
+        return ""
+    rec = json.loads(cal.read_text())
 
-        def cell(r, k):
-            return f"{r[k]['median_ratio']:.2f} ({r[k]['p10']:.2f}–{r[k]['p90']:.2f})"
+    def cell(r, k):
+        return f"{r[k]['median_ratio']:.2f} ({r[k]['p10']:.2f}–{r[k]['p90']:.2f})"
 
-        rows = [f"| {r['pattern']} | {r['period_px']:g} | {r['noise_std']:g} | {r['noise_estimated']:.4f} | "
-                f"{r['sigma_periods']:g} | {r['method']} | {r['phi_eff']['median_sigma']:.3g} | {cell(r, 'phi_eff')} | "
-                f"{cell(r, 'phi_shear')} | {cell(r, 'disp_x')} | {cell(r, 'disp_y')} |" for r in rec["records"]]
-        ratios = [r[k]["median_ratio"] for r in rec["records"] for k in ("phi_eff", "phi_shear", "disp_x", "disp_y")]
-        out.append(f"""
+    rows = [f"| {r['pattern']} | {r['period_px']:g} | {r['noise_std']:g} | {r['noise_estimated']:.4f} | "
+            f"{r['sigma_periods']:g} | {r['method']} | {r['phi_eff']['median_sigma']:.3g} | {cell(r, 'phi_eff')} | "
+            f"{cell(r, 'phi_shear')} | {cell(r, 'disp_x')} | {cell(r, 'disp_y')} |" for r in rec["records"]]
+    ratios = [r[k]["median_ratio"] for r in rec["records"] for k in ("phi_eff", "phi_shear", "disp_x", "disp_y")]
+    return f"""
 ## Per-pixel uncertainty: calibration
 
 Produced by `{rec['command']}` ({rec['seconds']:.0f} s). Each scene (a roller wave, {rec['records'][0]['size_px']} px
@@ -484,8 +503,7 @@ baseline noise after the affine removal (ratios up to 1.26).
 | pattern | period px | noise | noise estimated | σ periods | method | σ(φ_eff) mD | φ_eff | φ_shear | δ_x | δ_y |
 |---|---|---|---|---|---|---|---|---|---|---|
 {chr(10).join(rows)}
-""")
-    return "".join(out)
+"""
 
 
 def _runs(record: dict, name: str):
