@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property, partial
 
 import numpy as np
 
@@ -58,7 +59,8 @@ class PaneFrame:
     inside : ndarray of bool, shape (H, W)
         Pixels on the pane.
     edge_distance_mm : ndarray of float32, shape (H, W)
-        Distance from each pixel to the pane outline, mm (NaN outside the pane).
+        Distance from each pixel to the pane outline, mm (NaN outside the pane);
+        computed on first access when given as a function (only zones need it).
     source : {'spec', 'image', 'analysed_region'}
         Where the outline came from.
     units : {'pane_mm', 'backdrop_mm'}
@@ -74,13 +76,18 @@ class PaneFrame:
 
     px_to_mm: np.ndarray
     inside: np.ndarray
-    edge_distance_mm: np.ndarray
+    edge_distance: object  # ndarray, or a function returning it
     source: str
     units: str
     outline_px: tuple = ()
     size_mm: tuple | None = None
     warning: str = ""
     _mm_to_px: np.ndarray = field(default=None, repr=False, compare=False)
+
+    @cached_property
+    def edge_distance_mm(self) -> np.ndarray:
+        """Distance from each pixel to the pane outline, mm (float32, NaN outside the pane)."""
+        return self.edge_distance() if callable(self.edge_distance) else self.edge_distance
 
     @property
     def shape(self):
@@ -242,11 +249,6 @@ def pane_frame_from_region(valid, mm_per_px, *, grow_px=0.0):
                    "for zones on the pane itself")
     else:
         source = "image"
-    # distance from a pixel centre to the region's edge (half a pixel beyond the last pixel centre inside)
-    dist = distance_to_outside(region)
-    dist -= 0.5
-    dist *= mm_per_px
-    dist[~region] = np.nan
     rows, cols = np.flatnonzero(region.any(axis=1)), np.flatnonzero(region.any(axis=0))
     if rows.size:
         x0, y0 = cols.min() - 0.5, rows.min() - 0.5
@@ -256,7 +258,17 @@ def pane_frame_from_region(valid, mm_per_px, *, grow_px=0.0):
         size = None
     s = float(mm_per_px)
     H = np.array([[s, 0.0, -s * x0], [0.0, s, -s * y0], [0.0, 0.0, 1.0]])
-    return PaneFrame(H, region, dist, source, "backdrop_mm", _outline_polygons(region), size, warning)
+    return PaneFrame(H, region, partial(_edge_distance_mm, region, float(mm_per_px)), source, "backdrop_mm",
+                     _outline_polygons(region), size, warning)
+
+
+def _edge_distance_mm(region, mm_per_px):
+    """Distance (mm, float32) from each pixel centre of ``region`` to its edge, half a pixel beyond the last centre inside; NaN outside."""
+    dist = distance_to_outside(region)
+    dist -= 0.5
+    dist *= mm_per_px
+    dist[~region] = np.nan
+    return dist
 
 
 def pane_frame(result, pane=None):
@@ -294,7 +306,9 @@ def zone_masks(frame, zones):
     from skimage.draw import polygon as polygon_pixels
 
     out = {}
-    d = np.nan_to_num(frame.edge_distance_mm, nan=-1.0)
+    # the distance map only where a zone is defined by it
+    if any(z.edge_band_mm is not None or z.inset_mm is not None for z in zones):
+        d = np.nan_to_num(frame.edge_distance_mm, nan=-1.0)
     for z in zones:
         if z.edge_band_mm is not None:
             m = frame.inside & (d < z.edge_band_mm)
