@@ -386,3 +386,15 @@ def test_api_write_report_from_arrays_and_with_a_spec(lens_photos, tmp_path):
     assert s["metadata"]["pane_id"] == "P-9" and set(s["zones"]) == {"edge", "vision"}
     html = path.read_text()
     assert "P-9" in html and "C. D." in html
+
+
+@pytest.mark.parametrize("radius", [0.5, 1.0, 2.5, 3.0, 4.2])
+def test_grow_region_is_the_distance_threshold(radius):
+    """The disk dilation keeps exactly the pixels within ``radius`` of the region (exact Euclidean distance)."""
+    from glassdist.report.zones import distance_to_outside, grow_region
+
+    rng = np.random.default_rng(5)
+    mask = rng.random((90, 130)) < 0.01
+    mask[20:40, 30:70] = True
+    assert np.array_equal(grow_region(mask, radius), distance_to_outside(~mask) <= radius)
+    assert not grow_region(np.zeros((9, 9), bool), radius).any()
