@@ -233,11 +233,7 @@ def run_sweep(scene_path, vary: dict, out, *, method="direct", engine="exact", s
     int
         0 when every variant ran, 4 when some could not (:data:`~glassdist.report.batch.EXIT_PANE_ERRORS`).
     """
-    from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
-    from ..report.batch import EXIT_PANE_ERRORS, PaneOutcome, _lock, _prepare_out
-    from ..report.exports import atomic_write_text
+    from ..report.batch import EXIT_PANE_ERRORS, _lock, _prepare_out
 
     if method not in ("direct", "comparative"):
         raise InputError(f"unknown method '{method}'; use 'direct' or 'comparative'")
@@ -250,17 +246,7 @@ def run_sweep(scene_path, vary: dict, out, *, method="direct", engine="exact", s
     try:
         for stale in (out / "variants").glob(".tmp-*"):
             shutil.rmtree(stale, ignore_errors=True)
-        todo = []
-        for v in variants:
-            fp = v.fingerprint(method=method, engine=engine, spp=spp)
-            rec = _read_json(out / "variants" / v.id / "variant.json")
-            if rec and rec.get("fingerprint") == fp:
-                records[v.id] = rec
-            else:
-                todo.append(v)
-            path = out / "scenes" / f"{v.id}.json"
-            if not path.is_file() or path.read_text(encoding="utf-8") != v.scene_text():
-                atomic_write_text(path, v.scene_text())
+        todo = _variants_to_run(variants, out, records, method=method, engine=engine, spp=spp)
         if records:
             echo(f"resuming: {len(records)} variant(s) already done, {len(todo)} to run")
         write_sweep_index(variants, out)
@@ -272,24 +258,8 @@ def run_sweep(scene_path, vary: dict, out, *, method="direct", engine="exact", s
                                  cwd=cwd)
             echo(f"running {len(todo)} variant(s) on the {executor.description}")
         jobs = [(["validate", str(out / "scenes" / f"{v.id}.json"), *extra], out / "variants", v.id, cwd) for v in todo]
-        columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
-        run_all = executor.as_completed if executor is not None else _serial
-        with Progress(*columns, console=Console(stderr=True), disable=not progress, transient=True) as bar:
-            task = bar.add_task("sweep", total=len(variants), completed=len(records))
-            for done in run_all(_execute_variant, jobs):
-                v = todo[done.index]
-                if done.error is None:
-                    tmp, outcome, seconds = done.value
-                else:  # the job was lost (its worker died more often than the scheduler allows)
-                    tmp, seconds = out / "variants" / f".tmp-{v.id}-lost", 0.0
-                    outcome = PaneOutcome(1, repr(done.error), f"{type(done.error).__name__}: {done.error}")
-                fp = v.fingerprint(method=method, engine=engine, spp=spp)
-                rec = records[v.id] = _finish_variant(v, out, tmp, outcome, seconds, fp)
-                values = ", ".join(f"{k}={x}" for k, x in v.values.items())
-                tail = f"  ERROR: {rec['error']}" if rec["status"] == "error" else ""
-                echo(f"[{len(records)}/{len(variants)}] {v.id} {values}  ({rec['seconds']:.1f} s){tail}")
-                write_sweep_index(variants, out)
-                bar.advance(task)
+        _run_variants(variants, todo, jobs, out, records, executor, progress, echo,
+                      fingerprint=dict(method=method, engine=engine, spp=spp))
         for stale in (out / "variants").glob(".tmp-*"):  # of attempts lost with their worker
             shutil.rmtree(stale, ignore_errors=True)
     finally:
@@ -297,6 +267,60 @@ def run_sweep(scene_path, vary: dict, out, *, method="direct", engine="exact", s
     n_err = sum(r["status"] == "error" for r in records.values())
     echo(f"{len(variants)} variants: {len(variants) - n_err} ran, {n_err} could not be run")
     return EXIT_PANE_ERRORS if n_err else 0
+
+
+def _variants_to_run(variants, out, records: dict, *, method, engine, spp) -> list:
+    """The variants not already done with these run options; the done ones' records go into ``records``.
+
+    Every variant's scene file is (re)written where it is missing or differs, so the
+    ``scenes`` folder always holds the sweep as it now stands.
+    """
+    from ..report.exports import atomic_write_text
+
+    todo = []
+    for v in variants:
+        fp = v.fingerprint(method=method, engine=engine, spp=spp)
+        rec = _read_json(out / "variants" / v.id / "variant.json")
+        if rec and rec.get("fingerprint") == fp:
+            records[v.id] = rec
+        else:
+            todo.append(v)
+        path = out / "scenes" / f"{v.id}.json"
+        if not path.is_file() or path.read_text(encoding="utf-8") != v.scene_text():
+            atomic_write_text(path, v.scene_text())
+    return todo
+
+
+def _run_variants(variants, todo, jobs, out, records: dict, executor, progress, echo, *, fingerprint: dict) -> None:
+    """Run the ``jobs`` of ``todo`` (here, or as the cluster's futures complete), recording each in ``records``.
+
+    Each finished variant is moved into place (:func:`_finish_variant`), echoed, and the
+    index rewritten, so an interrupted sweep leaves an index of what is done.
+    ``fingerprint``: the run options (``method``, ``engine``, ``spp``) of :meth:`Variant.fingerprint`.
+    """
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from ..report.batch import PaneOutcome
+
+    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
+    run_all = executor.as_completed if executor is not None else _serial
+    with Progress(*columns, console=Console(stderr=True), disable=not progress, transient=True) as bar:
+        task = bar.add_task("sweep", total=len(variants), completed=len(records))
+        for done in run_all(_execute_variant, jobs):
+            v = todo[done.index]
+            if done.error is None:
+                tmp, outcome, seconds = done.value
+            else:  # the job was lost (its worker died more often than the scheduler allows)
+                tmp, seconds = out / "variants" / f".tmp-{v.id}-lost", 0.0
+                outcome = PaneOutcome(1, repr(done.error), f"{type(done.error).__name__}: {done.error}")
+            fp = v.fingerprint(**fingerprint)
+            rec = records[v.id] = _finish_variant(v, out, tmp, outcome, seconds, fp)
+            values = ", ".join(f"{k}={x}" for k, x in v.values.items())
+            tail = f"  ERROR: {rec['error']}" if rec["status"] == "error" else ""
+            echo(f"[{len(records)}/{len(variants)}] {v.id} {values}  ({rec['seconds']:.1f} s){tail}")
+            write_sweep_index(variants, out)
+            bar.advance(task)
 
 
 def _serial(fn, jobs):
