@@ -64,15 +64,32 @@ def create_app(*, public_host: str | None = None, **store_options) -> FastAPI:
 
     app = FastAPI(title="glassdist", version=__version__, lifespan=lifespan, docs_url=None, redoc_url=None)
     app.state.store = store
-    # several files per request, plus the form itself
-    max_request = len(ROLES) * store.max_upload_bytes + (1 << 20)
+    pages = _Pages(store, public_host)
+    _add_upload_routes(app, store, pages)
+    _add_job_routes(app, store, pages)
+    return app
 
-    def page(request, name, status_code=200, **context):
-        context.update(version=__version__, public_host=public_host, max_upload_mb=store.max_upload_bytes / 2**20)
+
+class _Pages:
+    """The templates rendered with what every page shows: version, public-address warning, upload limit."""
+
+    def __init__(self, store: JobStore, public_host: str | None):
+        self.store, self.public_host = store, public_host
+
+    def page(self, request, name, status_code=200, **context):
+        context.update(version=__version__, public_host=self.public_host,
+                       max_upload_mb=self.store.max_upload_bytes / 2**20)
         return _TEMPLATES.TemplateResponse(request, name, context, status_code=status_code)
 
-    def index(request, *, error="", status_code=200, form=None):
-        return page(request, "index.html", status_code, jobs=store.recent(), error=error, form=form or {})
+    def index(self, request, *, error="", status_code=200, form=None):
+        return self.page(request, "index.html", status_code, jobs=self.store.recent(), error=error, form=form or {})
+
+
+def _add_upload_routes(app: FastAPI, store: JobStore, pages: _Pages) -> None:
+    """``GET /`` (the upload form and the recent jobs) and ``POST /jobs`` (one job per upload)."""
+    # several files per request, plus the form itself
+    max_request = len(ROLES) * store.max_upload_bytes + (1 << 20)
+    index = pages.index
 
     @app.get("/", response_class=HTMLResponse)
     async def home(request: Request):
@@ -100,6 +117,11 @@ def create_app(*, public_host: str | None = None, **store_options) -> FastAPI:
         finally:
             await form.close()
         return RedirectResponse(f"/jobs/{job.id}", status_code=303)
+
+
+def _add_job_routes(app: FastAPI, store: JobStore, pages: _Pages) -> None:
+    """A job's page, status, files and outputs archive under ``/jobs/{job_id}``; an unknown one is a 404 page."""
+    page = pages.page
 
     def get_job(job_id):
         job = store.get(job_id)
@@ -148,8 +170,6 @@ def create_app(*, public_host: str | None = None, **store_options) -> FastAPI:
     async def not_found(request: Request, exc):
         return page(request, "index.html", 404, jobs=store.recent(), form={},
                     error="no such job or file (jobs are kept until the server stops or newer ones replace them)")
-
-    return app
 
 
 class _NotFound(Exception):
