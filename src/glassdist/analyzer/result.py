@@ -266,8 +266,9 @@ class AnalysisResult:
 
     def quality_counts(self) -> dict:
         """Pixels per quality label, ``{label name: count}``."""
-        counts = np.bincount(np.asarray(self.quality).ravel(), minlength=len(LABELS))
-        return {LABELS[k]: int(counts[k]) for k in LABELS}
+        q = np.asarray(self.quality)
+        # one comparison per label: bincount would first widen every uint8 label to intp
+        return {LABELS[k]: int(np.count_nonzero(q == k)) for k in LABELS}
 
     def summary(self, statistics: dict | None = None) -> dict:
         """JSON-serialisable record of the run (written as ``summary.json``).
