@@ -51,6 +51,7 @@ __all__ = [
     "evaluate_displacement",
     "channel_statistics",
     "percentile",
+    "derivative",
 ]
 
 
@@ -322,7 +323,7 @@ def masked_gaussian(
     return masked_filter(field, weight, cov_px, step_px, min_weight=min_weight, order=order)
 
 
-def _derivative(f: np.ndarray, axis: int, h: float) -> np.ndarray:
+def derivative(f: np.ndarray, axis: int, h: float) -> np.ndarray:
     """Fourth-order centred difference (second order in the two outermost samples).
 
     On coarse sampling grids the 2-point centred difference would attenuate a wave of
@@ -369,8 +370,8 @@ def strain_tensor(
     sy, sx = step_px
     G = np.empty(d.shape[:2] + (2, 2))
     for c in range(2):  # d delta_c / d(x, y) in px
-        G[..., c, 1] = _derivative(dy_src[..., c], 0, sy)
-        G[..., c, 0] = _derivative(dx_src[..., c], 1, sx)
+        G[..., c, 1] = derivative(dy_src[..., c], 0, sy)
+        G[..., c, 0] = derivative(dx_src[..., c], 1, sx)
     if jacobian is None:
         if mm_per_px is None:
             raise ValueError("strain_tensor needs mm_per_px or jacobian")

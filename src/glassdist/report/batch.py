@@ -74,6 +74,10 @@ __all__ = [
     "write_index",
     "pane_defaults",
     "check_panes",
+    "prepare_job_folder",
+    "lock_job_folder",
+    "place_folder",
+    "write_csv",
 ]
 
 logger = logging.getLogger(__name__)
@@ -381,7 +385,7 @@ def _read_json(path):
         return None
 
 
-def _prepare_out(out, *, command="batch", folders=("panes", "failed")):
+def prepare_job_folder(out, *, command="batch", folders=("panes", "failed")):
     """Create (or accept to resume) a job folder of ``glassdist COMMAND``, marked ``.glassdist-COMMAND``."""
     out = Path(out)
     marker = f".glassdist-{command}"
@@ -399,7 +403,7 @@ def _prepare_out(out, *, command="batch", folders=("panes", "failed")):
     return out
 
 
-def _lock(out, *, command="batch"):
+def lock_job_folder(out, *, command="batch"):
     """Hold an exclusive lock on the job folder (returns the open file), or raise InputError."""
     fh = open(out / f".glassdist-{command}", "a+")  # noqa: SIM115 - kept open for the batch's duration
     try:
@@ -464,13 +468,13 @@ def _record_pane(pane, out, tmp, outcome, seconds, report, export):
     }
     (tmp / "analyze.log").write_text(outcome.log, encoding="utf-8")
     (tmp / "pane.json").write_text(json.dumps(record, indent=2) + "\n", encoding="utf-8")
-    _place(tmp, final)
+    place_folder(tmp, final)
     failed_json.unlink(missing_ok=True)
     failed_log.unlink(missing_ok=True)
     return record
 
 
-def _place(tmp, final):
+def place_folder(tmp, final):
     """Rename a complete temporary folder to its final name, replacing a stale result of other settings."""
     if final.exists():  # swap it out, then delete it
         old = final.parent / f".tmp-old-{final.name}-{os.getpid()}"
@@ -520,8 +524,8 @@ def run_batch(panes, out, *, report=False, export=False, runner=None, progress=T
         :data:`EXIT_PANE_ERRORS`).
     """
     runner = runner or subprocess_runner
-    out = _prepare_out(out)
-    lock = _lock(out)
+    out = prepare_job_folder(out)
+    lock = lock_job_folder(out)
     records = {}
     try:
         for stale in (out / "panes").glob(".tmp-*"):  # left by an interrupted run
@@ -668,7 +672,7 @@ def _csv_cell(value):
     return value
 
 
-def _write_csv(path, rows):
+def write_csv(path, rows):
     """Write rows (dicts with the same keys) as a CSV file, atomically; formula-like text cells neutralised."""
     import io
 
@@ -688,7 +692,7 @@ def write_index(panes, out, *, figures=True):
     """
     out = Path(out)
     rows = _index_rows(panes, out)
-    _write_csv(out / "index.csv", rows)
+    write_csv(out / "index.csv", rows)
     atomic_write_text(out / "index.html", _index_html(rows, out, figures=figures))
     return out / "index.csv", out / "index.html"
 

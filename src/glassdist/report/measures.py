@@ -37,7 +37,7 @@ import numpy as np
 from scipy import ndimage
 
 from ..analyzer.captures import sample_field
-from ..analyzer.metrics import _derivative
+from ..analyzer.metrics import derivative
 
 __all__ = [
     "RollWave",
@@ -142,8 +142,8 @@ def displacement_gradient(displacement_mm: np.ndarray, step_mm) -> np.ndarray:
     sy, sx = _step(step_mm)
     G = np.empty(d.shape[:2] + (2, 2))
     for c in range(2):
-        G[..., c, 0] = _derivative(d[..., c], 1, sx)
-        G[..., c, 1] = _derivative(d[..., c], 0, sy)
+        G[..., c, 0] = derivative(d[..., c], 1, sx)
+        G[..., c, 1] = derivative(d[..., c], 0, sy)
     ok = np.all(np.isfinite(d), axis=-1)
     for axis, b in ((1, 0), (0, 1)):  # the five samples of the stencil along that axis
         full = ok.copy()

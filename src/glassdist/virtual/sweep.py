@@ -181,7 +181,7 @@ def _read_json(path):
 
 
 def _finish_variant(v, out, tmp, outcome, seconds, fingerprint):
-    from ..report.batch import _place
+    from ..report.batch import place_folder
     from ..report.exports import atomic_write_text
 
     final = out / "variants" / v.id
@@ -198,7 +198,7 @@ def _finish_variant(v, out, tmp, outcome, seconds, fingerprint):
               "seconds": round(seconds, 2), "finished_utc": stamp}
     (tmp / "validate.log").write_text(outcome.log, encoding="utf-8")
     (tmp / "variant.json").write_text(json.dumps(record, indent=2) + "\n", encoding="utf-8")
-    _place(tmp, final)
+    place_folder(tmp, final)
     failed_json.unlink(missing_ok=True)
     failed_log.unlink(missing_ok=True)
     return record
@@ -233,15 +233,15 @@ def run_sweep(scene_path, vary: dict, out, *, method="direct", engine="exact", s
     int
         0 when every variant ran, 4 when some could not (:data:`~glassdist.report.batch.EXIT_PANE_ERRORS`).
     """
-    from ..report.batch import EXIT_PANE_ERRORS, _lock, _prepare_out
+    from ..report.batch import EXIT_PANE_ERRORS, lock_job_folder, prepare_job_folder
 
     if method not in ("direct", "comparative"):
         raise InputError(f"unknown method '{method}'; use 'direct' or 'comparative'")
     if spp is not None and spp < 1:
         raise InputError(f"--spp must be at least 1, got {spp}")
     variants = expand_variants(scene_path, vary)
-    out = _prepare_out(out, command="sweep", folders=("scenes", "variants", "failed"))
-    lock = _lock(out, command="sweep")
+    out = prepare_job_folder(out, command="sweep", folders=("scenes", "variants", "failed"))
+    lock = lock_job_folder(out, command="sweep")
     records: dict = {}
     try:
         for stale in (out / "variants").glob(".tmp-*"):
@@ -373,10 +373,10 @@ def write_sweep_index(variants, out):
     """Write ``OUT/index.csv`` and ``OUT/index.json``: one row per variant (varied values, status, figures)."""
     from ..report.exports import atomic_write_text
 
-    from ..report.batch import _write_csv
+    from ..report.batch import write_csv
 
     out = Path(out)
     rows = _index_rows(variants, out)
-    _write_csv(out / "index.csv", rows)
+    write_csv(out / "index.csv", rows)
     atomic_write_text(out / "index.json", json.dumps({"glassdist_version": __version__, "variants": rows}, indent=2) + "\n")
     return out / "index.csv", out / "index.json"
