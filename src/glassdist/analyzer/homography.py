@@ -161,124 +161,174 @@ def fit_homography(
     return HomographyFit(H, float(inliers.mean()), int(len(src)), rms)
 
 
-#: Least share of the view at the strain noise level for the robust refit to be kept.
+#: Least share of the view at the strain noise level for it to be called undistorted.
 _MIN_CLEAN = 0.3
+#: Most samples of the logical grid the robust refit looks at (a regular subsample).
+_MAX_REFIT_SAMPLES = 40_000
+#: Gross errors (unwrapping slips of whole periods, occlusions) lie farther than this many
+#: carrier periods from the averaging fit.
+_GROSS_PERIODS = 1.0
+#: Without an undistorted part, the averaging fit replaces RANSAC's only when it lowers the
+#: view's mean strain below this share of RANSAC's.
+_AVERAGE_GAIN = 0.8
+#: ... and when it keeps at least this share of the grid points within the inlier threshold
+#: (below it Block I calls a fit failed).
+_MIN_AVERAGE_INLIERS = 0.1
 
 
-def _local_frequency(U: np.ndarray, V: np.ndarray, valid: np.ndarray, step_px, period_px: float):
-    """Gradients of the logical grid (carrier periods per px) smoothed over one carrier period; NaN where unknown."""
+@dataclass(frozen=True)
+class _StrainSamples:
+    """A regular subsample of the logical grid with its local frequencies (Block I, robust refit)."""
+
+    src: np.ndarray  # (n, 2) logical (U, V), carrier periods
+    dst: np.ndarray  # (n, 2) pixel (x, y)
+    freq: np.ndarray  # (n, 4) dU/dx, dU/dy, dV/dx, dV/dy times the carrier period (dimensionless)
+    tol: float  # strain at the noise level: 3 x the robust noise of ``freq`` (dimensionless)
+
+
+def _strain_samples(U, V, y, x, valid, step_px, period_px: float) -> _StrainSamples | None:
+    """Local frequencies of the logical grid on a regular subsample of at most ``_MAX_REFIT_SAMPLES``.
+
+    The gradients (centred differences on the subsample, steps in px) are smoothed over
+    about one carrier period (normalised by the smoothed mask); their noise is the robust
+    (MAD) spread of their departure from a version smoothed twice as much, so the
+    tolerance comes from the view itself.
+    """
     from scipy import ndimage
 
-    sy, sx = step_px
-    s = (period_px / sy, period_px / sx)
-    wgt = ndimage.gaussian_filter(valid.astype(float), s, mode="constant")
-    out = []
-    for f in (U, V):
-        gy, gx = np.gradient(np.where(valid, f, np.nan), sy, sx)
-        for g in (gx, gy):
-            ok = np.isfinite(g)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                gs = ndimage.gaussian_filter(np.where(ok, g, 0.0), s, mode="constant") / wgt
-            out.append(np.where(ok & valid, gs, np.nan))
-    return np.stack(out, axis=-1)  # (h, w, 4): dU/dx, dU/dy, dV/dx, dV/dy
+    s = max(1, int(np.ceil(np.sqrt(valid.sum() / _MAX_REFIT_SAMPLES))))
+    sl = (slice(s // 2, None, s), slice(s // 2, None, s))
+    ok, sy, sx = valid[sl], step_px[0] * s, step_px[1] * s
+    sig = (max(period_px / sy, 1.0), max(period_px / sx, 1.0))
+    grads = [g for f in (U[sl], V[sl]) for g in np.gradient(np.where(ok, f, np.nan), sy, sx)[::-1]]
+    fin = ok & np.all(np.isfinite(grads), axis=0)
+    if fin.sum() < 32:
+        return None
+    with np.errstate(invalid="ignore", divide="ignore"):
+        w1 = ndimage.gaussian_filter(fin.astype(float), sig, mode="constant")
+        w2 = ndimage.gaussian_filter(fin.astype(float), (2 * sig[0], 2 * sig[1]), mode="constant")
+        J = np.stack([ndimage.gaussian_filter(np.where(fin, g, 0.0), sig, mode="constant") / w1 for g in grads], -1)
+        J2 = np.stack([ndimage.gaussian_filter(np.where(fin, j, 0.0), (2 * sig[0], 2 * sig[1]), mode="constant")
+                       for j in np.moveaxis(J, -1, 0)], -1) / w2[..., None]
+    hf = (J - J2)[fin] * period_px
+    noise = 1.4826 * float(np.median(np.abs(hf - np.median(hf, axis=0))))
+    return _StrainSamples(np.stack([U[sl][fin], V[sl][fin]], 1), np.stack([x[sl][fin], y[sl][fin]], 1),
+                          J[fin] * period_px, max(3.0 * noise, 1e-4))
+
+
+def _lsq(src: np.ndarray, dst: np.ndarray):
+    """Plain least-squares homography (normalised DLT + Levenberg-Marquardt), or None."""
+    import cv2
+
+    if len(src) < 8:
+        return None
+    H, _ = cv2.findHomography(src.astype(np.float64), dst.astype(np.float64), 0)
+    return None if H is None or not np.all(np.isfinite(H)) or abs(H[2, 2]) < 1e-12 else H / H[2, 2]
+
+
+def _strain(H: np.ndarray, S: _StrainSamples, period_px: float) -> np.ndarray:
+    """Largest departure of the samples' local frequencies from those of ``H^{-1}`` (dimensionless)."""
+    J = inverse_jacobian(H, S.dst[:, 0], S.dst[:, 1]).reshape(-1, 4) * period_px
+    return np.max(np.abs(J - S.freq), axis=1)
+
+
+def _clean(H: np.ndarray, S: _StrainSamples, period_px: float) -> np.ndarray:
+    """Samples whose local frequencies match those of ``H^{-1}`` within the noise (no strain)."""
+    return _strain(H, S, period_px) < S.tol
+
+
+def _mean_strain(H: np.ndarray, S: _StrainSamples, period_px: float) -> float:
+    return float(np.mean(_strain(H, S, period_px)))
+
+
+def _trimmed_lsq(S: _StrainSamples, period_px: float):
+    """Least-squares homography of every sample but the gross errors (``_GROSS_PERIODS``), or None."""
+    H = _lsq(S.src, S.dst)
+    for _ in range(3):
+        if H is None:
+            return None
+        keep = _reproj_error(H, S.src, S.dst) < _GROSS_PERIODS * period_px
+        H = _lsq(S.src[keep], S.dst[keep])
+    return H
+
+
+def _refit_on_clean(H: np.ndarray, S: _StrainSamples, period_px: float):
+    """Three least-squares refits on the samples without strain; the homography and their share."""
+    for _ in range(3):
+        m = _clean(H, S, period_px)
+        H2 = _lsq(S.src[m], S.dst[m])
+        if H2 is None:
+            break
+        H = H2
+    return H, float(_clean(H, S, period_px).mean())
 
 
 def refit_undistorted(
     fit: HomographyFit, U: np.ndarray, V: np.ndarray, y: np.ndarray, x: np.ndarray, valid: np.ndarray, spacing: int, *,
     period_px: float, step_px: tuple[float, float], threshold_px: float,
 ) -> HomographyFit:
-    """Refit the homography to the grid's local frequencies, robustly (Direct Method, Block I).
+    """Refit the homography on the undistorted part of the view, found by its strain (Direct Method, Block I).
 
-    RANSAC keeps the points within ``threshold_px`` of one consensus plane, but a smooth
-    defect covering much of the view (a lens) leaves many of its points within that
-    threshold, and the least-squares refit then absorbs part of the defect (the
-    perspective terms bend to follow it). Here the map ``(x, y) -> (U, V) = H^{-1}`` is
-    fitted instead to the *gradients* of the logical grid (the local carrier frequencies,
-    the strain it implies), with a robust (soft-L1) loss whose scale is the noise of those
-    gradients measured on the view itself: where a defect strains the grid its samples
-    weigh little, wherever they lie, and the homography follows the undistorted part of
-    the view. A distortion spread evenly over the view (a roller wave) pulls it equally
-    both ways. The translation, which the gradients do not fix, is the median offset of
-    the logical grid. No user input.
+    RANSAC keeps the largest set of points within ``threshold_px`` of one homography, but a
+    lens that fills much of the view is itself nearly projective over its centre (a uniform
+    power is a magnification), and its points can win the consensus. Here the local
+    frequencies of the logical grid (its strain) decide instead. Starting from the RANSAC
+    fit and from a least-squares fit of every point (gross errors, farther than
+    ``_GROSS_PERIODS`` carrier period, trimmed), the samples whose local frequencies match
+    the homography's within the measured noise are taken as undistorted and the
+    homography is refitted to their positions by least squares, three times. When one
+    start leaves at least ``_MIN_CLEAN`` of the view undistorted, the start leaving the
+    larger share wins; otherwise no glass in view is flat (a distortion spread over the
+    whole view: a roller wave, a lens wider than the view) and the trimmed least-squares
+    fit, which averages it, is kept. At most ``_MAX_REFIT_SAMPLES`` samples (a regular
+    subsample): the cost is bounded whatever the image size. No user input.
+
+    Parameters
+    ----------
+    fit : HomographyFit
+        The RANSAC fit (:func:`fit_homography`).
+    U, V : ndarray (h, w)
+        Logical grid coordinates (carrier periods) on the sample grid.
+    y, x : ndarray (h, w)
+        Pixel coordinates of the samples.
+    valid : ndarray of bool (h, w)
+    spacing : int
+        Step of the grid points for the reported inlier statistics.
+    period_px : float
+        Carrier period, px.
+    step_px : (float, float)
+        Sample grid step (rows, cols), px.
+    threshold_px : float
+        Inlier threshold of the reported statistics, px.
 
     Returns
     -------
     HomographyFit
-        The refitted homography (``fit`` when the robust fit fails).
+        The refitted homography (``fit`` when the samples are too few); ``excluded_fraction``
+        is the share of the samples with strain above the noise.
     """
-    from scipy import ndimage
-    from scipy.optimize import least_squares
-
-    Jm = _local_frequency(U, V, valid, step_px, period_px)
-    ok = valid & np.all(np.isfinite(Jm), axis=-1)
-    s = max(int(spacing), 1)
-    s = max(s, int(np.ceil(np.sqrt(ok.sum() / 20_000))))
-    sl = (slice(s // 2, None, s), slice(s // 2, None, s))
-    m = ok[sl]
-    if m.sum() < 32:
+    S = _strain_samples(U, V, y, x, valid, step_px, period_px)
+    avg = None if S is None else _trimmed_lsq(S, period_px)
+    if avg is None:
         return fit
-    xs, ys = x[sl][m], y[sl][m]
-    Jp = Jm[sl][m] * period_px  # dimensionless
-    Us, Vs = U[sl][m], V[sl][m]
-    # Noise of the local frequencies: their departure from a smoother version of themselves.
-    sy, sx = step_px
-    sm = np.stack([ndimage.gaussian_filter(np.nan_to_num(Jm[..., i]), (2 * period_px / sy, 2 * period_px / sx)) for i in range(4)], -1)
-    wsm = ndimage.gaussian_filter(ok.astype(float), (2 * period_px / sy, 2 * period_px / sx))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        hf = (Jm - sm / wsm[..., None])[ok] * period_px
-    noise = 1.4826 * float(np.median(np.abs(hf - np.median(hf, axis=0))))
-    scale = max(3.0 * noise, 1e-4)
-    # Normalised pixel coordinates keep the 8 parameters of comparable size.
-    cx, cy = float(np.mean(xs)), float(np.mean(ys))
-    L = float(max(np.ptp(xs), np.ptp(ys), 1.0)) / 2.0
-    Tn = np.array([[1 / L, 0, -cx / L], [0, 1 / L, -cy / L], [0, 0, 1.0]])
-    G0 = np.linalg.inv(fit.matrix) @ np.linalg.inv(Tn)  # logical = G0 (normalised pixel)
-    G0 = G0 / G0[2, 2]
-    xn, yn = (xs - cx) / L, (ys - cy) / L
-
-    def model_jac(q):
-        a, b, c, d, e, f, g, h = q
-        w = g * xn + h * yn + 1.0
-        u = (a * xn + b * yn + c) / w
-        v = (d * xn + e * yn + f) / w
-        return np.stack([(a - u * g) / w, (b - u * h) / w, (d - v * g) / w, (e - v * h) / w], -1) / L * period_px
-
-    def resid(q):
-        return (model_jac(q) - Jp).ravel()
-
-    q0 = G0.ravel()[:8]
-    try:
-        sol = least_squares(resid, q0, loss="soft_l1", f_scale=scale, x_scale="jac", max_nfev=200)
-    except (ValueError, np.linalg.LinAlgError):
-        return fit
-    if not sol.success or not np.all(np.isfinite(sol.x)):
-        return fit
-    Gn = np.append(sol.x, 1.0).reshape(3, 3)
-    # The gradients fix the map up to a translation of the logical grid, U -> U - t, i.e.
-    # rows 0 and 1 of G minus t times row 2: t is the median offset of the logical grid.
-    w = Gn[2, 0] * xn + Gn[2, 1] * yn + 1.0
-    for row, obs in ((0, Us), (1, Vs)):
-        t = float(np.median((Gn[row, 0] * xn + Gn[row, 1] * yn + Gn[row, 2]) / w - obs))
-        Gn[row] -= t * Gn[2]
-    Hn = np.linalg.inv(Gn @ Tn)
-    if not np.all(np.isfinite(Hn)) or abs(Hn[2, 2]) < 1e-12:
-        return fit
-    Hn = Hn / Hn[2, 2]
-    # Keep the robust fit only where it finds an undistorted part of the view: many more
-    # samples whose strain is at the noise level than under the RANSAC fit. A distortion
-    # spread over the whole view (a roller wave) leaves few such samples under either fit,
-    # and there the least-squares fit of the positions, which averages the wave over
-    # whole periods, is the better baseline.
-    clean0 = float(np.mean(np.abs(resid(q0)).reshape(-1, 4).max(axis=1) < 3 * scale))
-    r = np.abs(resid(sol.x))
-    clean = float(np.mean(r.reshape(-1, 4).max(axis=1) < 3 * scale))
-    if clean < max(_MIN_CLEAN, clean0 + 0.1):
-        return fit
+    best, share = None, 0.0
+    for start in (fit.matrix, avg):
+        H, c = _refit_on_clean(start, S, period_px)
+        if c >= _MIN_CLEAN and c > share:
+            best, share = H, c
+    if best is None:
+        best, share = avg, float(_clean(avg, S, period_px).mean())
     src, dst = logical_grid_points(U, V, y, x, valid, spacing)
-    err = _reproj_error(Hn, src, dst)
+    err = _reproj_error(best, src, dst)
     inl = err < threshold_px
+    # No undistorted part: RANSAC's consensus stands unless it is a distorted patch (the centre
+    # of a wide lens), which the rest of the view then strains clearly more than the average
+    # does - and the average is a baseline at all (keeps _MIN_AVERAGE_INLIERS of the points).
+    if best is avg and (inl.mean() < _MIN_AVERAGE_INLIERS or _mean_strain(avg, S, period_px)
+                        >= _AVERAGE_GAIN * _mean_strain(fit.matrix, S, period_px)):
+        return fit
     rms = float(np.sqrt(np.mean(err[inl] ** 2))) if inl.any() else float("nan")
-    return HomographyFit(Hn, float(inl.mean()), int(len(src)), rms, 1.0 - clean)
+    return HomographyFit(best, float(inl.mean()), int(len(src)), rms, 1.0 - share)
 
 
 def _reproj_error(H: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.ndarray:

@@ -34,6 +34,7 @@ __all__ = [
     "Pillow",
     "SphericalCap",
     "GaussianBump",
+    "PolynomialBump",
     "Plane",
     "Term",
     "FaceShape",
@@ -256,6 +257,49 @@ class GaussianBump(_TermBase):
         return (du * du / s2 - 1) / s2 * g, du * dv / (s2 * s2) * g, (dv * dv / s2 - 1) / s2 * g
 
 
+class PolynomialBump(_TermBase):
+    """Lens of compact support: :math:`h = A\\,q^m`, :math:`q = 1 - \\rho^2/R^2` inside ``R``, 0 outside.
+
+    .. math::
+
+       h_u = -\\frac{2 m A}{R^2} q^{m-1} \\delta u, \\qquad
+       h_{uv} = \\frac{4 m (m - 1) A}{R^4} q^{m-2} \\delta u\\,\\delta v
+       - \\frac{2 m A}{R^2} q^{m-1} \\delta_{uv},
+
+    with ``A = amplitude_mm``, ``R = radius_mm``, ``m = order`` (``m - 1`` continuous
+    derivatives at the rim: the glass around it is flat). On both faces with opposite
+    signs (front ``-A``, back ``+A``) it thickens the pane by ``2 A q^m``: a converging
+    lens of thin-lens power :math:`(n - 1)\\,4 m A / R^2` (1/mm) at its centre.
+    """
+
+    kind: Literal["bump"]
+    amplitude_mm: Length_mm
+    radius_mm: PositiveLength_mm
+    order: int = Field(default=3, ge=2, le=8)
+    center_mm: tuple[Length_mm, Length_mm] = (0.0, 0.0)
+
+    def _parts(self, u, v):
+        du, dv = u - self.center_mm[0], v - self.center_mm[1]
+        R2 = self.radius_mm**2
+        q = np.maximum(1.0 - (du * du + dv * dv) / R2, 0.0)
+        return du, dv, R2, q
+
+    def height(self, u, v):
+        return self.amplitude_mm * self._parts(u, v)[3] ** self.order
+
+    def gradient(self, u, v):
+        du, dv, R2, q = self._parts(u, v)
+        c = -2.0 * self.order * self.amplitude_mm / R2 * q ** (self.order - 1)
+        return c * du, c * dv
+
+    def hessian(self, u, v):
+        du, dv, R2, q = self._parts(u, v)
+        m, A = self.order, self.amplitude_mm
+        c1 = -2.0 * m * A / R2 * q ** (m - 1)
+        c2 = np.where(q > 0, 4.0 * m * (m - 1) * A / (R2 * R2) * q ** (m - 2), 0.0)
+        return c2 * du * du + c1, c2 * du * dv, c2 * dv * dv + c1
+
+
 class Plane(_TermBase):
     """Plane / wedge: :math:`h = h_0 + s_u u + s_v v` (slopes dimensionless).
 
@@ -279,7 +323,7 @@ class Plane(_TermBase):
 
 
 Term = Annotated[
-    Union[RollerWave, Pillow, SphericalCap, GaussianBump, Plane], Field(discriminator="kind")
+    Union[RollerWave, Pillow, SphericalCap, GaussianBump, PolynomialBump, Plane], Field(discriminator="kind")
 ]
 
 
