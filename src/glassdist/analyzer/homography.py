@@ -276,9 +276,9 @@ def refit_undistorted(
     fit and from a least-squares fit of every point (gross errors, farther than
     ``_GROSS_PERIODS`` carrier period, trimmed), the samples whose local frequencies match
     the homography's within the measured noise are taken as undistorted and the
-    homography is refitted to their positions by least squares, three times. When one
-    start leaves at least ``_MIN_CLEAN`` of the view undistorted, the start leaving the
-    larger share wins; otherwise no glass in view is flat (a distortion spread over the
+    homography is refitted to their positions by least squares, three times. When a
+    candidate (RANSAC's fit itself, or either refit) leaves at least ``_MIN_CLEAN`` of the
+    view undistorted, the one leaving the largest share wins; otherwise no glass in view is flat (a distortion spread over the
     whole view: a roller wave, a lens wider than the view) and the trimmed least-squares
     fit, which averages it, is kept. At most ``_MAX_REFIT_SAMPLES`` samples (a regular
     subsample): the cost is bounded whatever the image size. No user input.
@@ -312,8 +312,11 @@ def refit_undistorted(
     if avg is None:
         return fit
     best, share = None, 0.0
-    for start in (fit.matrix, avg):
-        H, c = _refit_on_clean(start, S, period_px)
+    # RANSAC's fit as it is competes too: on a coarse grid (few, noisy samples) a refit on its
+    # clean samples can drift to a homography that leaves less of the view clean
+    candidates = [(fit.matrix, float(_clean(fit.matrix, S, period_px).mean()))]
+    candidates += [_refit_on_clean(start, S, period_px) for start in (fit.matrix, avg)]
+    for H, c in candidates:
         if c >= _MIN_CLEAN and c > share:
             best, share = H, c
     if best is None:
