@@ -31,11 +31,10 @@ def _failed(record: dict, known=()) -> list[str]:
 # on the 96.9 mm grid (sigma = 100 mm, about one carrier period) the Comparative Method's
 # phi_shear within ~1.5 periods of the image edges is ~5 % low against the exact truth
 # (Direct ~1.5 %), so D vs C reaches 3.8-4.1 % on the common region; 1.9 % in the interior.
-#: Bounds not met, with the value they must stay within (a regression past it fails): on the
-#: 96.9 mm grid (sigma about one carrier period) the Direct Method reads phi_shear ~3 % above the
-#: truth over the interior (docs/experiments/pitch.md), which moves the Direct spread and the
-#: coarse Direct-vs-Comparative difference just past their 2 % and 3 % bounds.
-KNOWN_UNMET = {"pitch": {"direct_vs_comparative_phi_shear_coarse": 0.04, "spread_direct_phi_shear": 0.03}}
+#: Bounds not met, with the value they must stay within (a regression past it fails). The full-size
+#: run (docs/experiments/pitch.md) meets all eight; at half size (the reduced test) the 96.9 mm grid
+#: has under two periods per lens radius and the Direct phi_shear spread reads 2.4 % (bound 2 %).
+KNOWN_UNMET = {"pitch": {"spread_direct_phi_shear": 0.03}}
 
 
 @pytest.mark.slow
