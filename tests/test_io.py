@@ -52,3 +52,20 @@ def test_low_contrast_and_occlusion_give_warnings_not_silence():
     assert any("contrast" in w for w in res.warnings)
     assert any("could be analysed" in w for w in res.warnings)
     assert not res.valid[120:230, 100:280].any()
+
+
+@pytest.mark.parametrize("bits, ext", [(8, ".png"), (16, ".png"), (12, ".tif"), (10, ".tif")])
+def test_single_precision_read_is_the_double_read_rounded(tmp_path, bits, ext):
+    """``dtype=float32`` gives exactly the float64 values rounded (the analyzer's input), for every code value."""
+    full = 2**bits - 1
+    codes = np.arange(full + 1, dtype=np.uint8 if bits == 8 else np.uint16)
+    img = np.resize(codes, (max(2, (full + 1) // 256), 256))
+    path = tmp_path / f"all_codes{ext}"
+    if ext == ".png":
+        cv2.imwrite(str(path), img)
+    else:
+        tifffile.imwrite(path, img, bitspersample=bits)
+    double, single = read_image(path), read_image(path, dtype=np.float32)
+    assert double.dtype == np.float64 and single.dtype == np.float32
+    assert np.array_equal(double, img / float(full))
+    assert np.array_equal(single, (img / float(full)).astype(np.float32))

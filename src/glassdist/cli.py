@@ -134,7 +134,7 @@ def _read_inputs(args):
         spec_label=f"the specification '{args.spec}'")
     params = load_params(args.params, **protocol.params_overrides)
     paths = list(args.image)
-    images = [read_image(path) for path in paths]
+    images = [read_image(path, dtype=np.float32) for path in paths]  # the analyzer works in single precision
     image = images[0]
     for path, other in zip(paths[1:], images[1:]):
         if other.shape != image.shape:
@@ -142,7 +142,7 @@ def _read_inputs(args):
                 f"the image '{path}' is {other.shape[1]}x{other.shape[0]} px but '{paths[0]}' is "
                 f"{image.shape[1]}x{image.shape[0]} px; captures of one set-up come from the same camera"
             )
-    reference = read_image(args.reference) if args.reference is not None else None
+    reference = read_image(args.reference, dtype=np.float32) if args.reference is not None else None
     if reference is not None and reference.shape != image.shape:
         raise InputError(
             f"the reference '{args.reference}' is {reference.shape[1]}x{reference.shape[0]} px but the image is "

@@ -148,8 +148,8 @@ def _max_pixels(max_megapixels: float | None) -> float:
     return 1e6 * (limits().megapixels if max_megapixels is None else float(max_megapixels))
 
 
-def read_image(path: str | os.PathLike, *, max_megapixels: float | None = None) -> np.ndarray:
-    """Read an image file as a grey ``float64`` array in [0, 1], indexed (row, col).
+def read_image(path: str | os.PathLike, *, max_megapixels: float | None = None, dtype=np.float64) -> np.ndarray:
+    """Read an image file as a grey floating-point array in [0, 1], indexed (row, col).
 
     Parameters
     ----------
@@ -161,10 +161,14 @@ def read_image(path: str | os.PathLike, *, max_megapixels: float | None = None) 
         Largest image accepted, megapixels, checked from the file's header before the
         pixels are decoded; default :attr:`glassdist.validation.Limits.megapixels`
         (250, or the ``GLASSDIST_MAX_MEGAPIXELS`` environment variable).
+    dtype : {numpy.float64, numpy.float32}
+        Type of the result. ``float32`` holds exactly the ``float64`` values rounded to
+        single precision (what the analyzer works in) at half the memory, without a
+        double-precision copy of a grey image ever being made.
 
     Returns
     -------
-    image : ndarray, shape (H, W), float64
+    image : ndarray, shape (H, W), ``dtype``
         Luminance scaled by the largest value of the file's bit depth: ``2**b - 1``
         for a TIFF of ``b`` bits per sample (a 10-, 12- or 14-bit camera image reaches
         1.0 at its own full scale), else the integer type's maximum (8-bit: 255, 16-bit:
@@ -209,19 +213,36 @@ def read_image(path: str | os.PathLike, *, max_megapixels: float | None = None) 
     elif raw.ndim == 3 and raw.shape[2] in (1, 2):
         grey = raw[..., 0].astype(np.float64)
     elif raw.ndim == 2:
+        if np.issubdtype(raw.dtype, np.integer) and raw.dtype.itemsize <= 2:
+            return _scaled_grey(raw, bits, dtype)
         grey = raw.astype(np.float64)
     else:
         raise InputError(f"'{safe_text(p)}' is not a 2-D image (array shape {raw.shape}); give a single grey or colour frame")
     if np.issubdtype(raw.dtype, np.integer):
-        full = float(np.iinfo(raw.dtype).max)
-        if bits is not None and 1 <= bits < np.iinfo(raw.dtype).bits:
-            full = float(2**bits - 1)  # a 10/12/14-bit camera image in a 16-bit container
-        grey /= full
+        grey /= _full_scale(raw.dtype, bits)  # a 10/12/14-bit camera image: 2**bits - 1
     elif raw.dtype == bool:
         grey = grey.astype(np.float64)
     if not np.all(np.isfinite(grey)):
         raise InputError(f"'{safe_text(p)}' contains NaN or infinite pixel values; export it again as an integer image")
-    return grey
+    return grey.astype(dtype, copy=False)
+
+
+def _full_scale(dtype, bits) -> float:
+    """Value that reads 1.0: ``2**bits - 1`` for a 10/12/14-bit camera image in a 16-bit container, else the type's maximum."""
+    full = float(np.iinfo(dtype).max)
+    if bits is not None and 1 <= bits < np.iinfo(dtype).bits:
+        full = float(2**bits - 1)
+    return full
+
+
+def _scaled_grey(raw: np.ndarray, bits, dtype) -> np.ndarray:
+    """An 8/16-bit grey image scaled to [0, 1] through a table of ``k / full`` (float64, then ``dtype``).
+
+    The same values as ``raw.astype(float64) / full`` cast to ``dtype``, by one gather
+    instead of a double-precision copy of the image and a division over it.
+    """
+    table = (np.arange(np.iinfo(raw.dtype).max + 1, dtype=np.float64) / _full_scale(raw.dtype, bits)).astype(dtype)
+    return table[raw]
 
 
 def read_mask(path: str | os.PathLike, shape: tuple[int, int] | None = None) -> np.ndarray:

@@ -757,9 +757,9 @@ def _api_inputs(image, reference, params, mask, detrend_degree, sigma_mm):
     from ..io import read_image, read_mask
 
     if isinstance(image, (str, os.PathLike)):
-        image = read_image(image)
+        image = read_image(image, dtype=np.float32)
     if isinstance(reference, (str, os.PathLike)):
-        reference = read_image(reference)
+        reference = read_image(reference, dtype=np.float32)
     if isinstance(mask, (str, os.PathLike)):
         mask = read_mask(mask, np.shape(image))
     settings = {k: v for k, v in (("detrend_degree", detrend_degree), ("sigma_mm", sigma_mm)) if v is not None}

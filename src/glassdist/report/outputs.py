@@ -790,7 +790,7 @@ def finish_analysis(result, *, out_dir, image_path, reference_path=None, spec_pa
     cover = valid_percent(result.valid)
     files = [write_statistics_csv(stats, out_dir / "statistics.csv"),
              atomic_write_text(out_dir / "worst_regions.csv", acc.regions_csv())]
-    figs = a4_figures(result, read_image(image_path) if image is None and image_path is not None else image, limits,
+    figs = a4_figures(result, read_image(image_path, dtype=np.float32) if image is None and image_path is not None else image, limits,
                       heatmaps=True, acceptance=acc)
     files += [atomic_write_bytes(out_dir / f"{stem}.png", png) for stem, _, png in figs]
     if exports:
