@@ -10,7 +10,8 @@ percentile range over the pixels). A calibrated prediction has median ratios wit
 0.8-1.25. The noise level the analyzer estimated from each photo is shown against the
 true one. Direct Method displacement: Block I's baseline (the homography) moves with the
 noise too, an image-wide smooth term the per-pixel uncertainty does not include; it is
-removed per realisation (best-fit affine over the trusted pixels) before the comparison.
+removed per realisation (the best-fit change of homography over the trusted pixels: affine
+per component plus the two shared projective terms) before the comparison.
 
 Usage::
 
@@ -41,13 +42,23 @@ def _get(res, key):
     return getattr(res, key)
 
 
-def _minus_affine(d: np.ndarray, region: np.ndarray) -> np.ndarray:
-    yy, xx = np.mgrid[0 : d.shape[0], 0 : d.shape[1]]
-    A = np.stack([np.ones(int(region.sum())), xx[region], yy[region]], axis=1)
+def _minus_projective(d: np.ndarray, region: np.ndarray) -> np.ndarray:
+    """``d`` less its best fit over ``region`` by a small change of homography (8 parameters).
+
+    To first order a homography's change moves a pixel by an affine term per component
+    plus the two projective terms shared by both, ``g1 x^2 + g2 x y`` along x and
+    ``g1 x y + g2 y^2`` along y: the family Block I's baseline error lies in.
+    """
+    h, w = d.shape[:2]
+    yy, xx = np.mgrid[0:h, 0:w]
+    x, y = (xx - w / 2) / w, (yy - h / 2) / h
+    xr, yr, one, zero = x[region], y[region], np.ones(int(region.sum())), np.zeros(int(region.sum()))
+    A = np.concatenate([np.stack([one, xr, yr, zero, zero, zero, xr * xr, xr * yr], 1),
+                        np.stack([zero, zero, zero, one, xr, yr, xr * yr, yr * yr], 1)])
+    coef, *_ = np.linalg.lstsq(A, np.concatenate([d[..., 0][region], d[..., 1][region]]), rcond=None)
     out = d.copy()
-    for c in range(2):
-        coef, *_ = np.linalg.lstsq(A, d[..., c][region], rcond=None)
-        out[..., c] -= coef[0] + coef[1] * xx + coef[2] * yy
+    out[..., 0] -= coef[0] + coef[1] * x + coef[2] * y + coef[6] * x * x + coef[7] * x * y
+    out[..., 1] -= coef[3] + coef[4] * x + coef[5] * y + coef[6] * x * y + coef[7] * y * y
     return out
 
 
@@ -81,8 +92,8 @@ def calibrate(pattern, period_px, noise, sigma_periods, method, *, n=30, size=25
         d_mm = res.displacement_mm.astype(float)
         if method == "direct":
             # Block I's baseline moves with the noise too: an image-wide smooth term outside
-            # the per-pixel uncertainty, removed per realisation (best-fit affine).
-            d_mm = _minus_affine(d_mm, res.trusted)
+            # the per-pixel uncertainty, removed per realisation (best-fit change of homography).
+            d_mm = _minus_projective(d_mm, res.trusted)
         for k in FIELDS:
             val = d_mm[..., FIELDS[k][1]] if isinstance(FIELDS[k], tuple) else _get(res, FIELDS[k]).astype(float)
             stacks[k].append(val)
