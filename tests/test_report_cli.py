@@ -82,12 +82,21 @@ def test_bad_spec_exits_2_before_any_work(photos, tmp_path):
     assert "Traceback" not in r.stderr and not (tmp_path / "never").exists()
 
 
-def _wait_for(path, proc, seconds=240):
+def _wait_for(path, proc, seconds=240, *, holds=lambda p: True):
+    """Poll until ``path`` exists and ``holds(path)``, while the batch ``proc`` runs."""
     t0 = time.monotonic()
-    while not path.exists():
+    while not (path.exists() and holds(path)):
         assert proc.poll() is None, "the batch ended before it could be interrupted"
         assert time.monotonic() - t0 < seconds, f"{path} never appeared"
         time.sleep(0.1)
+
+
+def _indexed_done(index, pane_id):
+    """Whether ``index`` (index.csv) lists ``pane_id`` as done (False while it is being rewritten)."""
+    try:
+        return any(r["id"] == pane_id and r["status"] == "done" for r in csv.DictReader(index.open()))
+    except (OSError, csv.Error, KeyError):
+        return False
 
 
 def test_batch_killed_then_resumed(photos, tmp_path):
@@ -103,7 +112,8 @@ def test_batch_killed_then_resumed(photos, tmp_path):
            "--spec", str(photos / "pass.json")]
     proc = subprocess.Popen(cmd, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
     try:
-        _wait_for(out / "panes" / "first" / "pane.json", proc)
+        # the pane is placed first, then the index rewritten: kill once the index lists it
+        _wait_for(out / "index.csv", proc, holds=lambda p: _indexed_done(p, "first"))
         os.killpg(proc.pid, signal.SIGKILL)  # the batch and the analysis it is running, mid-pane
     finally:
         proc.wait(timeout=60)
