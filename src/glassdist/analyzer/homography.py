@@ -278,9 +278,9 @@ def refit_undistorted(
     the homography's within the measured noise are taken as undistorted and the
     homography is refitted to their positions by least squares, three times. When a
     candidate (RANSAC's fit itself, or either refit) leaves at least ``_MIN_CLEAN`` of the
-    view undistorted, the one leaving the largest share wins; otherwise no glass in view is flat (a distortion spread over the
-    whole view: a roller wave, a lens wider than the view) and the trimmed least-squares
-    fit, which averages it, is kept. At most ``_MAX_REFIT_SAMPLES`` samples (a regular
+    view undistorted, the one leaving the largest share wins; otherwise no glass in view
+    is flat (a distortion spread over the whole view: a roller wave, a lens wider than the
+    view) and the trimmed least-squares fit, which averages it, is kept. At most ``_MAX_REFIT_SAMPLES`` samples (a regular
     subsample): the cost is bounded whatever the image size. No user input.
 
     Parameters

@@ -202,18 +202,17 @@ def pitch_bounds(interior_s: dict) -> dict:
     3 sigma of a border the normalised convolution's border convention weighs in.
     The own- and common-region figures stay in the tables.
     """
-    common_s = interior_s
     bounds = {
         f"spread_direct_{ch}": bound(
-            common_s["spread"][ch]["direct"], BOUNDS["spread"], paper=PAPER["direct_spread"] if ch == "phi_eff" else None,
+            interior_s["spread"][ch]["direct"], BOUNDS["spread"], paper=PAPER["direct_spread"] if ch == "phi_eff" else None,
             what=f"Direct mean abs {ch}, interior: max deviation from its mean across pitches",
         )
         for ch in CHANNELS
     }
     for ch in CHANNELS:
-        for n in common_s["direct_vs_comparative"][ch]:
+        for n in interior_s["direct_vs_comparative"][ch]:
             bounds[f"direct_vs_comparative_{ch}_{n}"] = bound(
-                common_s["direct_vs_comparative"][ch][n], BOUNDS["methods"],
+                interior_s["direct_vs_comparative"][ch][n], BOUNDS["methods"],
                 paper=PAPER["direct_vs_comparative"].get(n) if ch == "phi_eff" else None,
                 what=f"{ch}, {n} grid, interior: abs(D - C) / max(D, C)",
             )

@@ -172,6 +172,7 @@ def _ripple_rows(pair, n: float, sigma_periods) -> list[dict]:
     scene, p_c = plus.scene, plus.scene.backdrop.pitch_mm
     J = landing_jacobian(scene)
     half = (np.nan_to_num(plus.truth.displacement_mm) - np.nan_to_num(minus.truth.displacement_mm)) / 2
+    fin = np.isfinite(plus.truth.displacement_mm).all(-1) & np.isfinite(minus.truth.displacement_mm).all(-1)
     rows = []
     for method in ("comparative", "direct"):
         for sp in sigma_periods:
@@ -179,7 +180,6 @@ def _ripple_rows(pair, n: float, sigma_periods) -> list[dict]:
                     for i in pair]
             res = vals[0].analysis
             s_px = sp * p_c / res.mm_per_px
-            fin = np.isfinite(plus.truth.displacement_mm).all(-1) & np.isfinite(minus.truth.displacement_mm).all(-1)
             region = vals[0].valid & vals[1].valid & fin  # compared: the trusted pixels
             # detrended and smoothed over the region the Analyzer detrends over (its reported region)
             ind = independent_phi_eff(half, vals[0].analysis.valid & vals[1].analysis.valid & fin, jacobian=J,
@@ -208,13 +208,13 @@ def _lens_rows(scene, opts: RunOptions) -> list[dict]:
 
     inputs = render_inputs(scene, engine=opts.engine, reference=True, progress=opts.progress)
     params = analysis_params(scene)
+    fin = np.isfinite(inputs.truth.displacement_mm).all(-1)
     rows = []
     for method in ("comparative", "direct"):
         val = evaluate(inputs, method=method, params=params)
         res = val.analysis
         ex, an = val.exact.phi_eff_mD, res.phi_eff_mD
         s_px = params.sigma_mm / res.mm_per_px
-        fin = np.isfinite(inputs.truth.displacement_mm).all(-1)
         region = val.valid & fin  # compared: the trusted pixels
         # detrended over the region the Analyzer detrends over (its reported region): with N = 1 on a lens
         # the fitted plane, hence a uniform power, depends on the region (the trusted one reads 2.7 % apart)

@@ -69,7 +69,7 @@ from .model import (
     rotation_yaw_pitch,
     scene_from_dict,
 )
-from .surfaces import FaceShape, GaussianBump, Harmonic, Pillow, Plane, RollerWave, SphericalCap
+from .surfaces import FaceShape, GaussianBump, Harmonic, Pillow, Plane, PolynomialBump, RollerWave, SphericalCap
 
 __all__ = [
     "Scene",
@@ -90,6 +90,7 @@ __all__ = [
     "Pillow",
     "SphericalCap",
     "GaussianBump",
+    "PolynomialBump",
     "Plane",
     "FaceShape",
     "pixel_directions",
