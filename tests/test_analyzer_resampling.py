@@ -75,3 +75,23 @@ def test_bspline_upsampling_reproduces_a_smooth_field(k):
     inner = (slice(8 * k, -8 * k), slice(8 * k, -8 * k))
     assert g.shape == (h * k, w * k)
     assert np.abs(g[inner] - truth[inner]).max() < 1e-4  # bilinear from the coarse grid: ~1e-2
+
+
+@pytest.mark.parametrize("block_rows", [1, 97, 400, 5000])
+@pytest.mark.parametrize("components", [1, 2])
+def test_row_blocks_are_bit_identical_to_the_whole_upsampling(block_rows, components):
+    from glassdist.analyzer.resample import grid_fill_indices, upsample_field, upsample_field_rows
+
+    rng = np.random.default_rng(7)
+    grid = F.SamplingGrid((997, 1201), (150, 180))
+    f = rng.normal(size=(150, 180, components)).astype(np.float32)[..., 0 if components == 1 else slice(None)]
+    valid = np.ones((150, 180), bool)
+    valid[:10] = False
+    valid[50:60, 30:90] = False
+    f[~valid] = np.nan
+    idx = grid_fill_indices(valid)
+    invalid = rng.random((997, 1201)) < 0.1
+    whole = upsample_field(f, idx, grid, invalid)
+    blocks = list(upsample_field_rows(f, idx, grid, invalid, block_rows))
+    assert [b[0].start for b in blocks] == list(range(0, 997, block_rows))
+    assert np.array_equal(np.concatenate([b for _, b in blocks]), whole, equal_nan=True)

@@ -43,6 +43,8 @@ from .transfer import MIN_RESPONSE, difference_response
 
 __all__ = [
     "Channels",
+    "streamed_statistics",
+    "percentile_bracket",
     "polynomial_detrend",
     "masked_gaussian",
     "masked_filter",
@@ -633,6 +635,128 @@ def channel_statistics(field: np.ndarray, valid: np.ndarray | None = None, *, ov
     if limits:
         out["over_percent"] = {t: float(100.0 * np.count_nonzero(a > t) / a.size) for t in limits}
     out["p95_abs"] = percentile(a, 95.0)
+    return out
+
+
+def percentile_bracket(sample: np.ndarray, q: float = 95.0, *, rank_margin: float = 0.02) -> tuple[float, float]:
+    """Values ``(lo, hi)`` that should hold the ``q``-th percentile of a population ``sample`` comes from.
+
+    The sample's quantiles at ranks ``q/100 -/+ (rank_margin + 6 standard errors)``;
+    ``(-inf, inf)`` for a sample of fewer than 400 values. :func:`streamed_statistics`
+    checks the bracket against the population's counts, so a wrong one costs time, never
+    accuracy.
+    """
+    a = np.asarray(sample, dtype=np.float64).ravel()
+    a = a[np.isfinite(a)]
+    if a.size < 400:
+        return -np.inf, np.inf
+    p = q / 100.0
+    m = rank_margin + 6.0 * np.sqrt(p * (1.0 - p) / a.size)
+    lo = float(np.quantile(a, p - m)) if p - m > 0 else -np.inf
+    hi = float(np.quantile(a, p + m)) if p + m < 1 else np.inf
+    return lo, hi
+
+
+class _Running:
+    """Running statistics of one channel over one region, block by block (see :func:`streamed_statistics`)."""
+
+    def __init__(self, limits, bracket):
+        self.n, self.mean, self.m2, self.sum_abs, self.max_abs = 0, 0.0, 0.0, 0.0, -np.inf
+        self.limits, self.over = limits, np.zeros(len(limits), np.int64)
+        self.lo, self.hi = bracket
+        self.below, self.inside = 0, []
+
+    def add(self, x: np.ndarray) -> None:
+        if x.size == 0:
+            return
+        a = np.abs(x)
+        x64 = x.astype(np.float64)
+        n_b, mean_b = x64.size, float(x64.mean())
+        d = x64 - mean_b
+        m2_b = float(np.dot(d, d))
+        delta, n = mean_b - self.mean, self.n + n_b  # Chan et al.'s pairwise update
+        self.mean += delta * n_b / n
+        self.m2 += m2_b + delta * delta * self.n * n_b / n
+        self.n = n
+        self.sum_abs += float(a.sum(dtype=np.float64))
+        self.max_abs = max(self.max_abs, float(a.max()))
+        for i, t in enumerate(self.limits):
+            self.over[i] += np.count_nonzero(a > t)
+        if np.isfinite(self.lo) or np.isfinite(self.hi):
+            self.below += int(np.count_nonzero(a < self.lo))
+            self.inside.append(a[(a >= self.lo) & (a <= self.hi)])
+        else:
+            self.inside.append(a)
+
+    def p95(self, q: float) -> float | None:
+        """The exact ``q``-th percentile (numpy's linear method), None when the bracket missed it."""
+        inside = np.concatenate(self.inside) if self.inside else np.empty(0, np.float32)
+        virtual = (self.n - 1) * np.true_divide(q, 100)
+        k = int(np.floor(virtual))
+        gamma = float(virtual - k)
+        k1 = min(k + 1, self.n - 1)
+        if not (self.below <= k and self.below + inside.size > k1):
+            return None
+        low, high = np.partition(inside, (k - self.below, k1 - self.below))[[k - self.below, k1 - self.below]]
+        diff = high - low  # numpy's _lerp, operation for operation (as :func:`percentile`)
+        return float(high - diff * (1 - gamma) if gamma >= 0.5 else low + diff * gamma)
+
+    def statistics(self, q: float):
+        if self.n == 0:
+            nan = float("nan")
+            out = {"mean_abs": nan, "mean": nan, "std": nan, "p95_abs": nan, "max_abs": nan, "n_valid": 0}
+            return {**out, "over_percent": {t: nan for t in self.limits}} if self.limits else out
+        out = {"mean_abs": self.sum_abs / self.n, "mean": self.mean, "std": float(np.sqrt(self.m2 / self.n)),
+               "max_abs": self.max_abs, "n_valid": int(self.n)}
+        if self.limits:
+            out["over_percent"] = {t: float(100.0 * c / self.n) for t, c in zip(self.limits, self.over)}
+        out["p95_abs"] = self.p95(q)
+        return out
+
+
+def streamed_statistics(blocks, regions: dict, *, over_limits: dict | None = None, brackets: dict | None = None,
+                        q: float = 95.0) -> dict:
+    """:func:`channel_statistics` of several channels over several regions, from blocks of image rows.
+
+    One pass over the blocks, each channel's values taken once per block and region:
+    the mean and standard deviation are combined exactly from per-block moments (Chan,
+    Golub & LeVeque 1979) in float64, the counts summed, and the ``q``-th percentile is
+    numpy's (linear method) exactly, from the values inside a bracket (``brackets``, see
+    :func:`percentile_bracket`) and the count of those below it; without a bracket every
+    value is kept.
+
+    Parameters
+    ----------
+    blocks : iterable of (slice, dict of str -> ndarray)
+        Consecutive blocks of image rows: ``(rows, {channel: field[rows]})``, NaN where invalid.
+    regions : dict of key -> ndarray of bool (H, W)
+    over_limits : dict, optional
+        ``{channel: thresholds}`` for ``over_percent``.
+    brackets : dict, optional
+        ``{(key, channel): (lo, hi)}``.
+    q : float
+        The percentile reported as ``p95_abs``.
+
+    Returns
+    -------
+    dict
+        ``{key: {channel: statistics}}`` as :func:`channel_statistics`; ``p95_abs`` is None
+        where its bracket missed (the caller takes it from the whole field).
+    """
+    over_limits, brackets = over_limits or {}, brackets or {}
+    run = {}
+    for rows, fields in blocks:
+        for key, region in regions.items():
+            r = np.asarray(region[rows], bool)
+            for ch, block in fields.items():
+                acc = run.get((key, ch))
+                if acc is None:
+                    limits = sorted(set(float(t) for t in over_limits.get(ch, ())))
+                    acc = run[(key, ch)] = _Running(limits, brackets.get((key, ch), (-np.inf, np.inf)))
+                acc.add(block[r & np.isfinite(block)])
+    out = {key: {} for key in regions}
+    for (key, ch), acc in run.items():
+        out[key][ch] = acc.statistics(q)
     return out
 
 

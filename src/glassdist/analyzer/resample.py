@@ -18,7 +18,8 @@ from scipy import ndimage
 
 from . import fourier as F
 
-__all__ = ["grid_fill_indices", "image_grid_valid", "bspline_upsample", "bspline_eval", "upsample_field", "upsample_labels"]
+__all__ = ["grid_fill_indices", "image_grid_valid", "bspline_upsample", "bspline_eval", "upsample_field",
+           "upsample_field_rows", "upsample_labels"]
 
 
 def grid_fill_indices(valid: np.ndarray):
@@ -97,6 +98,23 @@ def bspline_upsample(f: np.ndarray, k: int, axis: int) -> np.ndarray:
     return bspline_eval(f, t if axis == 0 else None, t if axis == 1 else None)
 
 
+def _filled(f: np.ndarray, idx) -> np.ndarray:
+    """``f`` as float32 with each invalid sample replaced by its nearest valid one (``idx``)."""
+    f = np.ascontiguousarray(f, np.float32)  # (h, w) or (h, w, 2)
+    return f[idx[0], idx[1]] if idx is not None else f
+
+
+def _planes(a: np.ndarray) -> list:
+    return [a] if a.ndim == 2 else [a[..., c] for c in range(a.shape[2])]
+
+
+def _mask_invalid(up: np.ndarray, invalid: np.ndarray) -> np.ndarray:
+    # One plane at a time: a broadcast mask over the channel axis is ~20x slower.
+    for plane in _planes(up):
+        np.copyto(plane, np.float32(np.nan), where=invalid)
+    return up
+
+
 def upsample_field(f: np.ndarray, idx, grid: F.SamplingGrid, invalid: np.ndarray) -> np.ndarray:
     """A field of the analysis grid at every image pixel: cubic B-spline interpolation, NaN where ``invalid``.
 
@@ -104,22 +122,51 @@ def upsample_field(f: np.ndarray, idx, grid: F.SamplingGrid, invalid: np.ndarray
     the spline never mixes NaN into valid pixels near a border.
     """
     H, W = grid.full_shape
-    f = np.ascontiguousarray(f, np.float32)  # (h, w) or (h, w, 2)
-    if idx is not None:
-        f = f[idx[0], idx[1]]
+    f = _filled(f, idx)
     if grid.is_full:
         up = f.copy()
     else:
         sy, sx = grid.step
         oy, ox = grid.offset
         ty, tx = (np.arange(H) - oy) / sy, (np.arange(W) - ox) / sx
-        planes = [f] if f.ndim == 2 else [f[..., c] for c in range(f.shape[2])]
-        out = [bspline_eval(p_, ty, tx) for p_ in planes]
+        out = [bspline_eval(p_, ty, tx) for p_ in _planes(f)]
         up = out[0] if f.ndim == 2 else np.stack(out, axis=-1)
-    # One plane at a time: a broadcast mask over the channel axis is ~20x slower.
-    for plane in [up] if up.ndim == 2 else [up[..., c] for c in range(up.shape[2])]:
-        np.copyto(plane, np.float32(np.nan), where=invalid)
-    return up
+    return _mask_invalid(up, invalid)
+
+
+def upsample_field_rows(f: np.ndarray, idx, grid: F.SamplingGrid, invalid: np.ndarray, block_rows: int):
+    """:func:`upsample_field` one block of image rows at a time: yields ``(rows, block)``.
+
+    ``rows`` is a ``slice`` of image rows and ``block`` the field on them, bit-identical to
+    ``upsample_field(...)[rows]``: the spline's prefilter and its interpolation along x
+    are done once on the coarse rows (``h x W`` values), then each block of image rows
+    takes its 4-tap rows of the y interpolation. Peak memory is one block, whatever the
+    image's size.
+    """
+    H, W = grid.full_shape
+    f = _filled(f, idx)
+    block_rows = max(1, int(block_rows))
+    if grid.is_full:
+        for r0 in range(0, H, block_rows):
+            rows = slice(r0, min(H, r0 + block_rows))
+            yield rows, _mask_invalid(f[rows].copy(), invalid[rows])
+        return
+    sy, sx = grid.step
+    oy, ox = grid.offset
+    ty, tx = (np.arange(H) - oy) / sy, (np.arange(W) - ox) / sx
+    bx = _bspline_weights(f.shape[1], tx)
+    by = _bspline_weights(f.shape[0], ty)
+    along_x = []
+    for p_ in _planes(f):  # the steps of bspline_eval up to its last product
+        c = ndimage.spline_filter1d(np.ascontiguousarray(p_, np.float32), order=3, axis=0, mode="nearest",
+                                    output=np.float32)
+        c = ndimage.spline_filter1d(c, order=3, axis=1, mode="nearest", output=np.float32)
+        along_x.append(np.ascontiguousarray((bx @ c.T).T, np.float32))
+    for r0 in range(0, H, block_rows):
+        rows = slice(r0, min(H, r0 + block_rows))
+        b = by[rows]
+        out = [np.ascontiguousarray(np.asarray(b @ c, np.float32)) for c in along_x]
+        yield rows, _mask_invalid(out[0] if f.ndim == 2 else np.stack(out, axis=-1), invalid[rows])
 
 
 def upsample_labels(labels: np.ndarray, grid: F.SamplingGrid) -> np.ndarray:

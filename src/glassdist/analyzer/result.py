@@ -19,7 +19,7 @@ from .homography import HomographyFit
 from .metrics import channel_statistics
 from .params import AnalyzerParams
 from .region import ANALYSED, LABELS, pixel_quality, trusted_on
-from .resample import upsample_field, upsample_labels
+from .resample import upsample_field, upsample_field_rows, upsample_labels
 
 __all__ = ["AnalysisResult", "FieldSpec", "FIELDS", "CHANNELS"]
 
@@ -71,6 +71,13 @@ FIELDS: tuple[FieldSpec, ...] = (
 CHANNELS: tuple[str, ...] = ("phi_eff_mD", "phi_shear_mD", "phi_total_mD")
 
 _SPECS = {f.name: f for f in FIELDS}
+
+
+def _row_slices(full: np.ndarray, block_rows: int):
+    """``(rows, full[rows])`` for consecutive blocks of ``block_rows`` rows."""
+    for r in range(0, full.shape[0], block_rows):
+        rows = slice(r, min(full.shape[0], r + block_rows))
+        yield rows, full[rows]
 
 
 class _ImageGridField:
@@ -198,6 +205,26 @@ class AnalysisResult:
         if _SPECS[name].kind == "label":
             return upsample_labels(f, d["grid"])
         return upsample_field(f, d["idx"], d["grid"], ~self.valid)
+
+    def pixel_rows(self, names, max_pixels: int = 1 << 21):
+        """Fields ``names`` on the pixel grid, one block of image rows at a time.
+
+        Yields ``(rows, {name: block})`` with ``rows`` a ``slice`` of image rows and each
+        block bit-identical to ``getattr(self, name)[rows]``, about ``max_pixels`` pixels
+        each: statistics over a 100 Mpx photo need no full-size copy of any field.
+        A field already brought to the pixel grid (cached) is sliced.
+        """
+        H, W = self.valid.shape
+        block_rows = max(1, int(max_pixels) // max(W, 1))
+        d = self._deferred
+        streams = []
+        for name in names:
+            if name in self.__dict__ or _SPECS[name].kind == "label":
+                streams.append(_row_slices(getattr(self, name), block_rows))
+            else:
+                streams.append(upsample_field_rows(self.grid_field(name), d["idx"], d["grid"], ~self.valid, block_rows))
+        for blocks in zip(*streams):
+            yield blocks[0][0] if blocks else slice(0, H), {n: b for n, (_, b) in zip(names, blocks)}
 
     @property
     def grid_valid(self) -> np.ndarray:

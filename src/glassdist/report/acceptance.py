@@ -17,8 +17,8 @@ import numpy as np
 
 from .regions import REGION_CHANNELS, all_worst_regions, regions_csv
 from .spec import spec_channels, spec_limits, spec_verdict
-from .stats import CHANNEL_FIELDS, valid_percent
-from .zones import measured_region, pane_frame, region_statistics, zone_masks, zone_statistics
+from .stats import CHANNEL_FIELDS, regions_statistics, valid_percent
+from .zones import measured_region, pane_frame, zone_masks, zone_statistics
 
 __all__ = ["Acceptance", "assess", "camera_metadata", "heatmap_axes", "draw_overlays", "colour_limits", "describe_clipping", "metadata_rows",
            "METADATA_KEYS"]
@@ -202,11 +202,15 @@ def assess(result, spec=None, *, spec_path="", spec_sha256="", protocol=None, ma
     # the power channels always; the uncertainty channels where a criterion judges them
     channels = tuple(dict.fromkeys((*CHANNEL_FIELDS, *(spec_channels(spec) if spec is not None else ()))))
     measured = measured_region(result)
-    stats = region_statistics(result, measured, over_limits_mD=limits, channels=channels)
     frame = pane_frame(result, spec.pane if spec is not None else None)
     zones_def = spec.zones if spec is not None else ()
     masks = zone_masks(frame, zones_def)
-    zones = zone_statistics(result, frame, zones_def, over_limits_mD=limits, masks=masks, channels=channels)
+    # the whole region and every zone in one pass over the pixel grid
+    regions = {None: measured, **{z.name: measured & masks[z.name] for z in zones_def}}
+    per_region = regions_statistics(result, regions, over_limits_mD=limits, channels=channels)
+    stats = per_region.pop(None)
+    zones = zone_statistics(result, frame, zones_def, over_limits_mD=limits, masks=masks, channels=channels,
+                            statistics=per_region)
     if mask is not None:
         m = np.asarray(mask, dtype=bool)
         coverage = 100.0 * np.count_nonzero(measured & m) / max(np.count_nonzero(m), 1)

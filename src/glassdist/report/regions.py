@@ -100,16 +100,36 @@ def worst_regions(field, valid, frame, threshold_mD, *, channel="phi_eff", max_c
     (50.0, (20.0, 7.5), 7.0)
     """
     field = np.asarray(field)
-    a = np.abs(field)
-    over = np.asarray(valid, dtype=bool) & (a > threshold_mD)  # NaN compares False
+    over = np.asarray(valid, dtype=bool) & (np.abs(field) > threshold_mD)  # NaN compares False
+    return _regions_of(over, field[over], frame, threshold_mD, channel=channel, max_count=max_count,
+                       min_area_mm2=min_area_mm2)
+
+
+def _over_threshold(result, attr, valid, threshold_mD, max_pixels=1 << 21):
+    """``(over, values)``: the pixels of ``valid`` where ``|result.attr| > threshold_mD`` and their signed values
+    (raster order), taken block by block of image rows (no full-size copy of the field)."""
+    over = np.zeros(valid.shape, bool)
+    values = []
+    for rows, block in result.pixel_rows([attr], max_pixels):
+        f = block[attr]
+        o = over[rows]
+        np.greater(np.abs(f), threshold_mD, out=o)  # NaN compares False
+        o &= valid[rows]
+        values.append(f[o])
+    return over, np.concatenate(values) if values else np.empty(0, np.float32)
+
+
+def _regions_of(over, signed, frame, threshold_mD, *, channel, max_count, min_area_mm2):
+    """:func:`worst_regions` of the pixels ``over`` (bool (H, W)) with their signed values ``signed`` (raster order)."""
     labels, n = ndimage.label(over, structure=np.ones((3, 3), bool))
     if n == 0:
         return ()
     yy, xx = np.nonzero(over)
     lab = labels[yy, xx]
+    del labels
     u, v = frame.to_mm(xx, yy)
     w = frame.pixel_area_mm2(xx, yy)
-    vals = a[yy, xx].astype(np.float64)
+    vals = np.abs(signed).astype(np.float64)
     area = np.bincount(lab, weights=w, minlength=n + 1)[1:]
     count = np.bincount(lab, minlength=n + 1)[1:]
     cu = np.bincount(lab, weights=w * u, minlength=n + 1)[1:] / area
@@ -122,7 +142,7 @@ def worst_regions(field, valid, frame, threshold_mD, *, channel="phi_eff", max_c
     # signed peak: the value at each region's largest |phi| (the first such pixel in raster order)
     top = vals == _per_label(np.maximum, vals, lab, n)[lab - 1]
     _, first = np.unique(lab[top], return_index=True)
-    peak = field[yy[top][first], xx[top][first]].astype(np.float64)
+    peak = signed[top][first].astype(np.float64)
     order = sorted((i for i in range(n) if area[i] >= min_area_mm2), key=lambda i: (-abs(peak[i]), -area[i]))
     out = []
     for k, i in enumerate(order[:max_count], start=1):
@@ -183,10 +203,14 @@ def all_worst_regions(result, frame, spec=None, *, channels=REGION_CHANNELS, sta
     settings = spec.worst_regions if spec is not None else None
     valid = measured_region(result)
     out = {}
+    kw = dict(max_count=settings.max_count if settings else 10, min_area_mm2=settings.min_area_mm2 if settings else 0.0)
     for ch, (t, source) in region_thresholds(result, spec, channels, statistics=statistics).items():
-        regions = () if not np.isfinite(t) else worst_regions(
-            getattr(result, CHANNEL_FIELDS[ch]), valid, frame, t, channel=ch,
-            max_count=settings.max_count if settings else 10, min_area_mm2=settings.min_area_mm2 if settings else 0.0)
+        if not np.isfinite(t):
+            regions = ()
+        elif hasattr(result, "pixel_rows") and getattr(result, "_deferred", None) is not None:
+            regions = _regions_of(*_over_threshold(result, CHANNEL_FIELDS[ch], valid, t), frame, t, channel=ch, **kw)
+        else:
+            regions = worst_regions(getattr(result, CHANNEL_FIELDS[ch]), valid, frame, t, channel=ch, **kw)
         out[ch] = {"threshold_mD": t, "threshold_source": source, "regions": regions}
     return out
 

@@ -24,6 +24,7 @@ __all__ = [
     "channel_statistics",
     "area_over_percent",
     "result_statistics",
+    "regions_statistics",
     "valid_percent",
     "format_limit",
 ]
@@ -132,3 +133,75 @@ def result_statistics(result, *, over_limits_mD=None):
             continue
         stats[name] = channel_statistics(field, result.valid, over_limits_mD=over_limits_mD.get(name, ()))
     return stats
+
+
+def _held(result, attr) -> bool:
+    specs = getattr(result, "field_specs", None)
+    if specs is not None and getattr(result, "_deferred", None) is not None:
+        return any(f.name == attr for f in specs())
+    return getattr(result, attr, None) is not None
+
+
+def _grid_brackets(result, regions, names) -> dict:
+    """``{(key, channel): (lo, hi)}``: where each region's 95th percentile lies, from the analysis-grid samples in it.
+
+    The pixel-grid fields interpolate the analysis grid, so its samples' quantiles bracket
+    the pixels' (checked; a miss costs a second look, not accuracy).
+    """
+    from ..analyzer.metrics import percentile_bracket
+
+    yy, xx = result.analysis_grid.coords()
+    H, W = result.valid.shape
+    iy = np.clip(np.rint(yy).astype(np.intp), 0, H - 1)
+    ix = np.clip(np.rint(xx).astype(np.intp), 0, W - 1)
+    gv = np.asarray(result.grid_valid, bool)
+    out = {}
+    for key, region in regions.items():
+        at = gv & np.asarray(region, bool)[iy, ix]
+        for ch, attr in names.items():
+            g = np.asarray(result.grid_field(attr))[at]
+            out[(key, ch)] = percentile_bracket(np.abs(g), 95.0)
+    return out
+
+
+def regions_statistics(result, regions, *, channels=tuple(CHANNEL_FIELDS), over_limits_mD=None, max_pixels=1 << 21):
+    """Statistics of ``channels`` of ``result`` over each of ``regions``, in one pass over the pixel grid.
+
+    Parameters
+    ----------
+    result : AnalysisResult
+        Or any object with the channels as (H, W) attributes (taken whole).
+    regions : dict of key -> ndarray of bool (H, W)
+    channels : sequence of str
+        Names of :data:`STATISTIC_FIELDS` (those the result holds are reported).
+    over_limits_mD : dict, optional
+        ``{channel: [T, ...]}`` thresholds for the ``area_over_<T>`` statistics.
+    max_pixels : int
+        Pixels per block of rows the fields are brought to the pixel grid in.
+
+    Returns
+    -------
+    dict
+        ``{key: {channel: statistics}}``, each as :func:`channel_statistics`: the same
+        values (the mean and standard deviation summed in float64 block by block, the
+        percentile exact), without a full-size copy of any field.
+    """
+    from ..analyzer.metrics import percentile, streamed_statistics
+
+    over_limits_mD = over_limits_mD or {}
+    names = {ch: STATISTIC_FIELDS[ch] for ch in channels if _held(result, STATISTIC_FIELDS[ch])}
+    if hasattr(result, "pixel_rows") and getattr(result, "_deferred", None) is not None:
+        brackets = _grid_brackets(result, regions, names)
+        to_channel = {attr: ch for ch, attr in names.items()}
+        blocks = ((rows, {to_channel[a]: b for a, b in fields.items()})
+                  for rows, fields in result.pixel_rows(list(names.values()), max_pixels))
+    else:
+        brackets, blocks = {}, [(slice(None), {ch: np.asarray(getattr(result, attr)) for ch, attr in names.items()})]
+    out = streamed_statistics(blocks, regions, over_limits=over_limits_mD, brackets=brackets)
+    for key, per in out.items():
+        for ch, st in per.items():
+            if st["p95_abs"] is None:  # the bracket missed: the whole field, once
+                f = getattr(result, names[ch])
+                st["p95_abs"] = percentile(np.abs(f[np.asarray(regions[key], bool) & np.isfinite(f)]), 95.0)
+            st.update({format_limit(t): pct for t, pct in st.pop("over_percent", {}).items()})
+    return out

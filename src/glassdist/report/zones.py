@@ -34,7 +34,7 @@ from functools import cached_property, partial
 
 import numpy as np
 
-from .stats import CHANNEL_FIELDS, STATISTIC_FIELDS, channel_statistics
+from .stats import CHANNEL_FIELDS, regions_statistics
 
 __all__ = ["PaneFrame", "distance_to_outside", "fill_holes", "grow_region", "pane_frame", "pane_frame_from_corners", "pane_frame_from_region", "zone_masks",
            "zone_statistics", "measured_region", "region_statistics"]
@@ -360,18 +360,14 @@ def region_statistics(result, region, *, over_limits_mD=None, channels=tuple(CHA
     """``{channel: statistics}`` of ``channels`` of ``result`` (those it holds) over the pixels of ``region`` (bool, (H, W)).
 
     ``channels``: names of :data:`glassdist.report.stats.STATISTIC_FIELDS` (default the power
-    channels; a specification may add the uncertainty channels).
+    channels; a specification may add the uncertainty channels). See
+    :func:`~glassdist.report.stats.regions_statistics`, which takes several regions in one pass.
     """
-    over_limits_mD = over_limits_mD or {}
-    stats = {}
-    for name in channels:
-        f = getattr(result, STATISTIC_FIELDS[name], None)
-        if f is not None:
-            stats[name] = channel_statistics(f, region, over_limits_mD=over_limits_mD.get(name, ()))
-    return stats
+    return regions_statistics(result, {"region": region}, over_limits_mD=over_limits_mD, channels=channels)["region"]
 
 
-def zone_statistics(result, frame, zones, *, over_limits_mD=None, masks=None, channels=tuple(CHANNEL_FIELDS)):
+def zone_statistics(result, frame, zones, *, over_limits_mD=None, masks=None, channels=tuple(CHANNEL_FIELDS),
+                    statistics=None):
     """Statistics and coverage of every zone.
 
     Parameters
@@ -386,6 +382,8 @@ def zone_statistics(result, frame, zones, *, over_limits_mD=None, masks=None, ch
         :func:`zone_masks` already computed.
     channels : sequence of str
         As for :func:`region_statistics`.
+    statistics : dict, optional
+        ``{zone name: {channel: statistics}}`` already taken over each zone's analysed pixels.
 
     Returns
     -------
@@ -398,12 +396,15 @@ def zone_statistics(result, frame, zones, *, over_limits_mD=None, masks=None, ch
     """
     masks = zone_masks(frame, zones) if masks is None else masks
     measured = measured_region(result)
+    if statistics is None:
+        statistics = regions_statistics(result, {z.name: measured & masks[z.name] for z in zones},
+                                        over_limits_mD=over_limits_mD, channels=channels)
     out = {}
     for z in zones:
         m = masks[z.name]
         area = frame.area_mm2(m)
         analysed = frame.area_mm2(m & measured)
-        stats = region_statistics(result, measured & m, over_limits_mD=over_limits_mD, channels=channels)
+        stats = statistics[z.name]
         out[z.name] = {
             "definition": z.describe(), "area_mm2": area, "analysed_area_mm2": analysed,
             "coverage_percent": 100.0 * analysed / area if area > 0 else math.nan, "statistics": stats,
