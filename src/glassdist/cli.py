@@ -172,9 +172,10 @@ def _run_analyze(args) -> int:
             step("analysing")
             kw = dict(pitch_mm=protocol.pitch_mm, distance_m=protocol.distance_m, reference=reference, params=params,
                       mask=mask)
-            result = analyze(images[0], **kw) if len(images) == 1 else analyze_captures(images, **kw)
-            small = preview(images[0])
-            del images, reference  # only the reduced photo is drawn from here on
+            small = preview(images[0])  # only the reduced photo is drawn from here on
+            # a single photo is handed over, so that the analysis frees it once Block F is done
+            result = analyze(images.pop(), **kw) if len(images) == 1 else analyze_captures(images, **kw)
+            del images, reference, kw
             if spec is not None:  # a capture outside the protocol is not judged (exit 2), nothing written
                 check_capture(spec[0].protocol, result, spec_label=f"the specification '{args.spec}'")
             step("writing the outputs")

@@ -29,7 +29,7 @@ from ..errors import AnalysisError, InputError
 from ..validation import DISTANCE_M, PITCH_MM, check_number
 from . import fourier as F
 from .homography import HomographyFit, apply_inverse, fit_grid_homography, inverse_jacobian
-from .metrics import evaluate_displacement, polynomial_detrend
+from .metrics import evaluate_displacement, inverse_2x2, polynomial_detrend
 from .transfer import InstrumentTransfer
 from .params import AnalyzerParams, load_params
 from .region import Region, contamination_px, guard_band, trim_edges, valid_region
@@ -514,7 +514,7 @@ def _channels(ag: _AnalysisGrid, ks, H_jac, p: AnalyzerParams, p_c, mm_per_px, s
         hc, wc = ag.grid.shape
         R = _polar_rotation(J[hc // 2, wc // 2])
         ch = evaluate_displacement(delta, ag.valid, jacobian=J, transfer=ag.transfer, frame_rotation=R, **common)
-        a1 = {"T": p_c / (2 * np.pi) * np.eye(2), "W": np.linalg.inv(J), "R": R, "blur": None if ag.transfer is None else ag.transfer.gaussian_px2}
+        a1 = {"T": p_c / (2 * np.pi) * np.eye(2), "W": inverse_2x2(J), "R": R, "blur": None if ag.transfer is None else ag.transfer.gaussian_px2}
         return delta @ R, ch, a1
     M = np.array([ks[0].f / ks[0].norm, ks[1].f / ks[1].norm]).T  # columns: unit carriers
     proj_px = ag.phases / (2 * np.pi * np.array([ks[0].norm, ks[1].norm]))
@@ -748,6 +748,7 @@ def analyze(
     warn: list[str] = []
     with _routed_warnings(warn):
         meas = _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn)
+        del image  # Block A needs no photo: freed here unless the caller keeps it (the command line does not)
         evaluated = _evaluate(meas, meas.ag, warn)
     return _result(meas, evaluated, warn)
 

@@ -48,6 +48,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import fourier as F
+from .metrics import inverse_2x2
 
 __all__ = [
     "noise_std",
@@ -109,9 +110,7 @@ def noise_std(spectrum: F.Spectrum, carriers: F.CarrierPair, *, exclusion: float
 
 
 def _det_inv(C: np.ndarray):
-    det = C[..., 0, 0] * C[..., 1, 1] - C[..., 0, 1] * C[..., 1, 0]
-    inv = np.stack([np.stack([C[..., 1, 1], -C[..., 0, 1]], -1), np.stack([-C[..., 1, 0], C[..., 0, 0]], -1)], -2)
-    return det, inv / det[..., None, None]
+    return C[..., 0, 0] * C[..., 1, 1] - C[..., 0, 1] * C[..., 1, 0], inverse_2x2(C)
 
 
 def phase_variance(white: np.ndarray, cov_px2: np.ndarray) -> np.ndarray:
@@ -142,6 +141,12 @@ class ChannelUncertainty:
     phi_shear_sigma_mD: np.ndarray
 
 
+def _bilinear(Q: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a^T Q b`` for stacks of 2-vectors ``(..., 2)`` and of 2 x 2 matrices ``(..., 2, 2)``."""
+    return (a[..., 0] * (Q[..., 0, 0] * b[..., 0] + Q[..., 0, 1] * b[..., 1])
+            + a[..., 1] * (Q[..., 1, 0] * b[..., 0] + Q[..., 1, 1] * b[..., 1]))
+
+
 def channel_uncertainty(
     grad_cov: tuple[np.ndarray, np.ndarray],
     T: np.ndarray,
@@ -166,20 +171,18 @@ def channel_uncertainty(
         L, m.
     """
     W = np.asarray(W, float)
-    Wt = np.swapaxes(W, -1, -2)
     var_tr = 0.0
     c_aa = c_bb = c_ab = 0.0
     for i, Q in enumerate(grad_cov):
-        Cg = Wt @ Q @ W  # covariance of g_i = W^T grad phi_i, rad^2/mm^2
+        # x^T Cg y with Cg = W^T Q W the covariance of g_i = W^T grad phi_i (rad^2/mm^2): (W x)^T Q (W y),
+        # elementwise (a stack of 2 x 2 matrix products costs several times more)
         t = T[:, i]
-        u = np.array([t[0], -t[1]]) / 2.0
-        v = np.array([t[1], t[0]]) / 2.0
-        quad = lambda x, y: np.einsum("...a,...ab,...b->...", np.broadcast_to(x, Cg.shape[:-1]), Cg,  # noqa: E731
-                                      np.broadcast_to(y, Cg.shape[:-1]))
-        var_tr = var_tr + quad(t, t)
-        c_aa = c_aa + quad(u, u)
-        c_bb = c_bb + quad(v, v)
-        c_ab = c_ab + quad(u, v)
+        Wt_, Wu, Wv = (W[..., :, 0] * x[0] + W[..., :, 1] * x[1]
+                       for x in (t, np.array([t[0], -t[1]]) / 2.0, np.array([t[1], t[0]]) / 2.0))
+        var_tr = var_tr + _bilinear(Q, Wt_, Wt_)
+        c_aa = c_aa + _bilinear(Q, Wu, Wu)
+        c_bb = c_bb + _bilinear(Q, Wv, Wv)
+        c_ab = c_ab + _bilinear(Q, Wu, Wv)
     scale = 1000.0 / distance_m
     a = 0.5 * (strain[..., 0, 0] - strain[..., 1, 1])
     b = 0.5 * (strain[..., 0, 1] + strain[..., 1, 0])
