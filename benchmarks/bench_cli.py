@@ -8,7 +8,10 @@ fresh process under ``/usr/bin/time`` (wall time and peak RSS of that process):
   process: the unit;
 * ``default``: ``glassdist analyze IMG --pitch-mm 8 --distance-m 10 --out DIR`` (Direct Method);
 * ``report+export``: the same with ``--report --export``;
-* ``fields pixel``: the same with ``--fields pixel`` (sizes up to ``--pixel-max-mpx``).
+* ``fields pixel``: the same with ``--fields pixel`` (sizes up to ``--pixel-max-mpx``);
+* the floor under the command, also whole processes: ``import + read`` (``import glassdist``
+  and ``read_image``, nothing else) and ``analysis only`` (that, then ``glassdist.analyze``
+  with the command's settings, no output written).
 
 Also the output folder's size, and the agreement of the default (analysis-grid) fields with
 the pixel-grid ones: each analysis-grid sample of phi_eff / phi_shear against the pixel-grid
@@ -79,6 +82,15 @@ def _rfft2(png: Path) -> dict:
     return {"time_s": float(out.stdout.split()[-1])}
 
 
+_FLOOR = ("import sys, glassdist\nimg = glassdist.read_image(sys.argv[1], dtype='float32')\n"
+          "if sys.argv[2] == 'analyze':\n    glassdist.analyze(img, pitch_mm=8, distance_m=10)\n")
+
+
+def _floor(png: Path, what: str) -> dict:
+    """A whole process that imports glassdist and reads the photo (``what='read'``), or also analyses it."""
+    return _timed([sys.executable, "-c", _FLOOR, str(png), what])
+
+
 def _folder_mb(path: Path) -> float:
     return sum(p.stat().st_size for p in path.rglob("*") if p.is_file()) / 1e6
 
@@ -103,7 +115,7 @@ def _agreement(default_dir: Path, pixel_dir: Path) -> dict:
     return out
 
 
-def bench(sizes, pixel_max_mpx: float) -> list[dict]:
+def bench(sizes, pixel_max_mpx: float, commands: bool = True) -> list[dict]:
     exe = [sys.executable, "-m", "glassdist", "analyze"]
     rows = []
     for W, H in sizes:
@@ -113,8 +125,12 @@ def bench(sizes, pixel_max_mpx: float) -> list[dict]:
             unit = _rfft2(png)["time_s"]
             size = f"{W}x{H}"
             rows.append({"image": size, "run": "numpy rfft2", "time_s": unit, "x_rfft2": 1.0})
-            runs = [("default", []), ("report+export", ["--report", "--export"])]
-            if W * H / 1e6 <= pixel_max_mpx:
+            for name, what in (("import + read", "read"), ("analysis only", "analyze")):
+                m = _floor(png, what)
+                rows.append({"image": size, "run": name, **m, "x_rfft2": m["wall_s"] / unit})
+                print(json.dumps(rows[-1]), flush=True)
+            runs = [("default", []), ("report+export", ["--report", "--export"])] if commands else []
+            if commands and W * H / 1e6 <= pixel_max_mpx:
                 runs.append(("fields pixel", ["--fields", "pixel"]))
             for name, extra in runs:
                 out = tmp / name.replace(" ", "_").replace("+", "_")
@@ -122,7 +138,7 @@ def bench(sizes, pixel_max_mpx: float) -> list[dict]:
                 rows.append({"image": size, "run": name, **m, "x_rfft2": m["wall_s"] / unit,
                              "folder_mb": _folder_mb(out)})
                 print(json.dumps(rows[-1]), flush=True)
-            if (tmp / "fields_pixel").exists():
+            if commands and (tmp / "fields_pixel").exists():
                 rows.append({"image": size, "run": "default vs pixel", **_agreement(tmp / "default", tmp / "fields_pixel")})
                 print(json.dumps(rows[-1]), flush=True)
             shutil.rmtree(tmp, ignore_errors=True)
@@ -145,10 +161,11 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--sizes", nargs="+", default=["3000x2000", "6000x4000"], help="WxH, px")
     p.add_argument("--pixel-max-mpx", type=float, default=30.0, help="largest image with a --fields pixel row, Mpx")
+    p.add_argument("--floor-only", action="store_true", help="only the rfft2 unit and the floor rows")
     p.add_argument("--out", type=Path, help="JSON of the rows")
     args = p.parse_args(argv)
     sizes = [tuple(int(v) for v in s.split("x")) for s in args.sizes]
-    rows = bench(sizes, args.pixel_max_mpx)
+    rows = bench(sizes, args.pixel_max_mpx, commands=not args.floor_only)
     print(table(rows))
     if args.out:
         record = {"command": " ".join(["python", "benchmarks/bench_cli.py", *(argv or sys.argv[1:])]),
