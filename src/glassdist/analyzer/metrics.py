@@ -693,19 +693,6 @@ class _Running:
         else:
             self.inside.append(a)
 
-    def p95(self, q: float) -> float | None:
-        """The exact ``q``-th percentile (numpy's linear method), None when the bracket missed it."""
-        inside = np.concatenate(self.inside) if self.inside else np.empty(0, np.float32)
-        virtual = (self.n - 1) * np.true_divide(q, 100)
-        k = int(np.floor(virtual))
-        gamma = float(virtual - k)
-        k1 = min(k + 1, self.n - 1)
-        if not (self.below <= k and self.below + inside.size > k1):
-            return None
-        low, high = np.partition(inside, (k - self.below, k1 - self.below))[[k - self.below, k1 - self.below]]
-        diff = high - low  # numpy's _lerp, operation for operation (as :func:`percentile`)
-        return float(high - diff * (1 - gamma) if gamma >= 0.5 else low + diff * gamma)
-
     def statistics(self, q: float):
         if self.n == 0:
             nan = float("nan")
@@ -715,7 +702,8 @@ class _Running:
                "max_abs": self.max_abs, "n_valid": int(self.n)}
         if self.limits:
             out["over_percent"] = {t: float(100.0 * c / self.n) for t, c in zip(self.limits, self.over)}
-        out["p95_abs"] = self.p95(q)
+        inside = np.concatenate(self.inside) if self.inside else np.empty(0, np.float32)
+        out["p95_abs"] = _bracketed_percentile(inside, self.below, self.n, q)  # None: the bracket missed
         return out
 
 
@@ -790,21 +778,25 @@ def percentile(values: np.ndarray, q: float) -> float:
     n = a.size
     if n < 1 << 18:
         return float(np.percentile(a, q))
+    s = np.sort(a[:: n >> 16])
+    j = (n - 1) * np.true_divide(q, 100) / (n - 1) * (s.size - 1)  # the sample's rank of the percentile
+    margin = 6.0 * np.sqrt(s.size * 0.25) + 2.0
+    lo = s[max(int(j - margin), 0)]
+    hi = s[min(int(np.ceil(j + margin)), s.size - 1)]
+    found = _bracketed_percentile(a[(a >= lo) & (a <= hi)], int(np.count_nonzero(a < lo)), n, q)
+    return found if found is not None else _bracketed_percentile(a, 0, n, q)  # the sample misled: every value
+
+
+def _bracketed_percentile(inside: np.ndarray, below: int, n: int, q: float) -> float | None:
+    """numpy's ``q``-th percentile (linear method) of ``n`` values, from those ``inside`` a bracket and the
+    count ``below`` it; None when the two order statistics it needs are not inside."""
     virtual = (n - 1) * np.true_divide(q, 100)
     k = int(np.floor(virtual))
     gamma = float(virtual - k)
     k1 = min(k + 1, n - 1)
-    s = np.sort(a[:: n >> 16])
-    j = virtual / (n - 1) * (s.size - 1)
-    margin = 6.0 * np.sqrt(s.size * 0.25) + 2.0
-    lo = s[max(int(j - margin), 0)]
-    hi = s[min(int(np.ceil(j + margin)), s.size - 1)]
-    below = int(np.count_nonzero(a < lo))
-    inside = a[(a >= lo) & (a <= hi)]
-    if below <= k and below + inside.size > k1:
-        low, high = np.partition(inside, (k - below, k1 - below))[[k - below, k1 - below]]
-    else:  # the sample misled: every value
-        low, high = np.partition(a, (k, k1))[[k, k1]]
+    if not (below <= k and below + inside.size > k1):
+        return None
+    low, high = np.partition(inside, (k - below, k1 - below))[[k - below, k1 - below]]
     # numpy's linear interpolation (_lerp), operation for operation
     diff = high - low
     return float(high - diff * (1 - gamma) if gamma >= 0.5 else low + diff * gamma)

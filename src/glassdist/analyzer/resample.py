@@ -77,15 +77,21 @@ def bspline_eval(f: np.ndarray, ty: np.ndarray | None, tx: np.ndarray | None) ->
     ``sinc(S nu)^4 / ((2 + cos 2 pi S nu) / 3)`` per axis (S the sample step), is part of
     the instrument transfer Block A divides out (:mod:`glassdist.analyzer.transfer`).
     """
+    c = _prefiltered_along_x(f, ty, tx)
+    if ty is not None:
+        c = np.asarray(_bspline_weights(c.shape[0], ty) @ c, np.float32)
+    return np.ascontiguousarray(c)
+
+
+def _prefiltered_along_x(f: np.ndarray, ty, tx) -> np.ndarray:
+    """:func:`bspline_eval` up to its last product: the prefilter (along each axis evaluated), then x."""
     c = np.ascontiguousarray(f, np.float32)
     for axis, t in ((0, ty), (1, tx)):
         if t is not None:
             c = ndimage.spline_filter1d(c, order=3, axis=axis, mode="nearest", output=np.float32)
-    if tx is not None:
-        c = np.asarray((_bspline_weights(c.shape[1], tx) @ c.T).T, np.float32)
-    if ty is not None:
-        c = np.asarray(_bspline_weights(c.shape[0], ty) @ c, np.float32)
-    return np.ascontiguousarray(c)
+    if tx is not None:  # C order: the y product of every block of rows reads it as it is
+        c = np.ascontiguousarray((_bspline_weights(c.shape[1], tx) @ c.T).T, np.float32)
+    return c
 
 
 def bspline_upsample(f: np.ndarray, k: int, axis: int) -> np.ndarray:
@@ -154,14 +160,8 @@ def upsample_field_rows(f: np.ndarray, idx, grid: F.SamplingGrid, invalid: np.nd
     sy, sx = grid.step
     oy, ox = grid.offset
     ty, tx = (np.arange(H) - oy) / sy, (np.arange(W) - ox) / sx
-    bx = _bspline_weights(f.shape[1], tx)
     by = _bspline_weights(f.shape[0], ty)
-    along_x = []
-    for p_ in _planes(f):  # the steps of bspline_eval up to its last product
-        c = ndimage.spline_filter1d(np.ascontiguousarray(p_, np.float32), order=3, axis=0, mode="nearest",
-                                    output=np.float32)
-        c = ndimage.spline_filter1d(c, order=3, axis=1, mode="nearest", output=np.float32)
-        along_x.append(np.ascontiguousarray((bx @ c.T).T, np.float32))
+    along_x = [_prefiltered_along_x(p_, ty, tx) for p_ in _planes(f)]
     for r0 in range(0, H, block_rows):
         rows = slice(r0, min(H, r0 + block_rows))
         b = by[rows]

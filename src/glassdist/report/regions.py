@@ -26,7 +26,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy import ndimage
 
-from .stats import CHANNEL_FIELDS
+from .stats import CHANNEL_FIELDS, pixel_blocks
 
 __all__ = ["WorstRegion", "worst_regions", "region_thresholds", "all_worst_regions", "regions_csv"]
 
@@ -110,7 +110,7 @@ def _over_threshold(result, attr, valid, threshold_mD, max_pixels=1 << 21):
     (raster order), taken block by block of image rows (no full-size copy of the field)."""
     over = np.zeros(valid.shape, bool)
     values = []
-    for rows, block in result.pixel_rows([attr], max_pixels):
+    for rows, block in pixel_blocks(result, [attr], max_pixels):
         f = block[attr]
         o = over[rows]
         np.greater(np.abs(f), threshold_mD, out=o)  # NaN compares False
@@ -205,12 +205,8 @@ def all_worst_regions(result, frame, spec=None, *, channels=REGION_CHANNELS, sta
     out = {}
     kw = dict(max_count=settings.max_count if settings else 10, min_area_mm2=settings.min_area_mm2 if settings else 0.0)
     for ch, (t, source) in region_thresholds(result, spec, channels, statistics=statistics).items():
-        if not np.isfinite(t):
-            regions = ()
-        elif hasattr(result, "pixel_rows") and getattr(result, "_deferred", None) is not None:
-            regions = _regions_of(*_over_threshold(result, CHANNEL_FIELDS[ch], valid, t), frame, t, channel=ch, **kw)
-        else:
-            regions = worst_regions(getattr(result, CHANNEL_FIELDS[ch]), valid, frame, t, channel=ch, **kw)
+        regions = () if not np.isfinite(t) else _regions_of(*_over_threshold(result, CHANNEL_FIELDS[ch], valid, t),
+                                                             frame, t, channel=ch, **kw)
         out[ch] = {"threshold_mD": t, "threshold_source": source, "regions": regions}
     return out
 

@@ -25,6 +25,7 @@ __all__ = [
     "area_over_percent",
     "result_statistics",
     "regions_statistics",
+    "pixel_blocks",
     "valid_percent",
     "format_limit",
 ]
@@ -135,6 +136,23 @@ def result_statistics(result, *, over_limits_mD=None):
     return stats
 
 
+def _on_analysis_grid(result) -> bool:
+    return hasattr(result, "pixel_rows") and getattr(result, "_deferred", None) is not None
+
+
+def pixel_blocks(result, attrs, max_pixels=1 << 21):
+    """``(rows, {attr: field[rows]})``: fields ``attrs`` of ``result`` on the pixel grid, by blocks of image rows.
+
+    An :class:`~glassdist.analyzer.result.AnalysisResult` brings them there block by block
+    (:meth:`~glassdist.analyzer.result.AnalysisResult.pixel_rows`); any other object with the
+    fields as (H, W) attributes gives them whole, as one block.
+    """
+    if _on_analysis_grid(result):
+        yield from result.pixel_rows(list(attrs), max_pixels)
+    else:
+        yield slice(None), {a: np.asarray(getattr(result, a)) for a in attrs}
+
+
 def _held(result, attr) -> bool:
     specs = getattr(result, "field_specs", None)
     if specs is not None and getattr(result, "_deferred", None) is not None:
@@ -190,13 +208,10 @@ def regions_statistics(result, regions, *, channels=tuple(CHANNEL_FIELDS), over_
 
     over_limits_mD = over_limits_mD or {}
     names = {ch: STATISTIC_FIELDS[ch] for ch in channels if _held(result, STATISTIC_FIELDS[ch])}
-    if hasattr(result, "pixel_rows") and getattr(result, "_deferred", None) is not None:
-        brackets = _grid_brackets(result, regions, names)
-        to_channel = {attr: ch for ch, attr in names.items()}
-        blocks = ((rows, {to_channel[a]: b for a, b in fields.items()})
-                  for rows, fields in result.pixel_rows(list(names.values()), max_pixels))
-    else:
-        brackets, blocks = {}, [(slice(None), {ch: np.asarray(getattr(result, attr)) for ch, attr in names.items()})]
+    brackets = _grid_brackets(result, regions, names) if _on_analysis_grid(result) else {}
+    to_channel = {attr: ch for ch, attr in names.items()}
+    blocks = ((rows, {to_channel[a]: b for a, b in fields.items()})
+              for rows, fields in pixel_blocks(result, list(names.values()), max_pixels))
     out = streamed_statistics(blocks, regions, over_limits=over_limits_mD, brackets=brackets)
     for key, per in out.items():
         for ch, st in per.items():
