@@ -258,7 +258,7 @@ def _fmt(rows) -> str:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     ap.add_argument("--sizes", nargs="+", default=["2000x1500", "6000x4000"], help="WxH sizes")
     ap.add_argument("--no-peers", action="store_true")
     ap.add_argument("--full-res-check", default=None, help="WxH size on which to also run the full-resolution path")

@@ -148,7 +148,7 @@ def score(name, ref, img, pattern, params) -> dict:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], allow_abbrev=False)
     ap.add_argument("--params", default="{}", help="analyzer parameter overrides, JSON")
     ap.add_argument("--out", type=Path, help="write the records as JSON")
     ap.add_argument("--cases", help="comma-separated substrings of the case names to run")

@@ -92,7 +92,7 @@ def _scene(folder: Path, pixels, spp) -> Path:
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     ap.add_argument("--out", type=Path, help="write the timings as JSON here")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--pixels", type=int, nargs=2, default=(512, 384), metavar=("W", "H"), help="sweep image size")

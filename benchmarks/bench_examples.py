@@ -50,7 +50,7 @@ def measure() -> dict:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], allow_abbrev=False)
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--before", type=Path)
     ap.add_argument("--before-command", default="")

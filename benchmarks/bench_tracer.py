@@ -31,7 +31,7 @@ SCENE = Path(__file__).resolve().parents[1] / "examples" / "scenes" / "wavy_slab
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     ap.add_argument("--size", type=int, default=1024)
     ap.add_argument("--spp", type=int, default=16)
     ap.add_argument("--repeat", type=int, default=1)

@@ -111,7 +111,7 @@ def calibrate(pattern, period_px, noise, sigma_periods, method, *, n=30, size=25
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], allow_abbrev=False)
     ap.add_argument("--n", type=int, default=30, help="noise realisations per scene")
     ap.add_argument("--size", type=int, default=256, help="image size, px")
     ap.add_argument("--quick", action="store_true", help="every fourth scene only")

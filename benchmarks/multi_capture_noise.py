@@ -54,7 +54,7 @@ def row(method: str, noise_std: float, *, reference_noise: bool = False, moved: 
 
 def main() -> None:
     logging.basicConfig(level=logging.ERROR)
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     p.add_argument("--moved-only", action="store_true", help="only the row with camera moves")
     args = p.parse_args()
     rows = [row("direct", 0.05, moved=True)]

@@ -5,13 +5,21 @@ Private to the package: the ``_cli`` modules of the subpackages import it; nothi
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import sys
 from pathlib import Path
 
 from .validation import SIGMA_MM, number_option
 
-__all__ = ["progress_reporter", "apply_render_overrides", "add_render_options", "add_scene_command", "add_analysis_options"]
+__all__ = ["folder_option", "progress_reporter", "apply_render_overrides", "add_render_options", "add_scene_command", "add_analysis_options"]
+
+
+def folder_option(text: str) -> Path:
+    """argparse type of ``--out``: a folder path; an empty one (which would mean the current folder) is refused."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("is empty; give a folder path (new or existing), e.g. --out out/run1")
+    return Path(text)
 
 
 @contextlib.contextmanager
@@ -55,7 +63,7 @@ def add_scene_command(subparsers, name: str, run, *, help: str, description: str
     """Add a sub-command that reads a scene file and writes into ``--out DIR``; returns its parser."""
     p = subparsers.add_parser(name, help=help, description=description)
     p.add_argument("scene", type=Path, help="scene file (YAML or JSON)")
-    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
+    p.add_argument("--out", type=folder_option, required=True, metavar="DIR", help="output folder")
     p.set_defaults(func=run)
     return p
 

@@ -9,14 +9,17 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import difflib
 import importlib
 import json
 import logging
 import sys
+import traceback
 from pathlib import Path
 
 import numpy as np
 
+from ._cli_shared import folder_option
 from ._version import __version__
 from .errors import GlassdistError, InputError
 from .validation import DISTANCE_M, PITCH_MM, SIGMA_MM, check_sigma_extent, number_option, safe_text
@@ -43,6 +46,10 @@ class OneLineErrorParser(argparse.ArgumentParser):
 
     _commands = None  # the sub-parsers action, once add_subparsers is called
 
+    def __init__(self, *args, **kwargs):
+        kwargs["allow_abbrev"] = False  # '--pitch 5' is not taken for '--pitch-mm 5'
+        super().__init__(*args, **kwargs)
+
     def add_subparsers(self, **kwargs):
         self._commands = super().add_subparsers(**kwargs)
         return self._commands
@@ -52,8 +59,18 @@ class OneLineErrorParser(argparse.ArgumentParser):
         ns, extras = self.parse_known_args(args, namespace)
         if extras:
             cmd = self._commands.choices.get(getattr(ns, self._commands.dest, None)) if self._commands else None
-            (cmd or self).error(f"unrecognized arguments: {' '.join(extras)}")
+            (cmd or self).error(f"unrecognized arguments: {' '.join(extras)}{(cmd or self).suggestion(extras)}")
         return ns
+
+    def suggestion(self, extras) -> str:
+        """'; did you mean --pitch-mm?' for the first unknown option that resembles one of this parser's."""
+        known = [s for action in self._actions for s in action.option_strings if s.startswith("--")]
+        for arg in extras:
+            if arg.startswith("--"):
+                close = difflib.get_close_matches(arg.split("=", 1)[0], known, n=1, cutoff=0.6)
+                if close:
+                    return f"; did you mean {close[0]}?"
+        return ""
 
     def error(self, message):
         self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {safe_text(message, 2000)} (see {self.prog} --help)\n")
@@ -77,7 +94,7 @@ def _register_analyze(sub) -> None:
     p.add_argument("--sigma-mm", type=number_option(SIGMA_MM), help="reporting smoothing scale on the backdrop, mm (default: 2 carrier periods)")
     p.add_argument("--params", type=Path, help="JSON file of analyzer parameters (unknown keys are errors)")
     p.add_argument("--mask", type=Path, help="image whose non-zero pixels mark the region to analyse")
-    p.add_argument("--out", type=Path, required=True, help="output folder (created if needed)")
+    p.add_argument("--out", type=folder_option, required=True, help="output folder (created if needed)")
     p.add_argument("--spec", type=Path, help="acceptance specification JSON: prints PASS/FAIL, exit 3 on FAIL; its protocol supplies omitted options and refuses contradicting ones (exit 2)")
     p.add_argument("--pane-id", help="pane identifier, stated in the report and summary.json")
     p.add_argument("--site", help="where the pane was measured (factory line, building), for the report")
@@ -235,8 +252,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except GlassdistError as exc:
-        if args.debug:
-            raise
+        if args.debug:  # bad input stays bad input (exit 2); the traceback shows where it was found
+            traceback.print_exc()
         print(f"glassdist: error: {safe_text(exc, 2000)}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:

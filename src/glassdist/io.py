@@ -316,11 +316,14 @@ def prepare_output_dir(path: str | os.PathLike) -> Path:
     InputError
         If ``path`` exists and is not a folder: glassdist never replaces a user's file by a folder.
     """
+    if not os.fspath(path):
+        raise InputError("the output folder is empty (''); give --out a folder path (new or existing)")
     p = Path(path)
-    if p.exists() and not p.is_dir():
-        raise InputError(f"output path '{p}' is an existing file; give --out a folder path (new or existing)")
     try:
+        if p.exists() and not p.is_dir():
+            raise InputError(f"output path '{p}' is an existing file; give --out a folder path (new or existing)")
         p.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"cannot create output folder '{p}': {exc.strerror}; choose a writable location") from None
+    except OSError as exc:  # no permission, a name too long for the file system, ...
+        raise InputError(f"cannot create output folder '{safe_text(p, 200)}': {exc.strerror}; "
+                         "choose a writable location with a shorter name") from None
     return p

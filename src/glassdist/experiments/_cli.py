@@ -10,17 +10,20 @@ from pathlib import Path
 
 from ..distributed import add_scheduler_options, open_executor
 from ..io import prepare_output_dir
-from .._cli_shared import progress_reporter
+from .._cli_shared import folder_option, progress_reporter
 from ..validation import SIGMA_MM, Range, number_option
 
 __all__ = ["register", "run"]
+
+
+_NAMES = ("parity", "pitch", "rotation", "accuracy", "transfer")
 
 
 def register(subparsers):
     """Add the ``experiment`` sub-command."""
     p = subparsers.add_parser(
         "experiment",
-        help="re-run one of the paper's virtual experiments (parity, pitch, rotation)",
+        help=f"re-run a virtual experiment ({', '.join(_NAMES)})",
         description="Render the experiment's scenes, run the Distortion Analyzer and compare it with the "
         "analytical model and the exact landing-point truth through the same evaluation stack. Writes "
         "DIR/NAME.json (numbers, settings, bound checks), DIR/NAME.md (tables next to the paper's) and the "
@@ -29,8 +32,8 @@ def register(subparsers):
         "ray-traced truth on 13 scenes (docs/accuracy.md). With --workers N or --scheduler ADDRESS the "
         "scenes render in parallel on Dask workers.",
     )
-    p.add_argument("name", choices=["parity", "pitch", "rotation", "accuracy", "transfer"], help="experiment to run")
-    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder (created if needed)")
+    p.add_argument("name", choices=_NAMES, help="experiment to run")
+    p.add_argument("--out", type=folder_option, required=True, metavar="DIR", help="output folder (created if needed)")
     p.add_argument("--engine", choices=["exact", "cycles"], default="exact", help="render engine (default exact)")
     p.add_argument("--scale", type=number_option(Range(0.05, 16.0)), default=1.0, help="image size relative to the scenes' 1024 x 768 px (default 1)")
     p.add_argument("--spp", type=int, help="samples per pixel (default: the scenes', 16)")

@@ -743,7 +743,7 @@ def register(subparsers) -> None:
 
 def main(argv=None) -> int:
     """``python -m glassdist.render.cycles``: install the Cycles engine."""
-    p = argparse.ArgumentParser(prog="python -m glassdist.render.cycles", description="Install the Blender Cycles engine.")
+    p = argparse.ArgumentParser(prog="python -m glassdist.render.cycles", description="Install the Blender Cycles engine.", allow_abbrev=False)
     _add_setup_arguments(p)
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
+from .._cli_shared import folder_option
 from ..distributed import add_scheduler_options, open_executor
 from ..validation import DISTANCE_M, PITCH_MM, SIGMA_MM, number_option, safe_text
 from .batch import check_panes, pane_defaults, panes_from_folder, read_manifest, run_batch
@@ -26,7 +27,7 @@ def register(subparsers):
     p = subparsers.add_parser("batch", help="analyse many panes (manifest CSV or folder), resumable",
                               description=_HELP)
     p.add_argument("source", metavar="MANIFEST.csv|FOLDER", help="manifest CSV or folder of images")
-    p.add_argument("--out", required=True, metavar="DIR", help="batch output folder (new, empty, or to resume)")
+    p.add_argument("--out", type=folder_option, required=True, metavar="DIR", help="batch output folder (new, empty, or to resume)")
     p.add_argument("--spec", metavar="SPEC.json", help="acceptance specification for panes without a 'spec' column")
     p.add_argument("--report", action="store_true", help="write an HTML report per pane")
     p.add_argument("--export", action="store_true", help="write NPZ and 32-bit TIFF fields per pane")

@@ -47,12 +47,14 @@ specification, ``report.html`` (``report=True``), ``fields.npz`` and ``tiff/*.ti
 from __future__ import annotations
 
 import contextlib
+import errno
 import hashlib
 import json
 import logging
 import os
 import re
 import secrets
+import shutil
 import sys
 import zipfile
 from dataclasses import dataclass, field
@@ -68,7 +70,7 @@ from .spec import load_spec, spec_limits
 from .stats import CHANNEL_FIELDS, STATISTIC_FIELDS, valid_percent
 
 __all__ = [
-    "EXIT_OK", "EXIT_SPEC_FAIL", "FIELD_LAYOUTS", "GRID_KEYS", "OutputFolder", "StoredResult", "a4_figures",
+    "EXIT_OK", "EXIT_SPEC_FAIL", "FIELD_LAYOUTS", "GRID_KEYS", "OutputFolder", "StoredResult", "a4_figures", "estimate_output_bytes",
     "file_sha256", "finish_analysis", "load_result", "open_output_folder", "output_record", "plan_outputs", "preview",
     "recorded_outputs", "remove_outputs", "write_npz", "write_outputs",
 ]
@@ -301,8 +303,11 @@ def _first_missing(path: Path) -> Path | None:
     """The topmost folder of ``path`` that does not exist yet (None if ``path`` exists)."""
     missing = None
     for p in (path, *path.parents):
-        if p.exists():
-            break
+        try:
+            if p.exists():
+                break
+        except OSError:  # e.g. a name too long: prepare_output_dir says so
+            return None
         missing = p
     return missing
 
@@ -399,10 +404,50 @@ def _take_folder(path: Path, planned, inputs, created) -> OutputFolder:
     try:
         folder.debris_removed = _remove_debris(path, set(planned))
         folder.previous = recorded_outputs(path)
+        _refuse_foreign(path, planned, folder.previous)
     except BaseException:
         folder.close()
         raise
     return folder
+
+
+def _is_summary(path: Path) -> bool:
+    """Whether ``path`` is a summary a glassdist run wrote (it names the version and the outputs)."""
+    try:
+        with open(path, "rb") as fh:
+            summary = json.loads(fh.read(16 << 20).decode("utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError):
+        return False
+    return isinstance(summary, dict) and "glassdist_version" in summary and isinstance(summary.get("outputs"), dict)
+
+
+def _refuse_foreign(path: Path, planned, previous: dict) -> None:
+    """Refuse the run when a planned output's name is taken by a file glassdist did not write.
+
+    A file is the tool's own when the previous run's ``summary.json`` records it with its
+    present size and SHA-256 (``summary.json`` itself when it is a glassdist summary);
+    anything else in the way (the user's own ``summary.json``, a ``phi_eff.png`` edited
+    or made by hand, a folder) would be overwritten, so the run stops before any work.
+
+    Raises
+    ------
+    InputError
+        Naming the first such file.
+    """
+    for name in planned:
+        target = path.joinpath(*PurePosixPath(name).parts)
+        if not os.path.lexists(target):
+            continue
+        if name == SUMMARY_NAME:
+            own = target.is_file() and not target.is_symlink() and _is_summary(target)
+        else:
+            rec = previous.get(name)
+            own = rec is not None and _own_file(path, name) is not None and file_sha256(target) == rec["sha256"]
+        if not own:
+            raise InputError(
+                f"'{target}' is in the way of the output '{name}' and was not written by glassdist (no previous "
+                "run's summary.json records it); move it away or choose another --out folder"
+            )
 
 
 def write_npz(fh, members) -> None:
@@ -514,9 +559,52 @@ def write_outputs(result, out_dir, *, fields="analysis", report=False, export=Fa
                                  spec=spec, protocol=protocol, mask=mask, metadata=metadata, image=image,
                                  image_path=image_path, reference_path=reference_path, mask_path=mask_path,
                                  captures=captures, echo=echo)
+    folder, out = out_dir, out_dir.path
+    try:
+        return _write_all(result, folder, fields=fields, report=report, export=export, spec_path=spec_path, spec=spec,
+                          protocol=protocol, mask=mask, metadata=metadata, image=image, image_path=image_path,
+                          reference_path=reference_path, mask_path=mask_path, captures=captures, echo=echo)
+    except OSError as exc:
+        if exc.errno not in (errno.ENOSPC, errno.EDQUOT):
+            raise
+        free = shutil.disk_usage(out).free
+        raise InputError(
+            f"no space left on the disk of '{out}' ({free / 1e6:.0f} MB free): this run's outputs need up to "
+            f"{estimate_output_bytes(result, folder.planned, fields) / 1e6:.0f} MB; free some space or choose "
+            "another --out (without --export and --report a run needs far less)"
+        ) from None
+
+
+def estimate_output_bytes(result, planned, fields="analysis") -> int:
+    """Upper bound (bytes) of what a run's outputs ``planned`` take on disk, before compression.
+
+    Each full-resolution file (``result.npz`` with ``fields='pixel'``, ``fields.npz``, one
+    TIFF per plane) holds the fields on the pixel grid, 4 bytes a value (1 for labels);
+    the compact ``result.npz`` about a 49th of that (a ~7 px analysis step); 2 MB for each
+    figure, table and the report.
+    """
+    h, w = result.valid.shape
+    sizes = {s.name: h * w * s.components * (4 if s.kind == "float" else 1) for s in result.field_specs()}
+    full = sum(sizes.values()) + h * w
+    total = 0
+    for name in planned:
+        if name == "result.npz":
+            total += full if fields == "pixel" else full // 49
+        elif name == "fields.npz":
+            total += full
+        elif name.startswith("tiff/"):
+            total += 4 * h * w  # one float32 plane
+        else:
+            total += 2 << 20
+    return total
+
+
+def _write_all(result, folder, *, fields, report, export, spec_path, spec, protocol, mask, metadata, image,
+               image_path, reference_path, mask_path, captures, echo):
+    """The writing of :func:`write_outputs` into the folder it holds."""
     from .exports import atomic_write
 
-    folder, out = out_dir, out_dir.path
+    out = folder.path
     spec = spec or (load_spec(spec_path) if spec_path is not None else None)
     members = _grid_members(result) if fields == "analysis" else _pixel_members(result)
     npz = atomic_write(out / "result.npz", lambda fh: write_npz(fh, members))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .._cli_shared import folder_option
 from ..distributed import add_scheduler_options, open_executor
 
 __all__ = ["register", "run"]
@@ -25,7 +26,7 @@ def register(subparsers):
     p.add_argument("scene", type=Path, help="base scene file (YAML or JSON)")
     p.add_argument("--vary", action="append", default=[], metavar="KEY=V1,V2,...", required=True,
                    help="a scene value and the values it takes (repeat for more keys; every combination runs)")
-    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="sweep folder (new, empty, or to resume)")
+    p.add_argument("--out", type=folder_option, required=True, metavar="DIR", help="sweep folder (new, empty, or to resume)")
     p.add_argument("--method", choices=["direct", "comparative"], default="direct", help="analyzer method (default direct)")
     p.add_argument("--engine", choices=["exact", "cycles"], default="exact", help="render engine (default exact)")
     p.add_argument("--spp", type=int, help="samples per pixel (default: the scene's)")
