@@ -112,6 +112,7 @@ def test_upload_result_and_report_in_headless_chromium(server, tmp_path):
             page.select_option("#pattern", "checkerboard")
             page.fill("#detrend_degree", "3")
             page.fill("#pane_id", "north facade W12")
+            page.check("#report")
             page.click("#submit")
             page.wait_for_selector("#progress, #verdict")  # the job page, polling its status
             page.wait_for_selector("#verdict", timeout=240_000)
@@ -140,6 +141,59 @@ def test_upload_result_and_report_in_headless_chromium(server, tmp_path):
             assert "\n" not in error.strip() and "'notes.txt' has an unsupported extension '.txt'" in error
         finally:
             browser.close()
+
+
+def test_contract_spec_with_the_form_as_it_loads_in_headless_chromium(server):
+    """The in-situ contract specification and the bundled photo, nothing else touched: the pinned fields are
+    shown as pinned and not sent, the empty ones not sent either, and the verdict page comes back."""
+    from playwright.sync_api import sync_playwright
+
+    exe = _chromium()
+    url, app = server
+    spec = Path(__file__).resolve().parents[1] / "examples" / "insitu" / "contract_spec.json"
+    protocol = json.loads(spec.read_text())["protocol"]
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=exe, args=["--headless", "--no-sandbox", "--disable-gpu",
+                                                               "--disable-background-networking"])
+        try:
+            page = browser.new_page(viewport={"width": 1280, "height": 1000})
+            page.goto(url)
+            page.set_input_files("#image", str(DATA / "distorted_waves.bmp"))
+            page.set_input_files("#spec", str(spec))
+            page.wait_for_function("document.getElementById('pitch_mm').disabled")
+            for key in ("pitch_mm", "distance_m", "pattern", "detrend_degree"):
+                assert page.is_disabled(f"#{key}")
+                assert f"pinned by the specification: {protocol[key]}" in page.inner_text(f"#pin-{key}")
+            assert page.is_disabled("#sigma_mm") and "carrier periods" in page.inner_text("#pin-sigma_mm")
+            page.click("#submit")
+            page.wait_for_selector("#verdict", timeout=240_000)
+            assert page.inner_text("#verdict") == "FAIL"
+            job = app.state.store.get(page.url.rsplit("/", 1)[1])
+            # only the photo, the specification and the output folder: no field, no report, no export
+            assert job.args == ["analyze", "--spec", "spec.json", "--out", "out", "--", "image.bmp"]
+            assert not any(n.startswith(("report", "fields", "tiff")) for n in job.outputs())
+        finally:
+            browser.close()
+
+
+def test_kept_jobs_have_a_disk_budget(tmp_path):
+    """The oldest finished jobs go while the kept ones take more than max_disk_mb; the newest always stays."""
+    from glassdist.web._jobs import JobStore
+
+    store = JobStore(tmp_path / "jobs", max_jobs=10, max_disk_mb=2.5)
+    jobs = []
+    for i in range(4):
+        job = store.new_job()
+        (job.folder / "out.bin").write_bytes(bytes(1 << 20))  # 1 MB each
+        job.state, job.created = "done", 1000.0 + i
+        store._jobs[job.id] = job
+        jobs.append(job)
+    with store._lock:
+        store._evict()
+    assert [j.id for j in store.recent()] == [jobs[3].id, jobs[2].id]  # 2 MB kept, under 2.5 MB
+    assert not jobs[0].folder.exists() and not jobs[1].folder.exists() and jobs[2].folder.exists()
+    assert store.disk_bytes() == 2 << 20
+    store.close()
 
 
 @pytest.mark.filterwarnings("ignore:Using `httpx` with `starlette.testclient`")

@@ -89,7 +89,9 @@ def _register_analyze(sub) -> None:
     p.add_argument("--pitch-mm", type=number_option(PITCH_MM), help="grid pitch on the backdrop, mm (line spacing, or square size); required unless the --spec protocol pins pitch_mm")
     p.add_argument("--distance-m", type=number_option(DISTANCE_M), help="glass-to-grid distance L, m; required unless the --spec protocol pins distance_m")
     p.add_argument("--reference", type=Path, help="glass-less photo from the same camera position (Comparative Method)")
-    p.add_argument("--pattern", choices=["lines", "checkerboard"], help="backdrop pattern (default: from --params, else lines)")
+    p.add_argument("--pattern", choices=["auto", "lines", "checkerboard"],
+                   help="backdrop pattern (default: from --spec or --params, else auto: decided from the photo's spectrum; "
+                   "a given pattern the spectrum contradicts gets a warning)")
     p.add_argument("--detrend-degree", type=int, help="A2 polynomial detrend total degree N (default 2)")
     p.add_argument("--sigma-mm", type=number_option(SIGMA_MM), help="reporting smoothing scale on the backdrop, mm (default: 2 carrier periods)")
     p.add_argument("--params", type=Path, help="JSON file of analyzer parameters (unknown keys are errors)")
@@ -144,12 +146,15 @@ def _read_inputs(args):
         if missing:
             args.parser.error(f"the following arguments are required: {', '.join(missing)}")
     spec = load_spec(args.spec) if args.spec is not None else None
-    protocol = resolve_protocol(
-        spec[0].protocol if spec else None, reference_given=args.reference is not None, pitch_mm=args.pitch_mm,
-        distance_m=args.distance_m, pattern=args.pattern, sigma_mm=args.sigma_mm, detrend_degree=args.detrend_degree,
-        params=load_params(args.params) if args.params is not None else None,
-        spec_label=f"the specification '{args.spec}'")
-    params = load_params(args.params, **protocol.params_overrides)
+
+    def protocol_with(pattern):
+        return resolve_protocol(
+            spec[0].protocol if spec else None, reference_given=args.reference is not None, pitch_mm=args.pitch_mm,
+            distance_m=args.distance_m, pattern=pattern, sigma_mm=args.sigma_mm, detrend_degree=args.detrend_degree,
+            params=load_params(args.params) if args.params is not None else None,
+            spec_label=f"the specification '{args.spec}'")
+
+    protocol = protocol_with(None if args.pattern == "auto" else args.pattern)
     paths = list(args.image)
     images = [read_image(path, dtype=np.float32) for path in paths]  # the analyzer works in single precision
     image = images[0]
@@ -165,10 +170,34 @@ def _read_inputs(args):
             f"the reference '{args.reference}' is {reference.shape[1]}x{reference.shape[0]} px but the image is "
             f"{image.shape[1]}x{image.shape[0]} px; both photos must come from the same camera, same size"
         )
+    if protocol.sources["pattern"] == "default":  # neither given nor pinned: the photo decides
+        protocol = _pattern_from_photo(protocol, protocol_with, reference if reference is not None else image)
+    params = load_params(args.params, **protocol.params_overrides)
     check_sigma_extent(params.sigma_mm, image.shape, protocol.pitch_mm, pattern=params.pattern,
                        min_period_px=params.min_period_px)
     mask = read_mask(args.mask, image.shape) if args.mask is not None else None
     return spec, protocol, params, images, reference, mask
+
+
+def _pattern_from_photo(protocol, protocol_with, photo):
+    """The protocol with the pattern the photo's spectrum shows (source 'auto'); unchanged when it does not tell.
+
+    Resolved before the analysis so that everything derived from the carrier period (the
+    default sigma, the specification's ``sigma_periods``, the sigma bound) uses it; the
+    analysis then warns if it cannot decide (and uses 'lines').
+    """
+    from dataclasses import replace
+
+    from .analyzer.pattern import detect_pattern
+
+    try:
+        found = detect_pattern(photo).pattern
+    except GlassdistError:  # no grid: the analysis says so on the whole photo
+        return protocol
+    if found is None:
+        return protocol
+    decided = protocol_with(found)
+    return replace(decided, sources={**decided.sources, "pattern": "auto"})
 
 
 def _run_analyze(args) -> int:

@@ -32,10 +32,11 @@ class AnalyzerParams(BaseModel):
 
     model_config = MODEL_CONFIG
 
-    pattern: Literal["lines", "checkerboard"] = Field(
-        "lines",
-        description="backdrop: 'lines' (crossed line grid, pitch = line spacing) or "
-        "'checkerboard' (pitch = square size; carriers along the diagonals, period pitch*sqrt(2))",
+    pattern: Literal["auto", "lines", "checkerboard"] = Field(
+        "auto",
+        description="backdrop: 'lines' (crossed line grid, pitch = line spacing), "
+        "'checkerboard' (pitch = square size; carriers along the diagonals, period pitch*sqrt(2)) or "
+        "'auto' (decided from the photo's spectrum: glassdist.analyzer.pattern)",
     )
     detrend_degree: int = Field(2, ge=0, le=8, description="A2: total degree N of the polynomial detrend")
     sigma_mm: float | None = Field(

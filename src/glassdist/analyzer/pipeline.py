@@ -32,6 +32,7 @@ from .homography import HomographyFit, apply_inverse, fit_grid_homography, inver
 from .metrics import evaluate_displacement, inverse_2x2, polynomial_detrend
 from .transfer import InstrumentTransfer
 from .params import AnalyzerParams, load_params
+from .pattern import settle_pattern
 from .region import Region, contamination_px, guard_band, trim_edges, valid_region
 from .resample import image_grid_valid
 from .result import AnalysisResult
@@ -289,6 +290,7 @@ def _checked_inputs(image, pitch_mm, distance_m, reference, params, mask, patter
     else:
         p = _resolve_params(params, pattern)
     img = _check_image(image, "image", warn)
+    p = settle_pattern(p, img, warn)  # 'auto' decided from the photo, a given pattern checked against it
     if mask is not None:
         mask = np.asarray(mask, bool)
         if mask.shape != img.shape:
@@ -641,6 +643,7 @@ def prepare_reference(reference: np.ndarray, *, params: AnalyzerParams | dict | 
     warn: list[str] = []
     with _routed_warnings(warn):
         ref = _check_image(reference, "reference", warn)
+        p = settle_pattern(p, ref, warn) if p.pattern == "auto" else p  # a given one is checked on the photo
         spec = F.compute_spectrum(ref)
         carriers = F.find_carriers(spec, min_period_px=p.min_period_px)
         F.check_image_size(ref.shape, max(carriers.k1.period_px, carriers.k2.period_px))

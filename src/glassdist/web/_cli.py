@@ -31,6 +31,8 @@ def register(subparsers):
     p.add_argument("--port", type=_port, default=8000, help="port (default 8000)")
     p.add_argument("--max-upload-mb", type=number_option(Range(1e-3, 1e5, unit="MB")), default=64.0, help="largest accepted upload per file, MB (default 64)")
     p.add_argument("--max-jobs", type=int, default=20, help="jobs kept (older ones and their files are removed; default 20)")
+    p.add_argument("--max-disk-mb", type=number_option(Range(1.0, 1e9, unit="MB")), default=2048.0,
+                   help="disk budget of the kept jobs, MB: the oldest are removed while their files take more (default 2048)")
     p.set_defaults(func=run)
     return p
 
@@ -47,5 +49,5 @@ def run(args) -> int:
         raise InputError("glassdist serve needs the web extra: pip install 'glassdist[web]'") from None
     if not args.max_upload_mb > 0 or args.max_jobs < 1:
         raise InputError("--max-upload-mb must be positive and --max-jobs at least 1")
-    serve(args.host, args.port, max_upload_mb=args.max_upload_mb, max_jobs=args.max_jobs)
+    serve(args.host, args.port, max_upload_mb=args.max_upload_mb, max_jobs=args.max_jobs, max_disk_mb=args.max_disk_mb)
     return 0

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import re
 import shutil
 import tempfile
@@ -16,17 +17,21 @@ from pathlib import Path
 
 from ..errors import InputError
 
-__all__ = ["Job", "JobStore", "ROLES"]
+__all__ = ["Job", "JobStore", "ROLES", "FIELDS", "FLAGS"]
 
 logger = logging.getLogger(__name__)
 
 #: Uploads a job takes, and the ``glassdist analyze`` option each becomes (the photo is the positional argument).
 ROLES = {"image": None, "reference": "--reference", "mask": "--mask", "spec": "--spec"}
 
-#: Form fields passed to ``glassdist analyze`` as ``--option=value`` (checked there, as on the command line).
+#: Form fields passed to ``glassdist analyze`` as ``--option=value`` (checked there, as on the command line);
+#: a field left empty is not sent (analyze's default, or the specification's pinned value, applies).
 FIELDS = {"pitch_mm": "--pitch-mm", "distance_m": "--distance-m", "pattern": "--pattern",
           "detrend_degree": "--detrend-degree", "sigma_mm": "--sigma-mm",
           "pane_id": "--pane-id", "site": "--site", "operator": "--operator"}
+
+#: Opt-in checkboxes of the form and the ``glassdist analyze`` flag each adds when ticked.
+FLAGS = {"report": "--report", "export": "--export"}
 
 # The first bytes of the formats analyze reads; an upload is stored under a name of our own with the
 # suffix its content shows (client file names never become paths).
@@ -56,6 +61,18 @@ def stored_name(role: str, head: bytes, client_name: str | None) -> str:
             return role + suffix
     suffix = Path(display_name(client_name, role)).suffix
     return role + (suffix.lower() if _SAFE_SUFFIX.match(suffix) else ".bin")
+
+
+def _folder_bytes(folder: Path) -> int:
+    """Total size of the regular files under ``folder`` (0 if it is gone)."""
+    total = 0
+    for root, _, files in os.walk(folder):
+        for name in files:
+            try:
+                total += os.lstat(os.path.join(root, name)).st_size
+            except OSError:
+                pass
+    return total
 
 
 @dataclass
@@ -148,16 +165,21 @@ class JobStore:
         Analyses running at once.
     timeout_s : float
         An analysis running longer is stopped and reported as failed.
+    max_disk_mb : float
+        Disk budget of the kept jobs, MB: the oldest finished ones are removed while the
+        jobs' folders take more (a job with report and export of a 24 Mpx photo takes
+        about 1.9 GB; without them about 30 MB).
     """
 
     def __init__(self, root=None, *, max_jobs: int = 20, max_upload_mb: float = 64.0, concurrent: int = 1,
-                 timeout_s: float = 600.0):
+                 timeout_s: float = 600.0, max_disk_mb: float = 2048.0):
         self._own_root = root is None
         self.root = Path(tempfile.mkdtemp(prefix="glassdist-web-") if root is None else root)
         self.root.mkdir(parents=True, exist_ok=True)
         self.root.chmod(0o700)
         self.max_jobs = max_jobs
         self.max_upload_bytes = int(max_upload_mb * 1024 * 1024)
+        self.max_disk_bytes = int(max_disk_mb * 1024 * 1024)
         self.timeout_s = timeout_s
         self._jobs: dict[str, Job] = {}
         self._lock = threading.Lock()
@@ -184,7 +206,8 @@ class JobStore:
         for role, option in ROLES.items():
             if option and role in job.names:
                 args += [option, job.names[role]]
-        args += ["--report", "--export", "--out", "out", "--", job.names["image"]]
+        args += [flag for key, flag in FLAGS.items() if form.get(key)]
+        args += ["--out", "out", "--", job.names["image"]]
         job.args = args
         with self._lock:
             self._jobs[job.id] = job
@@ -207,6 +230,8 @@ class JobStore:
             job.state, job.error = "failed", f"internal error: {type(exc).__name__}: {exc}"
         finally:
             job.finished = time.time()
+            with self._lock:
+                self._evict()  # its outputs now count against the disk budget
 
     @staticmethod
     def _client_names(job: Job, line: str) -> str:
@@ -214,13 +239,26 @@ class JobStore:
             line = line.replace(f"'{name}'", f"'{job.display.get(role, name)}'")
         return line
 
+    def disk_bytes(self) -> int:
+        """Bytes the listed jobs' folders take (uploads and outputs)."""
+        return sum(_folder_bytes(j.folder) for j in list(self._jobs.values()))
+
     def _evict(self) -> None:
-        finished = [j for j in self._jobs.values() if j.state in ("done", "failed")]
-        while len(self._jobs) > self.max_jobs and finished:
-            old = min(finished, key=lambda j: j.created)
+        """Remove the oldest finished jobs beyond ``max_jobs``, then while the jobs take more than ``max_disk_mb``.
+
+        The newest finished job is kept whatever its size, so that its page can be read.
+        """
+        finished = sorted((j for j in self._jobs.values() if j.state in ("done", "failed")), key=lambda j: j.created)
+
+        def drop(old):
             finished.remove(old)
             del self._jobs[old.id]
             shutil.rmtree(old.folder, ignore_errors=True)
+
+        while len(self._jobs) > self.max_jobs and finished:
+            drop(finished[0])
+        while len(finished) > 1 and self.disk_bytes() > self.max_disk_bytes:
+            drop(finished[0])
 
     def get(self, job_id: str) -> Job | None:
         """The job of this id, or None."""

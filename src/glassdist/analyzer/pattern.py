@@ -1,0 +1,204 @@
+"""Which backdrop a photo shows, a crossed line grid or a checkerboard, told from its spectrum's harmonics.
+
+The two carriers ``k1``, ``k2`` (F1) are found the same way for both backdrops, but they
+mean different lengths: the line spacing for a line grid, the square's diagonal
+(pitch·√2) for a checkerboard, so a wrong pattern scales every length in mm by √2
+(φ, a ratio of lengths, is unchanged). The harmonics tell them apart:
+
+* a **line grid** is a product of two periodic line profiles, ``t1(k1·x)·t2(k2·x)``: each
+  profile's harmonics ``n·k1``, ``n·k2`` sit *along each carrier* (thin lines: the second
+  harmonic nearly as strong as the fundamental);
+* a **checkerboard** of squares of side p is ``s(x/p)·s(y/p)`` with ``s`` a square wave:
+  odd harmonics only, so its spectrum holds frequencies ``(m, n)/(2p)`` with m and n
+  *both odd*. Its carriers are the diagonal fundamentals ``k1, k2 = (1, ±1)/(2p)``; a
+  frequency ``a·k1 + b·k2`` is ``(a + b, a - b)/(2p)``, so only ``a + b`` odd occurs: the
+  mixed terms ``2k1 ± k2``, ``k1 ± 2k2`` (amplitude 1/3 of the fundamental), never
+  ``2k1``, ``2k2``, and ``3k1`` only as ``(3, 3)/(2p)``, at 1/9.
+
+:func:`detect_pattern` measures, on a centred square crop (Hann window, one FFT), the
+background-corrected spectral energy around ``a·k1 + b·k2`` relative to the fundamentals:
+``along`` the largest of ``2k1, 2k2, 3k1, 3k2``, ``mixed`` the largest of ``2k1 ± k2,
+k1 ± 2k2``. ``along / mixed`` above :data:`DECISIVE_RATIO` reads a line grid, below its
+inverse a checkerboard; in between, or with neither above the noise (a sinusoidal grid,
+harmonics beyond Nyquist), the spectrum does not tell (``pattern`` None).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError
+from . import fourier as F
+
+__all__ = ["PatternEvidence", "detect_pattern", "settle_pattern", "DECISIVE_RATIO"]
+
+#: ``along / mixed`` energy ratio (or its inverse) from which the spectrum decides the pattern.
+#: Measured: line grids 10-15, checkerboards 0.02-0.06 (synthetic and the bundled photos).
+DECISIVE_RATIO = 3.0
+
+#: Energy above the background, in standard deviations of the background's own sum, that a
+#: harmonic needs to count as present ...
+_SIGNIFICANCE = 5.0
+#: ... and at least this share of the fundamentals' energy (-30 dB: below it, quantisation
+#: and compression residue, not the backdrop).
+_FLOOR = 1e-3
+
+_ALONG = ((2, 0), (0, 2), (3, 0), (0, 3))
+_MIXED = ((2, 1), (2, -1), (1, 2), (1, -2))
+
+
+@dataclass(frozen=True)
+class PatternEvidence:
+    """What the spectrum says about the backdrop (:func:`detect_pattern`).
+
+    Attributes
+    ----------
+    pattern : {'lines', 'checkerboard'} or None
+        None when the harmonics do not decide.
+    along, mixed : float
+        Energy of the strongest harmonic along a carrier (``2k``, ``3k``) and of the
+        strongest mixed odd term (``2k1 ± k2``, ``k1 ± 2k2``), each relative to the mean
+        energy of the fundamentals (0 where not above the noise).
+    noise : float
+        The energy a harmonic needs to count as present, same units: five standard
+        deviations of the background's sum over its disk, and at least 1e-3 (-30 dB).
+    """
+
+    pattern: str | None
+    along: float
+    mixed: float
+    noise: float
+
+    def describe(self) -> str:
+        """One phrase for messages: what the harmonics show."""
+        shown = {"lines": "harmonics along each carrier", "checkerboard": "harmonics only at odd mixed combinations of the carriers"}
+        what = shown.get(self.pattern, "no decisive harmonics")
+        return f"{what}, energy along/mixed {self.along:.3g}/{self.mixed:.3g} of the fundamentals"
+
+    def to_dict(self) -> dict:
+        return {"pattern": self.pattern, "along": self.along, "mixed": self.mixed, "noise": self.noise}
+
+
+def _energy(spectrum: F.Spectrum, f: np.ndarray, radius: float, background: float) -> tuple[float, float]:
+    """Power in a disk of ``radius`` bins around frequency ``f`` (cycles/px) less the background, and its noise."""
+    n_bins = spectrum.shape[0]  # square crop: the same bin size on both axes
+    cy, cx = f[1] * n_bins, f[0] * n_bins
+    r = int(math.ceil(radius))
+    ky0, kx0 = int(round(cy)) - r, int(round(cx)) - r
+    block = spectrum.block(ky0, kx0, 2 * r + 1, 2 * r + 1)
+    yy, xx = np.mgrid[0 : 2 * r + 1, 0 : 2 * r + 1]
+    inside = np.hypot(ky0 + yy - cy, kx0 + xx - cx) <= radius
+    power = np.abs(block[inside]) ** 2
+    n = int(inside.sum())
+    return float(power.sum() - background * n), float(background * math.sqrt(n))
+
+
+def detect_pattern(image: np.ndarray, *, max_px: int = 1024, min_period_px: float = 3.0) -> PatternEvidence:
+    """Tell a line grid from a checkerboard by the harmonic structure of the photo's spectrum.
+
+    Parameters
+    ----------
+    image : ndarray (H, W)
+        The photo (grey); a centred square crop of at most ``max_px`` px is analysed.
+    max_px : int
+        Side of the crop, px (enough periods for sharp peaks, one small FFT).
+    min_period_px : float
+        Shortest carrier period considered (as for F1).
+
+    Returns
+    -------
+    PatternEvidence
+
+    Raises
+    ------
+    InputError
+        No grid in the photo (as F1).
+
+    Notes
+    -----
+    Energy ``E(a, b)`` = sum of ``|FFT|²`` over a disk of ``2.5 + 1.5 (|a| + |b|)`` bins
+    (distortion spreads a harmonic in proportion to its order) around ``a·k1 + b·k2``,
+    less the median background power per bin; relative to ``(E(1,0) + E(0,1))/2``.
+    Harmonics beyond Nyquist are not measured.
+
+    Examples
+    --------
+    >>> from glassdist.synthetic import synthetic_capture
+    >>> cap = synthetic_capture((256, 256), pitch_mm=2.0, mm_per_px=0.25, pattern="checkerboard")
+    >>> detect_pattern(cap.image).pattern
+    'checkerboard'
+    """
+    img = np.asarray(image, dtype=np.float32)
+    H, W = img.shape[:2]
+    s = min(H, W, max_px)
+    y0, x0 = (H - s) // 2, (W - s) // 2
+    crop = img[y0 : y0 + s, x0 : x0 + s]
+    window = np.hanning(s).astype(np.float32)
+    spectrum = F.compute_spectrum((crop - crop.mean()) * window[:, None] * window[None, :])
+    pair = F.find_carriers(spectrum, min_period_px=min_period_px)
+    k1, k2 = pair.k1.f, pair.k2.f
+    background = float(np.median(np.abs(spectrum.rfft) ** 2))
+    spacing = s * min(pair.k1.norm, pair.k2.norm, float(np.linalg.norm(k1 - k2)), float(np.linalg.norm(k1 + k2)))
+
+    def energy(a: int, b: int) -> tuple[float, float]:
+        f = a * k1 + b * k2
+        if np.any(np.abs(f) >= 0.5):
+            return 0.0, math.inf  # beyond Nyquist: not measured
+        return _energy(spectrum, f, min(2.5 + 1.5 * (abs(a) + abs(b)), 0.45 * spacing), background)
+
+    fundamental = 0.5 * (energy(1, 0)[0] + energy(0, 1)[0])
+    if not fundamental > 0:
+        return PatternEvidence(None, 0.0, 0.0, math.inf)
+
+    def strongest(terms) -> tuple[float, float]:
+        """The strongest present term's energy (0 if none) and the energy a term needs to be present."""
+        found = [energy(a, b) for a, b in terms]
+        need = max(_SIGNIFICANCE * min(noise for _, noise in found), _FLOOR * fundamental)
+        present = [e for e, noise in found if e > max(_SIGNIFICANCE * noise, _FLOOR * fundamental)]
+        return (max(present) if present else 0.0), need
+
+    along, noise_a = strongest(_ALONG)
+    mixed, noise_m = strongest(_MIXED)
+    noise = min(noise_a, noise_m)
+    pattern = None
+    if along > 0 and along >= DECISIVE_RATIO * max(mixed, noise_m):
+        pattern = "lines"
+    elif mixed > 0 and mixed >= DECISIVE_RATIO * max(along, noise_a):
+        pattern = "checkerboard"
+    return PatternEvidence(pattern, along / fundamental, mixed / fundamental, noise / fundamental)
+
+
+def settle_pattern(params, image: np.ndarray, warn: list[str]):
+    """The parameters with ``pattern`` decided: ``'auto'`` from the spectrum, a given one checked against it.
+
+    Parameters
+    ----------
+    params : AnalyzerParams
+    image : ndarray (H, W)
+        The photo (or the glass-less reference) the pattern is read from.
+    warn : list of str
+        Receives a warning when a given pattern is contradicted by the spectrum, or when
+        ``'auto'`` cannot decide (then ``'lines'`` is used).
+
+    Returns
+    -------
+    AnalyzerParams
+        ``pattern`` is ``'lines'`` or ``'checkerboard'``.
+    """
+    try:
+        evidence = detect_pattern(image, min_period_px=params.min_period_px)
+    except InputError:  # no grid at all: F1 says so on the full photo
+        evidence = PatternEvidence(None, 0.0, 0.0, math.inf)
+    if params.pattern == "auto":
+        if evidence.pattern is None:
+            warn.append(f"the photo's spectrum does not tell a line grid from a checkerboard ({evidence.describe()}); "
+                        "assumed 'lines': give --pattern (lengths in mm differ by sqrt(2) between the two)")
+        return params.model_copy(update={"pattern": evidence.pattern or "lines"})
+    if evidence.pattern is not None and evidence.pattern != params.pattern:
+        warn.append(f"the pattern '{params.pattern}' was given but the photo's spectrum shows a {evidence.pattern} "
+                    f"({evidence.describe()}); lengths in mm (mm_per_px, displacements, sigma) are off by sqrt(2) "
+                    f"if the backdrop is a {evidence.pattern}: check --pattern, or leave it out to decide from the photo")
+    return params

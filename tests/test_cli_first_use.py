@@ -1,0 +1,138 @@
+"""What a first-time user trips over on the command line: guessed options, the user's own files, odd --out values."""
+
+import errno
+import json
+import re
+import subprocess
+import sys
+
+import pytest
+from conftest import write_lens_pair
+
+from glassdist import cli
+
+
+def _cli(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "glassdist", *map(str, args)], capture_output=True, text=True, cwd=cwd)
+
+
+@pytest.fixture(scope="module")
+def pair(tmp_path_factory):
+    return write_lens_pair(tmp_path_factory.mktemp("lens"))
+
+
+def _analyze(pair, out, *extra):
+    return ["analyze", pair / "pane.png", "--reference", pair / "reference.png", "--pitch-mm", 2, "--distance-m", 1,
+            "--pattern", "lines", *extra, "--out", out]
+
+
+def _parsers(parser):
+    """The parser and every sub-command's parser, recursively."""
+    yield parser
+    for action in parser._actions:
+        for sub in (getattr(action, "choices", None) or {}).values() if hasattr(action, "_name_parser_map") else ():
+            yield from _parsers(sub)
+
+
+def test_no_parser_takes_an_abbreviation():
+    parsers = list(_parsers(cli.build_parser()))
+    assert len(parsers) > 8
+    assert [p.prog for p in parsers if p.allow_abbrev] == []
+
+
+def test_an_abbreviated_option_exits_2_with_a_suggestion(pair, tmp_path):
+    r = _cli("analyze", pair / "pane.png", "--pitch", 5, "--distance-m", 1, "--out", tmp_path / "o")
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert re.search(r"unrecognized arguments: --pitch 5; did you mean --pitch-mm\?", r.stderr), r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("argv, suggestion", [
+    (["analyze", "x.png", "--pitch-mm", "5", "--distnce-m", "1", "--out", "o"], "--distance-m"),
+    (["analyze", "x.png", "--pitch-mm=5", "--distance-m", "1", "--refrence=r.png", "--out", "o"], "--reference"),
+    (["validate", "s.yaml", "--method", "direct", "--ot", "o"], None),  # required --out missing is said first
+    (["batch", "m.csv", "--out", "o", "--reprot"], "--report"),
+])
+def test_a_misspelt_option_gets_did_you_mean(capsys, argv, suggestion):
+    with pytest.raises(SystemExit) as e:
+        cli.main(argv)
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and len(err.strip().splitlines()) == 1
+    if suggestion:
+        assert f"did you mean {suggestion}?" in err, err
+
+
+def test_top_level_help_lists_every_experiment(capsys):
+    from glassdist.experiments import EXPERIMENTS
+
+    with pytest.raises(SystemExit):
+        cli.main(["--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert len(EXPERIMENTS) == 5
+    assert all(name in text.split("experiment", 1)[1] for name in EXPERIMENTS), text
+
+
+@pytest.mark.parametrize("out", ["", "   "])
+def test_an_empty_out_exits_2(pair, tmp_path, out):
+    r = _cli(*_analyze(pair, out), cwd=tmp_path)
+    assert r.returncode == 2 and "--out" in r.stderr and "empty" in r.stderr and "Traceback" not in r.stderr
+    assert list(tmp_path.iterdir()) == []  # nothing landed in the current folder
+
+
+def test_an_out_name_too_long_for_the_file_system_exits_2(pair, tmp_path):
+    r = _cli(*_analyze(pair, tmp_path / ("x" * 300)))
+    assert r.returncode == 2 and "name too long" in r.stderr.lower() and "Traceback" not in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("name, content", [("summary.json", b'{"my": "own notes"}\n'),
+                                           ("phi_eff.png", b"my own picture"),
+                                           ("statistics.csv", b"a,b\n1,2\n")])
+def test_a_users_own_file_in_out_survives_with_exit_2(pair, tmp_path, name, content):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / name).write_bytes(content)
+    r = _cli(*_analyze(pair, out))
+    assert r.returncode == 2, r.stderr
+    assert name in r.stderr and "not written by glassdist" in r.stderr and "Traceback" not in r.stderr
+    assert (out / name).read_bytes() == content
+    assert [p.name for p in out.iterdir()] == [name]  # refused before any work
+
+
+def test_the_tools_own_files_are_rewritten_but_an_edited_one_is_not(pair, tmp_path):
+    out = tmp_path / "out"
+    assert _cli(*_analyze(pair, out)).returncode == 0
+    assert _cli(*_analyze(pair, out)).returncode == 0  # every file recorded with its SHA-256: a re-run is fine
+    figure = out / "phi_eff.png"
+    edited = figure.read_bytes() + b"annotated"
+    figure.write_bytes(edited)
+    r = _cli(*_analyze(pair, out))
+    assert r.returncode == 2 and "phi_eff.png" in r.stderr
+    assert figure.read_bytes() == edited
+
+
+def test_debug_keeps_exit_2_for_bad_input_and_adds_the_traceback(pair, tmp_path):
+    r = _cli("--debug", "analyze", pair / "pane.png", "--pitch-mm", 2, "--distance-m", 1, "--mask",
+             tmp_path / "missing.png", "--out", tmp_path / "o")
+    assert r.returncode == 2
+    assert "Traceback" in r.stderr and r.stderr.strip().splitlines()[-1].startswith("glassdist: error:")
+
+
+def test_a_full_disk_under_report_export_exits_2_saying_what_is_needed(pair, tmp_path, monkeypatch, capsys):
+    """ENOSPC while writing the exports: exit 2 with the space the outputs need, no traceback."""
+    from glassdist.report import exports
+
+    real = exports.atomic_write
+
+    def full_disk(path, write):
+        if path.name == "fields.npz":
+            raise OSError(errno.ENOSPC, "No space left on device", str(path))
+        return real(path, write)
+
+    monkeypatch.setattr(exports, "atomic_write", full_disk)
+    code = cli.main([str(a) for a in _analyze(pair, tmp_path / "o", "--report", "--export", "--quiet")])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    m = re.search(r"no space left .* need up to (\d+) MB", err)
+    assert m and int(m.group(1)) >= 1, err
+    assert "Traceback" not in err
