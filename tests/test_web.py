@@ -163,7 +163,9 @@ def test_contract_spec_with_the_form_as_it_loads_in_headless_chromium(server):
             page.wait_for_function("document.getElementById('pitch_mm').disabled")
             for key in ("pitch_mm", "distance_m", "pattern", "detrend_degree"):
                 assert page.is_disabled(f"#{key}")
-                assert f"pinned by the specification: {protocol[key]}" in page.inner_text(f"#pin-{key}")
+                value = protocol[key]
+                shown = f"{value:g}" if isinstance(value, float) else str(value)
+                assert f"pinned by the specification: {shown}" in page.inner_text(f"#pin-{key}")
             assert page.is_disabled("#sigma_mm") and "carrier periods" in page.inner_text("#pin-sigma_mm")
             page.click("#submit")
             page.wait_for_selector("#verdict", timeout=240_000)

@@ -282,6 +282,16 @@ def _check_values(data, lim: Limits):
             stack.extend((v, depth + 1, f"{where}[{i}]") for i, v in enumerate(value))
 
 
+def _document_format(suffix: str, text: str) -> str:
+    """``'json'`` or ``'yaml'``: by the file name's suffix, else by the content (see :func:`load_document`)."""
+    suffix = suffix.lower()
+    if suffix in (".yaml", ".yml"):
+        return "yaml"
+    if suffix == ".json":
+        return "json"
+    return "json" if text.lstrip("\ufeff \t\r\n")[:1] in ("{", "[") else "yaml"
+
+
 def load_document(path, what: str, *, option: str | None = None, fmt: str | None = None,
                   hint: str = "check its syntax"):
     """Read a JSON or YAML document with bounded resources.
@@ -294,7 +304,8 @@ def load_document(path, what: str, *, option: str | None = None, fmt: str | None
     option : str, optional
         The option that named it, for messages.
     fmt : {"json", "yaml"}, optional
-        Default: YAML for ``.yaml``/``.yml`` files, JSON otherwise.
+        Default: YAML for ``.yaml``/``.yml`` files, JSON for ``.json``; any other name
+        (``scene.txt``) by its content: JSON when it starts with ``{`` or ``[``, else YAML.
     hint : str
         How to fix a syntax error (end of the message).
 
@@ -313,7 +324,7 @@ def load_document(path, what: str, *, option: str | None = None, fmt: str | None
     lim = limits()
     p = check_input_file(path, what, option=option, max_bytes=lim.document_bytes)
     text = _read_text(p, what, lim.document_bytes)
-    fmt = fmt or ("yaml" if p.suffix.lower() in (".yaml", ".yml") else "json")
+    fmt = fmt or _document_format(p.suffix, text)
     shown = safe_text(p)
     try:
         data = _parse_yaml(text, lim) if fmt == "yaml" else _parse_json(text)

@@ -157,6 +157,11 @@ def fit_homography(
     H = H / H[2, 2]
     err = _reproj_error(H, src, dst)
     inliers = err < threshold_px
+    if inliers.sum() < 4:  # a threshold below the phase noise: no consensus to speak of
+        raise AnalysisError(
+            f"no grid point lies within the RANSAC threshold of {threshold_px:.3g} px; ransac_threshold_periods "
+            "is too small for this photo's phase noise - use a larger one (default 0.1) or the Comparative Method"
+        )
     rms = float(np.sqrt(np.mean(err[inliers] ** 2)))
     return HomographyFit(H, float(inliers.mean()), int(len(src)), rms)
 

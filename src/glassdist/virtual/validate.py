@@ -104,6 +104,13 @@ def compare(analysis, analytical, valid: np.ndarray, exact=None) -> Validation:
         sel &= np.all(np.isfinite(ch.displacement_detrended_mm), axis=-1)
     if sel.sum() < 16:
         raise InputError("the analyzer and the analytical model share fewer than 16 valid pixels; check the scene framing")
+    for name in CHANNELS:  # every ratio below divides by the model's (or the truth's) mean |phi|
+        for what, ch in (("analytical model", analytical), ("exact truth", exact)):
+            if ch is not None and not _mean_abs(getattr(ch, name), sel) > 0:
+                raise InputError(
+                    f"the {what} predicts no {name} at all on the {int(sel.sum())} compared pixels, so there is no "
+                    "ratio to validate; check the scene (e.g. a pane thickness or distance so large that the "
+                    "deformation no longer shows)")
     m: dict = {"ratios": {}, "correlations": {}, "statistics": {"analyzer": {}, "analytical": {}}}
     for name in CHANNELS:
         a, b = getattr(analysis, name), getattr(analytical, name)
