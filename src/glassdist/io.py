@@ -11,8 +11,10 @@ meaning for saturation and contrast checks.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import warnings
 from pathlib import Path, PurePosixPath
 
 import numpy as np
@@ -20,7 +22,7 @@ import numpy as np
 from .errors import InputError
 from .validation import check_input_file, limits, safe_text
 
-__all__ = ["read_image", "image_shape", "read_mask", "write_png16", "prepare_output_dir"]
+__all__ = ["read_image", "image_shape", "read_mask", "write_png16", "prepare_output_dir", "open_with_pillow"]
 
 _READABLE = {".png", ".tif", ".tiff", ".bmp", ".jpg", ".jpeg"}
 
@@ -100,21 +102,39 @@ def _check_pixels(p: Path, width: int, height: int, max_pixels: float) -> None:
         )
 
 
+@contextlib.contextmanager
+def open_with_pillow(path):
+    """``PIL.Image.open(path)`` for its header (size, EXIF) only, without Pillow's pixel-count check.
+
+    glassdist applies its own, configurable limit (``GLASSDIST_MAX_MEGAPIXELS``) from the
+    same header, so Pillow's ``DecompressionBombWarning`` (over 89 Mpx) or error (over
+    179 Mpx) would only print a raw warning about a photo glassdist accepts or refuses
+    anyway. The pixels are never decoded here.
+    """
+    from PIL import Image
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+        bomb, Image.MAX_IMAGE_PIXELS = Image.MAX_IMAGE_PIXELS, None
+        try:
+            im = Image.open(path)
+        finally:
+            Image.MAX_IMAGE_PIXELS = bomb
+    with im:
+        yield im
+
+
 def _header_size(p: Path) -> tuple[int, int]:
     """(width, height) from a PNG/BMP/JPEG header, without decoding the pixels."""
-    from PIL import Image, UnidentifiedImageError
+    from PIL import UnidentifiedImageError
 
-    bomb = Image.MAX_IMAGE_PIXELS
-    Image.MAX_IMAGE_PIXELS = None  # glassdist applies its own, configurable limit
     try:
-        with Image.open(p) as im:
+        with open_with_pillow(p) as im:
             return im.size
     except (UnidentifiedImageError, OSError, SyntaxError, ValueError):
         raise InputError(
             f"cannot decode image '{safe_text(p)}'; supported formats are PNG, TIFF, BMP and JPEG (8 or 16 bit)"
         ) from None
-    finally:
-        Image.MAX_IMAGE_PIXELS = bomb
 
 
 def image_shape(path: str | os.PathLike, *, max_megapixels: float | None = None) -> tuple[int, int]:

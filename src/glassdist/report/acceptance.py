@@ -47,12 +47,10 @@ def camera_metadata(path):
         ``datetime_original``, ``exposure_time_s``, ``f_number``, ``focal_length_mm``,
         ``iso`` that the file records.
     """
+    from ..io import open_with_pillow
+
     try:
-        from PIL import Image
-    except ImportError:  # pragma: no cover - Pillow comes with matplotlib
-        return None
-    try:
-        with Image.open(path) as im:
+        with open_with_pillow(path) as im:
             exif = im.getexif()
             tags = dict(exif)
             tags.update(exif.get_ifd(0x8769))  # the Exif sub-IFD: exposure, lens, original time

@@ -646,7 +646,9 @@ def _index_rows(panes, out):
                        seconds=done.get("seconds", ""), valid_percent=_round(a4.get("valid_percent")))
             row.update({f"{c}_{s}_mD": _round(stats.get(c, {}).get(s)) for c, s in _INDEX_STATS})
             row.update(spec_name=(summary.get("verdict") or {}).get("spec_name", ""),
-                       detrend_degree=summary.get("detrend_degree", ""), sigma_mm=_round(summary.get("sigma_mm")))
+                       detrend_degree=summary.get("detrend_degree", ""), sigma_mm=_round(summary.get("sigma_mm")),
+                       # the values the analysis used: the manifest's, or those its specification pins
+                       pitch_mm=summary.get("pitch_mm", pane.pitch_mm), distance_m=summary.get("distance_m", pane.distance_m))
             if (out / "panes" / pane.id / "report.html").is_file():
                 row["report"] = f"panes/{pane.id}/report.html"
         elif failed:

@@ -117,13 +117,28 @@ class PaneFrame:
         return float(self.pixel_area_mm2(xx, yy).sum()) if yy.size else 0.0
 
     def to_dict(self):
-        """JSON form for ``summary.json`` (``"pane"``)."""
+        """JSON form for ``summary.json`` (``"pane"``); ``outline_px``: one ``"x,y x,y ..."`` string per polygon."""
         return {
             "source": self.source, "units": self.units,
             "size_mm": None if self.size_mm is None else [float(v) for v in self.size_mm],
             "px_to_mm": self.px_to_mm.tolist(), "area_mm2": self.area_mm2(self.inside),
-            "outline_px": [np.round(p, 2).tolist() for p in self.outline_px], "warning": self.warning or None,
+            "outline_px": [_compact_polygon(p) for p in self.outline_px], "warning": self.warning or None,
         }
+
+
+def _compact_polygon(points, tolerance_px: float = 1.5) -> str:
+    """A polygon's vertices for ``summary.json``: ``"x,y x,y ..."`` (SVG ``points``), whole px.
+
+    Douglas-Peucker (``cv2.approxPolyDP``) keeps the vertices within ``tolerance_px`` of the
+    outline, which is found on the analysis grid (a few px step) and drawn at that precision;
+    one string per polygon keeps ``summary.json`` short (it was a third of the file).
+    """
+    import cv2
+
+    pts = np.asarray(points, dtype=np.float32).reshape(-1, 1, 2)
+    if len(pts) > 3:
+        pts = cv2.approxPolyDP(pts, tolerance_px, closed=True)
+    return " ".join(f"{x:.0f},{y:.0f}" for x, y in pts.reshape(-1, 2))
 
 
 def pane_frame_from_corners(corners_px, size_mm, shape):
