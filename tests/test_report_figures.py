@@ -6,6 +6,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from conftest import DATA
 
 from glassdist.analyzer import FIELDS
 from glassdist.analyzer.fourier import SamplingGrid
@@ -159,3 +160,33 @@ def test_outputs_draw_the_quality_map_and_the_noise_floor(tmp_path):
     assert (tmp_path / "o" / "quality.png").stat().st_size > 0 and (tmp_path / "o" / "uncertainty.png").exists()
     html = (tmp_path / "o" / "report.html").read_text()
     assert f"noise floor (median over the trusted pixels) {want:.3g} mD" in html and "Quality map" in html
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("photo", ["distorted_waves.bmp", "distorted_floating_ring.bmp"])
+def test_histogram_ranges_are_the_trusted_statistics_range(photo, tmp_path, monkeypatch):
+    """On the bundled photos the histograms span exactly the largest |phi| over the trusted pixels (quality 0),
+    the statistics' pixels: not the guard band's or the excluded areas' values."""
+    import glassdist
+    from glassdist.report import figures
+
+    ranges = {}
+    real = figures.plot_histogram
+
+    def spy(field, valid=None, **kw):
+        fig, ax = real(field, valid, **kw)
+        ranges[kw["title"]] = ax.get_xlim()
+        return fig, ax
+
+    monkeypatch.setattr(figures, "plot_histogram", spy)
+    res = glassdist.analyze(DATA / photo, reference=DATA / "reference.png", pitch_mm=5, distance_m=0.5,
+                            detrend_degree=3)
+    glassdist.write_outputs(res, tmp_path / "out", echo=lambda line: None)
+    assert len(ranges) == 2
+    for name, signed in (("phi_eff", True), ("phi_shear", False)):
+        field = getattr(res, f"{name}_mD")
+        top = float(np.max(np.abs(field[res.trusted & np.isfinite(field)])))  # independent of the figure code
+        lo, hi = ranges[figures.CHANNELS[name][1]]
+        assert hi == pytest.approx(top, rel=1e-6) and lo == pytest.approx(-top if signed else 0.0, rel=1e-6)
+        # the reported (guard band included) values reach further: the old range would have shown them
+        assert np.nanmax(np.abs(np.where(res.valid, field, np.nan))) > top

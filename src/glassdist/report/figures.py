@@ -35,6 +35,7 @@ from matplotlib.figure import Figure
 __all__ = [
     "CHANNELS",
     "shared_limit",
+    "histogram_range",
     "plot_channel",
     "plot_axis",
     "plot_input",
@@ -67,11 +68,12 @@ def _new_ax(ax, figsize=(6.4, 3.6)):
     return fig, fig.add_subplot()
 
 
-def _map_ax(ax, shape, extent=None, colorbar=True):
+def _map_ax(ax, shape, extent=None, colorbar=True, px_axis=None):
     """``(fig, ax, cax)`` for a map of ``shape`` (h, w): ``ax``'s figure, or a new one sized to the map.
 
     The axes are placed by hand: a layout solver cost more than drawing the map. ``cax``
     is the colour bar's axes (None with ``ax`` given: matplotlib takes room from ``ax``).
+    With ``px_axis`` the top margin holds the secondary pixel axis too.
     """
     if ax is not None:
         return ax.figure, ax, None
@@ -84,7 +86,7 @@ def _map_ax(ax, shape, extent=None, colorbar=True):
     if h_in > 5.0 or h_in < 1.2:  # very tall or very flat maps keep a readable size
         h_in = min(max(h_in, 1.2), 5.0)
         w_in = min(h_in / aspect, 7.0)
-    left, bottom, top, right = 0.9, 0.6, 0.75, (1.4 if colorbar else 0.3)
+    left, bottom, top, right = 0.9, 0.6, (1.25 if px_axis else 0.75), (1.4 if colorbar else 0.3)
     W, H = left + w_in + right, bottom + h_in + top
     fig = Figure(figsize=(W, H))
     ax = fig.add_axes((left / W, bottom / H, w_in / W, h_in / H))
@@ -101,11 +103,24 @@ def _centres(shape, extent):
             extent[3] + (np.arange(h) + 0.5) * (extent[2] - extent[3]) / h)
 
 
-def _label_image_axes(ax, title, units="px"):
+def _label_image_axes(ax, title, units="px", px_axis=None):
+    """Axis labels in ``units``; with ``px_axis = (scale, offset)`` (column px = scale * x + offset) a
+    secondary axis along the top in the photo's pixels."""
     ax.set_xlabel(f"x ({units}, columns)" if units == "px" else f"x ({units})")
     ax.set_ylabel(f"y ({units}, rows)" if units == "px" else f"y ({units})")
+    if px_axis is not None:
+        scale, offset = (float(v) for v in px_axis)
+        sec = ax.secondary_xaxis("top", functions=(lambda x: scale * x + offset, lambda c: (c - offset) / scale))
+        sec.set_xlabel("x (px, columns)", fontsize="small")
+        sec.tick_params(labelsize="small")
+        ax.glassdist_px_axis = True
     if title:
-        ax.set_title(title)
+        map_title(ax, title)
+
+
+def map_title(ax, text, **kwargs):
+    """Set a map's title, above its secondary pixel axis when it has one."""
+    ax.set_title(text, pad=36 if getattr(ax, "glassdist_px_axis", False) else 6, **kwargs)
 
 
 def _masked(field, valid):
@@ -143,7 +158,7 @@ def shared_limit(*fields, valid=None, percentile=99.0):
 
 
 def plot_channel(field, valid=None, *, signed=True, vmax=None, cmap=None, title=None, ax=None, colorbar=True,
-                 extent=None, axis_units="px"):
+                 extent=None, axis_units="px", px_axis=None):
     """Heatmap of one power channel, in mD, over the valid region.
 
     Parameters
@@ -166,6 +181,9 @@ def plot_channel(field, valid=None, *, signed=True, vmax=None, cmap=None, title=
         ``imshow`` extent (left, right, bottom, top) in ``axis_units`` (e.g. mm); default pixels.
     axis_units : str
         Label of the axes' unit.
+    px_axis : (float, float), optional
+        ``(scale, offset)``: column px = scale * x + offset; a secondary axis in the
+        photo's pixels along the top (every map: mm below, px above).
 
     Returns
     -------
@@ -173,14 +191,14 @@ def plot_channel(field, valid=None, *, signed=True, vmax=None, cmap=None, title=
     """
     import matplotlib
 
-    fig, ax, cax = _map_ax(ax, np.shape(field), extent, colorbar)
+    fig, ax, cax = _map_ax(ax, np.shape(field), extent, colorbar, px_axis)
     data, _ = _masked(field, valid)
     if vmax is None:
         vmax = shared_limit(field, valid=valid)
     cmap_obj = matplotlib.colormaps[cmap or ("RdBu_r" if signed else "viridis")].with_extremes(bad=_INVALID_RGBA)
     norm = Normalize(-vmax, vmax) if signed else Normalize(0.0, vmax)
     im = ax.imshow(data, cmap=cmap_obj, norm=norm, interpolation="nearest", extent=extent)
-    _label_image_axes(ax, title, axis_units)
+    _label_image_axes(ax, title, axis_units, px_axis)
     if colorbar:
         fig.colorbar(im, ax=ax, cax=cax, label="mD", extend="both" if signed else "max", shrink=1.0 if cax else 0.9)
     return fig, ax
@@ -191,7 +209,7 @@ def plot_channel(field, valid=None, *, signed=True, vmax=None, cmap=None, title=
 QUALITY_COLOURS = ("#1b9e77", "#7f7f7f", "#e7298a", "#d95f02", "#7570b3", "#d9d9d9", "#b8e0c8", "#e6ab02")
 
 
-def plot_quality(labels, *, counts=None, title=None, ax=None, extent=None, axis_units="px"):
+def plot_quality(labels, *, counts=None, title=None, ax=None, extent=None, axis_units="px", px_axis=None):
     """Quality map: each pixel's label, in categorical colours with a legend naming each label.
 
     Parameters
@@ -218,7 +236,7 @@ def plot_quality(labels, *, counts=None, title=None, ax=None, extent=None, axis_
     from ..analyzer import QUALITY_LABELS
 
     own = ax is None
-    fig, ax, _ = _map_ax(ax, np.shape(labels), extent, colorbar=False)
+    fig, ax, _ = _map_ax(ax, np.shape(labels), extent, colorbar=False, px_axis=px_axis)
     if own:  # room on the right for the legend: widen the figure, keep the map's size in inches
         W, H = fig.get_size_inches()
         extra = 2.8
@@ -229,7 +247,7 @@ def plot_quality(labels, *, counts=None, title=None, ax=None, extent=None, axis_
     cmap = ListedColormap(QUALITY_COLOURS[:n])
     ax.imshow(np.asarray(labels), cmap=cmap, norm=BoundaryNorm(np.arange(n + 1) - 0.5, n), interpolation="nearest",
               extent=extent)
-    _label_image_axes(ax, title, axis_units)
+    _label_image_axes(ax, title, axis_units, px_axis)
     total = sum(counts.values()) if counts else 0
     handles = []
     for k, name in QUALITY_LABELS.items():
@@ -242,7 +260,8 @@ def plot_quality(labels, *, counts=None, title=None, ax=None, extent=None, axis_
     return fig, ax
 
 
-def plot_axis(axis_deg, phi_shear, valid=None, *, min_shear_mD=None, title=None, ax=None, colorbar=True, extent=None):
+def plot_axis(axis_deg, phi_shear, valid=None, *, min_shear_mD=None, title=None, ax=None, colorbar=True, extent=None,
+              axis_units="px", px_axis=None):
     """Principal axis of the astigmatism (direction of largest stretch), degrees.
 
     Parameters
@@ -265,7 +284,7 @@ def plot_axis(axis_deg, phi_shear, valid=None, *, min_shear_mD=None, title=None,
     """
     import matplotlib
 
-    fig, ax, cax = _map_ax(ax, np.shape(axis_deg), extent, colorbar)
+    fig, ax, cax = _map_ax(ax, np.shape(axis_deg), extent, colorbar, px_axis)
     shear, ok = _masked(phi_shear, valid)
     if min_shear_mD is None:
         min_shear_mD = 0.1 * float(np.percentile(np.asarray(phi_shear)[ok], 95)) if ok.any() else 0.0
@@ -273,14 +292,15 @@ def plot_axis(axis_deg, phi_shear, valid=None, *, min_shear_mD=None, title=None,
     data = np.ma.masked_where(~show, np.asarray(axis_deg, dtype=np.float64))
     cmap_obj = matplotlib.colormaps["twilight"].with_extremes(bad=_INVALID_RGBA)
     im = ax.imshow(data, cmap=cmap_obj, norm=Normalize(-90.0, 90.0), interpolation="nearest", extent=extent)
-    _label_image_axes(ax, title or f"astigmatism axis (where $\\phi_{{shear}}$ ≥ {min_shear_mD:.3g} mD)")
+    _label_image_axes(ax, title or f"astigmatism axis (where $\\phi_{{shear}}$ ≥ {min_shear_mD:.3g} mD)", axis_units,
+                      px_axis)
     if colorbar:
         cb = fig.colorbar(im, ax=ax, cax=cax, label="axis (deg from +x towards +y, down)", shrink=1.0 if cax else 0.9)
         cb.set_ticks([-90, -45, 0, 45, 90])
     return fig, ax
 
 
-def plot_input(image, valid=None, *, title=None, ax=None, extent=None):
+def plot_input(image, valid=None, *, title=None, ax=None, extent=None, axis_units="px", px_axis=None):
     """The input photograph (grey, its own intensities) with the analysed region outlined.
 
     Parameters
@@ -296,17 +316,18 @@ def plot_input(image, valid=None, *, title=None, ax=None, extent=None):
     -------
     fig, ax
     """
-    fig, ax, _ = _map_ax(ax, np.shape(image), extent, colorbar=False)
+    fig, ax, _ = _map_ax(ax, np.shape(image), extent, colorbar=False, px_axis=px_axis)
     ax.imshow(np.asarray(image, dtype=np.float64), cmap="gray", vmin=0.0, vmax=1.0, interpolation="nearest",
               extent=extent)
     if valid is not None and np.any(valid):
         v = np.asarray(valid, dtype=float)
         ax.contour(*_centres(v.shape, extent), v, levels=[0.5], colors=["tab:orange"], linewidths=1.5)
-    _label_image_axes(ax, title or "input with analysed region (orange)")
+    _label_image_axes(ax, title or "input with analysed region (orange)", axis_units, px_axis)
     return fig, ax
 
 
-def plot_threshold_mask(field, valid=None, *, limit_mD, absolute=True, name="φ", title=None, ax=None, extent=None):
+def plot_threshold_mask(field, valid=None, *, limit_mD, absolute=True, name="φ", title=None, ax=None, extent=None,
+                        axis_units="px", px_axis=None):
     """Pixels over a limit: red over the limit, white under it, grey outside the region.
 
     Parameters
@@ -329,7 +350,7 @@ def plot_threshold_mask(field, valid=None, *, limit_mD, absolute=True, name="φ"
     """
     from matplotlib.colors import ListedColormap
 
-    fig, ax, _ = _map_ax(ax, np.shape(field), extent, colorbar=False)
+    fig, ax, _ = _map_ax(ax, np.shape(field), extent, colorbar=False, px_axis=px_axis)
     data, ok = _masked(field, valid)
     values = np.abs(np.asarray(field)) if absolute else np.asarray(field)
     over = ok & (np.nan_to_num(values, nan=-np.inf) > limit_mD)
@@ -338,18 +359,32 @@ def plot_threshold_mask(field, valid=None, *, limit_mD, absolute=True, name="φ"
     ax.imshow(img, cmap=cmap_obj, vmin=0, vmax=1, interpolation="nearest", extent=extent)
     frac = 100.0 * over.sum() / max(int(ok.sum()), 1)
     op = f"|{name}|" if absolute else name
-    _label_image_axes(ax, title or f"{op} > {limit_mD:g} mD: {frac:.2f} % of the region")
+    _label_image_axes(ax, title or f"{op} > {limit_mD:g} mD: {frac:.2f} % of the region", axis_units, px_axis)
     return fig, ax
 
 
-def plot_histogram(field, valid=None, *, signed=True, limits_mD=(), bins=80, title=None, ax=None, weight=1.0):
-    """Histogram of a channel over the valid region, with optional limit lines.
+def histogram_range(max_abs_mD, *, signed=True, limits_mD=()) -> tuple[float, float]:
+    """The histogram's axis range: the statistics' range of the channel, widened to show every limit.
+
+    ``[-M, M]`` for a signed channel, ``[0, M]`` otherwise, with ``M`` the maximum |φ| over
+    the trusted pixels (the statistics' ``max_abs``), or 1.1 times the largest limit when
+    that is larger (so that its line is drawn); 1 mD when nothing is known.
+    """
+    top = max([float(max_abs_mD or 0.0)] + [1.1 * float(x) for x in limits_mD]) or 1.0
+    return (-top if signed else 0.0), top
+
+
+def plot_histogram(field, valid=None, *, signed=True, limits_mD=(), bins=80, title=None, ax=None, weight=1.0,
+                   max_abs_mD=None):
+    """Histogram of a channel over the trusted region, on the statistics' range, with optional limit lines.
 
     Parameters
     ----------
     field : ndarray, shape (H, W)
         Channel in mD.
     valid : ndarray of bool, shape (H, W), optional
+        The pixels the statistics are over (the trusted ones): the same pixels, so that the
+        histogram and the statistics describe one set of values.
     signed : bool
         Signed channels get mirror lines at ``±limit``.
     limits_mD : sequence of float
@@ -360,6 +395,9 @@ def plot_histogram(field, valid=None, *, signed=True, limits_mD=(), bins=80, tit
     weight : float
         Pixels each value stands for (an analysis-grid sample: its cell area, px), so that
         the counts read in pixels.
+    max_abs_mD : float, optional
+        The statistics' maximum |φ| over those pixels (:func:`histogram_range`); default
+        the largest |value| drawn.
 
     Returns
     -------
@@ -368,20 +406,16 @@ def plot_histogram(field, valid=None, *, signed=True, limits_mD=(), bins=80, tit
     fig, ax = _new_ax(ax, figsize=(6.4, 3.6))
     _, ok = _masked(field, valid)
     values = np.asarray(field, dtype=np.float64)[ok]
+    if max_abs_mD is None and values.size:
+        max_abs_mD = float(np.max(np.abs(values)))
+    lo, top = histogram_range(max_abs_mD, signed=signed, limits_mD=limits_mD)
     if values.size:
-        # Range: the bulk of the values (99.5th percentile of |phi|) and every limit, so that
-        # a few extreme pixels do not squeeze the histogram into one bar.
-        top = max([1.2 * float(np.percentile(np.abs(values), 99.5))] + [1.1 * float(x) for x in limits_mD]) or 1.0
-        lo = -top if signed else 0.0
-        outside = np.count_nonzero((values < lo) | (values > top))
-        ax.hist(values, bins=bins, range=(lo, top), weights=np.full(values.size, float(weight)),
+        ax.hist(np.clip(values, lo, top), bins=bins, range=(lo, top), weights=np.full(values.size, float(weight)),
                 color="tab:blue" if signed else "tab:green", alpha=0.85)
-        if outside:
-            ax.text(0.99, 0.97, f"{100.0 * outside / values.size:.2g} % of the region beyond the axis",
-                    transform=ax.transAxes, ha="right", va="top", fontsize="small")
     for lim in limits_mD:
         for v in ((-lim, lim) if signed else (lim,)):
             ax.axvline(v, color="tab:red", linestyle="--", linewidth=1.2)
+    ax.set_xlim(lo, top)
     ax.set_xlabel("mD")
     ax.set_ylabel("pixels")
     if title:

@@ -671,10 +671,10 @@ def _heatmap(result, name, field, gv, v, chosen, axes, acceptance):
     from . import figures as F
     from .acceptance import describe_clipping, draw_overlays
 
-    extent, to_axes, units = axes
+    extent, to_axes, units, px_axis = axes
     _, label, cmap, signed = F.CHANNELS[name]
     fig, ax = F.plot_channel(field, gv, signed=signed, vmax=v, cmap=cmap, title=f"{label}, mD", extent=extent,
-                             axis_units=units)
+                             axis_units=units, px_axis=px_axis)
     span = f"[-{v:.3g}, {v:.3g}]" if signed else f"[0, {v:.3g}]"
     caption = f"{name} in mD; colour limits {span} mD" + ("." if chosen else " shared by both channels.")
     if acceptance is not None:
@@ -682,15 +682,19 @@ def _heatmap(result, name, field, gv, v, chosen, axes, acceptance):
         # the maximum and the clipped share over the trusted samples, as the statistics
         clip = describe_clipping(field, gv & np.asarray(result.grid_trusted, bool), v,
                                  acceptance.stats.get(name, {}).get("max_abs"))
-        ax.set_title(f"{label}, mD\n{clip}", fontsize="medium")
+        F.map_title(ax, f"{label}, mD\n{clip}", fontsize="medium")
         n = len(acceptance.regions.get(name, {}).get("regions", ()))
         caption += (f" Axes in {units}. {clip} (trusted pixels). Dashed: zones; numbers: the "
                     f"{n} worst regions (worst_regions.csv).")
     return name, caption + " Grey: not analysed.", F.figure_png(fig)
 
 
-def _quality_figures(result, gv, extent, max_px=900):
-    """The quality map (labels, reduced by striding to at most ``max_px`` a side) and the phi_eff uncertainty map."""
+def _quality_figures(result, gv, axes, max_px=900):
+    """The quality map (labels, reduced by striding to at most ``max_px`` a side) and the phi_eff uncertainty map.
+
+    ``axes``: ``(extent, units, px_axis)`` of every map (:func:`_map_axes`).
+    """
+    extent, units, px_axis = axes
     from . import figures as F
 
     held = {f.name for f in result.field_specs()}
@@ -698,7 +702,8 @@ def _quality_figures(result, gv, extent, max_px=900):
     if "quality" in held:
         q = np.asarray(result.quality)
         k = max(1, -(-max(q.shape) // max_px))
-        fig, _ = F.plot_quality(q[::k, ::k], counts=result.quality_counts(), title="Quality labels", extent=extent)
+        fig, _ = F.plot_quality(q[::k, ::k], counts=result.quality_counts(), title="Quality labels", extent=extent,
+                                axis_units=units, px_axis=px_axis)
         out.append(("quality", "Quality map: every pixel's label (README, quality labels). Statistics, verdicts and "
                                "the maximum use label 0 only; label 6 is reported but not trusted.", F.figure_png(fig)))
     if "phi_eff_sigma_mD" in held:
@@ -707,7 +712,7 @@ def _quality_figures(result, gv, extent, max_px=900):
         floor = result.noise_floor()["phi_eff_sigma_mD"]["median"]
         fig, _ = F.plot_channel(sig, gv, signed=False, vmax=F.shared_limit(sig, valid=trusted), cmap="magma",
                                 title=f"standard uncertainty of $\\phi_{{eff}}$, mD\nnoise floor {floor:.3g} mD",
-                                extent=extent)
+                                extent=extent, axis_units=units, px_axis=px_axis)
         out.append(("uncertainty", f"Standard uncertainty of phi_eff from the image noise (phi_eff_sigma_mD), mD; "
                                    f"noise floor (median over the trusted pixels) {floor:.3g} mD. Values of |phi_eff| "
                                    "within about 2 of it are not distinguishable from noise.", F.figure_png(fig)))
@@ -745,50 +750,74 @@ def a4_figures(result, image=None, limits=None, *, heatmaps=True, acceptance=Non
     from matplotlib.figure import Figure
 
     from . import figures as F
-    from .acceptance import heatmap_axes
 
     limits = limits or {}
     H, W = result.valid.shape
     gv = np.asarray(result.grid_valid, dtype=bool)
+    trusted = gv & np.asarray(result.grid_trusted, dtype=bool)  # the statistics' pixels
     sy, sx = result.analysis_grid.step
-    px_extent = (-0.5, W - 0.5, H - 0.5, -0.5)
     maps = {name: _map_of(result, F.CHANNELS[name][0]) for name in ("phi_eff", "phi_shear")}
     out = []
-    vmax = F.shared_limit(*maps.values(), valid=gv)
+    vmax = F.shared_limit(*maps.values(), valid=trusted)
     vmaxes = dict(acceptance.colour_limits) if acceptance is not None else {}
-    extent, to_axes, units = (px_extent, None, "px")
-    if acceptance is not None:
-        extent, to_axes, units = heatmap_axes(acceptance.frame, result.mm_per_px, (H, W))
+    extent, to_axes, units, px_axis = _map_axes(result, acceptance)
     if image is not None:
         import cv2
 
         small = preview(image)
         region = cv2.resize(np.asarray(result.valid, np.uint8), small.shape[::-1], interpolation=cv2.INTER_NEAREST)
-        fig, _ = F.plot_input(small, region.astype(bool), extent=px_extent)
+        fig, _ = F.plot_input(small, region.astype(bool), extent=extent, axis_units=units, px_axis=px_axis)
         out.append(("input_region", "Input photograph; the analysed region is outlined in orange.", F.figure_png(fig)))
     for name in ("phi_eff", "phi_shear") if heatmaps else ():
-        out.append(_heatmap(result, name, maps[name], gv, vmaxes.get(name, vmax), bool(vmaxes), (extent, to_axes, units),
-                            acceptance))
+        out.append(_heatmap(result, name, maps[name], gv, vmaxes.get(name, vmax), bool(vmaxes),
+                            (extent, to_axes, units, px_axis), acceptance))
     if heatmaps and any(f.name == "axis_deg" for f in result.field_specs()):
-        fig, _ = F.plot_axis(_map_of(result, "axis_deg"), maps["phi_shear"], gv, extent=px_extent)
+        fig, _ = F.plot_axis(_map_of(result, "axis_deg"), maps["phi_shear"], gv, extent=extent, axis_units=units,
+                             px_axis=px_axis)
         out.append(("axis", "Astigmatism axis (direction of largest stretch), degrees from +x towards +y (down); "
                             "grey where phi_shear is too small for the axis to be meaningful.", F.figure_png(fig)))
-    out += _quality_figures(result, gv, px_extent)
+    out += _quality_figures(result, gv, (extent, units, px_axis))
     for name, lims in ((n, v) for n, v in limits.items() if n in F.CHANNELS):  # masks of the power channels
         field = maps[name] if name in maps else _map_of(result, F.CHANNELS[name][0])
         for lim in lims:
-            fig, _ = F.plot_threshold_mask(field, gv, limit_mD=lim, name=name, extent=px_extent)
+            fig, _ = F.plot_threshold_mask(field, gv, limit_mD=lim, name=name, extent=extent, axis_units=units,
+                                           px_axis=px_axis)
             out.append((f"mask_{name}_{lim:g}mD", f"{name}: pixels with |{name}| > {lim:g} mD in red.",
                         F.figure_png(fig)))
-    fig = Figure(figsize=(10, 3.6))
-    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.14, top=0.9, wspace=0.2)
+    stats = acceptance.stats if acceptance is not None else {}
+    fig = Figure(figsize=(10, 3.8))
+    fig.subplots_adjust(left=0.09, right=0.98, bottom=0.14, top=0.9, wspace=0.3)
     for ax, name in zip(fig.subplots(1, 2), ("phi_eff", "phi_shear")):
         _, label, _, signed = F.CHANNELS[name]
-        F.plot_histogram(maps[name], gv, signed=signed, limits_mD=limits.get(name, ()), ax=ax, title=label,
-                         weight=sy * sx)
-    out.append(("histograms", "Histograms over the analysed region; dashed red: specification limits.",
-                F.figure_png(fig)))
+        F.plot_histogram(maps[name], trusted, signed=signed, limits_mD=limits.get(name, ()), ax=ax, title=label,
+                         weight=sy * sx, max_abs_mD=stats.get(name, {}).get("max_abs"))
+    out.append(("histograms", "Histograms over the trusted pixels (quality label 0, the statistics' pixels; "
+                              "analysis-grid samples weighted by their cells); axis range: the statistics' largest "
+                              "|value| (or a specification limit beyond it, dashed red).", F.figure_png(fig)))
     return out
+
+
+def _map_axes(result, acceptance):
+    """``(extent, to_axes, units, px_axis)`` shared by every map: millimetres, and the photo's px along the top.
+
+    The pane's (or the backdrop's) mm of the acceptance frame when there is one
+    (:func:`~glassdist.report.acceptance.heatmap_axes`), else backdrop mm from the photo's
+    top-left corner (``mm_per_px``). ``px_axis`` = ``(scale, offset)`` with column px =
+    scale * x_mm + offset (both frames are axis-aligned scalings of the pixel grid).
+    """
+    from .acceptance import heatmap_axes
+
+    H, W = result.valid.shape
+    s = float(result.mm_per_px)
+    if acceptance is not None:
+        extent, to_axes, units = heatmap_axes(acceptance.frame, s, (H, W))
+    else:
+        def to_axes(x, y):
+            return (np.asarray(x, dtype=float) + 0.5) * s, (np.asarray(y, dtype=float) + 0.5) * s
+        extent, units = (0.0, W * s, H * s, 0.0), "backdrop mm from the photo's top-left"
+    (x0, x1), _ = to_axes(np.array([0.0, 1.0]), np.array([0.0, 0.0]))
+    scale = 1.0 / float(x1 - x0)
+    return extent, to_axes, units, (scale, -float(x0) * scale)
 
 
 def _update_summary(path, additions):
