@@ -158,6 +158,9 @@ def test_contract_spec_with_the_form_as_it_loads_in_headless_chromium(server):
         try:
             page = browser.new_page(viewport={"width": 1280, "height": 1000})
             page.goto(url)
+            # report and export opt-in, their cost stated; the kept jobs' budget stated
+            assert not page.is_checked("#report") and not page.is_checked("#export")
+            assert "1.9 GB" in page.inner_text("#job-form") and "2048 MB" in page.inner_text("#kept")
             page.set_input_files("#image", str(DATA / "distorted_waves.bmp"))
             page.set_input_files("#spec", str(spec))
             page.wait_for_function("document.getElementById('pitch_mm').disabled")

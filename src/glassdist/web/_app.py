@@ -78,7 +78,8 @@ class _Pages:
 
     def page(self, request, name, status_code=200, **context):
         context.update(version=__version__, public_host=self.public_host,
-                       max_upload_mb=self.store.max_upload_bytes / 2**20)
+                       max_upload_mb=self.store.max_upload_bytes / 2**20, max_jobs=self.store.max_jobs,
+                       max_disk_mb=self.store.max_disk_bytes / 2**20)
         return _TEMPLATES.TemplateResponse(request, name, context, status_code=status_code)
 
     def index(self, request, *, error="", status_code=200, form=None):
