@@ -7,7 +7,7 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import DATA
+from conftest import DATA, REPO
 
 import glassdist
 from glassdist.analyzer.pattern import detect_pattern
@@ -77,3 +77,15 @@ def test_bundled_checkerboard_photo_without_pattern(tmp_path):
     assert "checkerboard" in r.stderr and "'lines' was given" in r.stderr
     # the same carriers read with the line grid's period: lengths off by exactly sqrt(2)
     assert math.isclose(s["mm_per_px"] / lines["mm_per_px"], math.sqrt(2), rel_tol=1e-9)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scene", ["wavy_slab.yaml", "pillowed_igu.yaml", "mild_slab_rotated.yaml"])
+def test_ray_traced_backdrops_are_told(scene):
+    """Rendered through a pane by the exact tracer (blur, perspective, the pane's own distortion): the
+    scene file's backdrop pattern is the truth."""
+    from glassdist.render import render_scene
+    from glassdist.scene import load_scene
+
+    sc = load_scene(REPO / "examples" / "scenes" / scene).with_changes(camera={"pixels": [384, 288]})
+    assert detect_pattern(render_scene(sc)).pattern == sc.backdrop.pattern
