@@ -1,7 +1,6 @@
 """What a first-time user trips over on the command line: guessed options, the user's own files, odd --out values."""
 
 import errno
-import json
 import re
 import subprocess
 import sys
