@@ -116,9 +116,8 @@ class ReflectionGeometry:
     camera_distance_m : float or None
         Camera-to-pane distance C, m; None: the camera sits in the board plane (C = D).
     incidence_deg : float
-        Angle of incidence theta of the line of sight on the pane at the view's centre, deg
-        (taken constant over the view: the view's angular extent seen from the pane small
-        against theta's effect, see docs/reflection.md).
+        Angle of incidence theta of the line of sight on the pane at the view's centre, deg;
+        elsewhere it follows from the position on the pane (:meth:`incidence`).
     plane_deg : float
         Direction of the plane of incidence (the tangential direction t) in the image, deg
         from +x (columns) towards +y (rows).
@@ -155,6 +154,29 @@ class ReflectionGeometry:
         """``D / m``: the transmission distance whose channels equal ``P`` at normal incidence, m."""
         return self.distance_m / self.magnification
 
+    def incidence(self, dx_mm, dy_mm):
+        """Angle of incidence and plane of incidence (deg) at pane points offset from the view's centre.
+
+        Parameters
+        ----------
+        dx_mm, dy_mm : ndarray
+            Offsets on the pane from the point seen at the view's centre, pane mm, along the
+            image's x and y.
+
+        Returns
+        -------
+        incidence_deg, plane_deg : ndarray
+            With the board parallel to the pane, the in-plane vector from the camera's foot
+            to the point is ``v = C tan(theta_0) t_0 + (dx, dy)``: ``tan(theta) = |v| / C``,
+            the plane of incidence along ``v``.
+        """
+        C = 1000.0 * (self.distance_m if self.camera_distance_m is None else self.camera_distance_m)
+        r0 = C * math.tan(math.radians(self.incidence_deg))
+        a0 = math.radians(self.plane_deg)
+        vx = r0 * math.cos(a0) + np.asarray(dx_mm, float)
+        vy = r0 * math.sin(a0) + np.asarray(dy_mm, float)
+        return np.degrees(np.arctan(np.hypot(vx, vy) / C)), np.degrees(np.arctan2(vy, vx))
+
     def to_dict(self) -> dict:
         """The record ``summary.json`` keeps under ``optics``."""
         return {
@@ -169,10 +191,22 @@ class ReflectionGeometry:
         }
 
 
-def _rotation(plane_deg: float) -> np.ndarray:
-    """``Q`` with rows ``t`` and ``s``: ``A_ts = Q A_xy Q^T``."""
-    a = math.radians(plane_deg)
-    return np.array([[math.cos(a), math.sin(a)], [-math.sin(a), math.cos(a)]])
+def _tensor_in_frame(A, tu, tv, ptt, pss, pts):
+    """``Q^T [[ptt, pts], [pts, pss]] Q`` with ``Q`` rows ``t = (tu, tv)``, ``s = (-tv, tu)``: back to (u, v)."""
+    su, sv = -tv, tu
+    puu = tu * tu * ptt + 2 * tu * su * pts + su * su * pss
+    pvv = tv * tv * ptt + 2 * tv * sv * pts + sv * sv * pss
+    puv = tu * tv * ptt + (tu * sv + tv * su) * pts + su * sv * pss
+    return np.stack([np.stack([puu, puv], -1), np.stack([puv, pvv], -1)], -2)
+
+
+def _components_ts(E, tu, tv):
+    """``(E_tt, E_ss, E_ts)`` of symmetric tensors ``E`` (..., 2, 2) along ``t = (tu, tv)``, ``s = (-tv, tu)``."""
+    exx, eyy, exy = E[..., 0, 0], E[..., 1, 1], 0.5 * (E[..., 0, 1] + E[..., 1, 0])
+    su, sv = -tv, tu
+    return (tu * tu * exx + 2 * tu * tv * exy + tv * tv * eyy,
+            su * su * exx + 2 * su * sv * exy + sv * sv * eyy,
+            tu * su * exx + (tu * sv + tv * su) * exy + tv * sv * eyy)
 
 
 def coddington_power(hessian, incidence_deg, tangent=(1.0, 0.0)) -> np.ndarray:
@@ -192,43 +226,41 @@ def coddington_power(hessian, incidence_deg, tangent=(1.0, 0.0)) -> np.ndarray:
     -------
     ndarray (..., 2, 2)
         ``P`` in the ``(u, v)`` frame:
-        ``P = 2 Q^T [[Z_tt / cos theta, Z_ts], [Z_ts, Z_ss cos theta]] Q``.
+        ``P = 2 Q^T [[Z_tt / cos theta, Z_ts], [Z_ts, Z_ss cos theta]] Q``, ``Q`` rows t and s.
     """
     huu, huv, hvv = (np.asarray(h, float) for h in hessian)
     tu, tv = (np.asarray(t, float) for t in tangent)
     c = np.cos(np.radians(np.asarray(incidence_deg, float)))
-    su, sv = -tv, tu
-    ztt = tu * tu * huu + 2 * tu * tv * huv + tv * tv * hvv
-    zss = su * su * huu + 2 * su * sv * huv + sv * sv * hvv
-    zts = tu * su * huu + (tu * sv + tv * su) * huv + tv * sv * hvv
-    ptt, pss, pts = 2 * ztt / c, 2 * zss * c, 2 * zts
-    # back to (u, v): P_uv = Q^T P_ts Q, Q rows t and s
-    puu = tu * tu * ptt + 2 * tu * su * pts + su * su * pss
-    pvv = tv * tv * ptt + 2 * tv * sv * pts + sv * sv * pss
-    puv = tu * tv * ptt + (tu * sv + tv * su) * pts + su * sv * pss
-    return np.stack([np.stack([puu, puv], -1), np.stack([puv, pvv], -1)], -2)
+    H = np.stack([np.stack([huu, huv], -1), np.stack([huv, hvv], -1)], -2)
+    ztt, zss, zts = _components_ts(H, tu, tv)
+    return _tensor_in_frame(H, tu, tv, 2 * ztt / c, 2 * zss * c, 2 * zts)
 
 
-def power_from_strain(strain: np.ndarray, geometry: ReflectionGeometry) -> np.ndarray:
-    """Reflective power ``P`` (same unit as ``strain * m / D``) from the board strain (module notes).
+def power_from_strain(strain: np.ndarray, incidence_deg, plane_deg) -> np.ndarray:
+    """Reflective power ``P`` from the board strain (module notes), in the strain's scale times ``D / m``.
 
     Parameters
     ----------
     strain : ndarray (..., 2, 2)
-        ``eps = sym grad_X delta`` in the image frame (x, y), X in board mm; or that strain
-        already scaled by ``1000 m / D`` (then P is in mD).
-    geometry : ReflectionGeometry
+        ``eps = sym grad_X delta`` in the image frame (x, y), X in board mm, scaled by
+        ``1000 m / D`` (D in mm) for P in mD (or by ``m / D`` for P in 1/mm).
+    incidence_deg, plane_deg : float or ndarray (...)
+        Angle of incidence theta and direction of the plane of incidence (deg from +x
+        towards +y) at each sample (:meth:`ReflectionGeometry.incidence`).
 
     Returns
     -------
     ndarray (..., 2, 2)
-        ``P / (m / D)``: the caller's scale carried through; in the image frame.
+        ``P`` in the image frame:
+        ``P_tt = cos(theta) eps_tt``, ``P_ss = cos(theta) eps_ss``,
+        ``P_ts = cos(theta) 2 cos(theta) / (1 + cos^2 theta) eps_ts``.
     """
-    c = math.cos(math.radians(geometry.incidence_deg))
-    Q = _rotation(geometry.plane_deg)
-    e = Q @ np.asarray(strain, float) @ Q.T
-    k = np.array([[c, c * 2 * c / (1 + c * c)], [c * 2 * c / (1 + c * c), c]])
-    return Q.T @ (e * k) @ Q
+    E = np.asarray(strain, float)
+    c = np.cos(np.radians(np.asarray(incidence_deg, float)))
+    a = np.radians(np.asarray(plane_deg, float))
+    tu, tv = np.cos(a), np.sin(a)
+    ett, ess, ets = _components_ts(E, tu, tv)
+    return _tensor_in_frame(E, tu, tv, c * ett, c * ess, c * (2 * c / (1 + c * c)) * ets)
 
 
 def power_channels(P: np.ndarray):
@@ -264,22 +296,27 @@ def reflect_result(result, geometry: ReflectionGeometry):
     AnalysisResult
         ``phi_eff_mD``, ``phi_shear_mD``, ``phi_total_mD``, ``axis_deg`` and the uncertainty
         maps in reflective power (:func:`power_from_strain`); ``mm_per_px`` and ``sigma_mm``
-        in pane mm (board / m); ``distance_m`` = D; ``displacement_mm`` stays the measured
+        in pane mm (board / m); ``distance_m`` = D; the incidence at each sample from its offset
+        from the image centre (pane mm = pixels x ``mm_per_px`` / m, :meth:`ReflectionGeometry.incidence`); ``displacement_mm`` stays the measured
         board displacement; ``optics`` names the geometry.
     """
     if not math.isclose(result.distance_m, geometry.effective_distance_m, rel_tol=1e-9):
         raise ValueError("reflect_result needs the result of a run at distance_m = geometry.effective_distance_m")
     fields = dict(result._deferred["fields"])
+    m = geometry.magnification
+    yy, xx = result.analysis_grid.coords()
+    H, W = result.valid.shape
+    pane_mm_per_px = result.mm_per_px / m
+    theta, plane = geometry.incidence((xx - W / 2) * pane_mm_per_px, (yy - H / 2) * pane_mm_per_px)
     eps = strain_from_channels(fields["phi_eff_mD"], fields["phi_shear_mD"], fields["axis_deg"])
-    eff, shear, total, axis = power_channels(power_from_strain(eps, geometry))
+    eff, shear, total, axis = power_channels(power_from_strain(eps, theta, plane))
     finite = np.isfinite(fields["phi_eff_mD"])
-    c = math.cos(math.radians(geometry.incidence_deg))
+    c = np.cos(np.radians(theta))
     for name, val in (("phi_eff_mD", eff), ("phi_shear_mD", shear), ("phi_total_mD", total), ("axis_deg", axis)):
         fields[name] = np.where(finite, val, np.nan).astype(fields[name].dtype)
     for name in ("phi_eff_sigma_mD", "phi_shear_sigma_mD"):  # the t and s channels scale by cos(theta)
         if name in fields:
             fields[name] = (fields[name] * c).astype(fields[name].dtype)
-    m = geometry.magnification
     optics = geometry.to_dict()
     optics["notes"] = [
         "phi in reflective power on the pane (Coddington: P = 2 [[Z_tt/cos, Z_ts], [Z_ts, Z_ss cos]]); "

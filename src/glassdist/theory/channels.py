@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from ..errors import InputError
-from ..scene import Scene, landing_jacobian, pixel_directions
+from ..scene import Scene, landing_jacobian, pixel_directions, pixel_grid
 from .model import Prediction, nominal_mm_per_px, predict_displacement
 
 __all__ = ["analysis_params", "carrier_period_mm", "predict_channels", "reflection_geometry"]
@@ -38,6 +38,15 @@ def reflection_geometry(scene: Scene):
         incidence_deg=math.degrees(math.acos(min(1.0, abs(ca)))),
         plane_deg=math.degrees(math.atan2(perp[1], perp[0])) if np.hypot(perp[0], perp[1]) > 1e-12 else 0.0,
     )
+
+
+def _incidence(scene: Scene):
+    """Angle of incidence and direction of the plane of incidence (deg, from +x towards +y) of every pixel's line of sight."""
+    w = scene.pane.rotation[:, 2]
+    a = pixel_directions(scene.camera, *pixel_grid(scene.camera))
+    ca = np.clip(a @ w, -1.0, 1.0)
+    perp = a - ca[..., None] * w
+    return np.degrees(np.arccos(np.abs(ca))), np.degrees(np.arctan2(perp[..., 1], perp[..., 0]))
 
 
 def carrier_period_mm(scene: Scene) -> float:
@@ -134,7 +143,7 @@ def predict_channels(
 
         from ..analyzer.reflection import power_channels, power_from_strain
 
-        P = power_from_strain(ch.strain * (1000.0 / geom.effective_distance_m), geom)
+        P = power_from_strain(ch.strain * (1000.0 / geom.effective_distance_m), *_incidence(scene))
         eff, shear, total, axis = power_channels(P)
         ch = replace(ch, phi_eff_mD=eff, phi_shear_mD=shear, phi_total_mD=total, axis_deg=axis)
     return pred, ch, region
