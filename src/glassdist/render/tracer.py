@@ -237,9 +237,9 @@ def fresnel_reflectance(cos_i, eta):
     -------
     ndarray
         :math:`R = (r_s^2 + r_p^2)/2` with
-        :math:`r_s = (\eta\cos i - \cos t)/(\eta\cos i + \cos t)`,
-        :math:`r_p = (\cos i - \eta\cos t)/(\cos i + \eta\cos t)`,
-        :math:`\sin t = \eta \sin i`; 1 under total internal reflection
+        :math:`r_s = (\\eta\\cos i - \\cos t)/(\\eta\\cos i + \\cos t)`,
+        :math:`r_p = (\\cos i - \\eta\\cos t)/(\\cos i + \\eta\\cos t)`,
+        :math:`\\sin t = \\eta \\sin i`; 1 under total internal reflection
         (Hecht 2017 §4.6.2). Uncoated glass, n = 1.52, at normal incidence: 0.0426.
     """
     ci = np.abs(np.asarray(cos_i, float))

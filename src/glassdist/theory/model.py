@@ -51,16 +51,16 @@ incidence, :math:`\\hat s = \\hat w \\times \\hat t` and
    camera's pixel centres, so it lives on the camera pixel grid.
 
 Reflection (``scene.reflection``, :func:`_predict_reflection`): the line of sight meets the
-nominal front plane at :math:`\mathbf p_f` and reflects to
-:math:`\mathbf r_0 = \mathbf a - 2\cos\alpha\,\hat w`. The mirror law on the surface slope
-(normal :math:`\hat w - \mathbf g`, :math:`\mathbf g = \nabla h_f`) turns it by
-:math:`\delta\mathbf r = 2\cos\alpha\,\mathbf g + 2(\mathbf a\cdot\mathbf g)\,\hat w`, and the
-height moves the hit point along the line of sight by :math:`h_f/\cos\alpha`; carried to the
-board with the oblique projection along :math:`\mathbf r_0`,
+nominal front plane at :math:`\\mathbf p_f` and reflects to
+:math:`\\mathbf r_0 = \\mathbf a - 2\\cos\\alpha\\,\\hat w`. The mirror law on the surface slope
+(normal :math:`\\hat w - \\mathbf g`, :math:`\\mathbf g = \\nabla h_f`) turns it by
+:math:`\\delta\\mathbf r = 2\\cos\\alpha\\,\\mathbf g + 2(\\mathbf a\\cdot\\mathbf g)\\,\\hat w`, and the
+height moves the hit point along the line of sight by :math:`h_f/\\cos\\alpha`; carried to the
+board with the oblique projection along :math:`\\mathbf r_0`,
 
 .. math::
 
-   \delta = \Pi_r\!\left(\frac{h_f}{\cos\alpha}\,\mathbf a\right) + \ell\,\Pi_r\,\delta\mathbf r ,
+   \\delta = \\Pi_r\\!\\left(\\frac{h_f}{\\cos\\alpha}\\,\\mathbf a\\right) + \\ell\\,\\Pi_r\\,\\delta\\mathbf r ,
 
 whose gradient gives Coddington's factors off the normal (``1/cos^2`` along the plane of
 incidence: :mod:`glassdist.analyzer.reflection`). Terms ``height`` and ``slope``.
