@@ -790,7 +790,9 @@ def reflected_roll_wave(rw: RollWave, optics: dict) -> dict:
     along the wave, ``2 A k^2 F`` with ``F = cos^2(b) / cos(theta) + sin^2(b) cos(theta)``
     (``b`` the angle between the wave and the plane of incidence; ``F = 1`` at normal
     incidence: ``2 A (2 pi / Lambda)^2``), and the surface amplitude is
-    ``A = P / (2 k^2 F)``, peak-to-valley ``2 A``.
+    ``A = P / (2 k^2 F)``, peak-to-valley ``2 A``. The pane mm along the image axes: with the
+    plane of incidence along an image axis, the camera (aimed at the view's centre) sees the
+    pane foreshortened by ``cos(theta)`` along it (:func:`standard_measures`).
     """
     theta = np.radians(optics["incidence_deg"])
     b = np.radians(rw.direction_deg - optics["plane_of_incidence_deg"])
@@ -803,7 +805,8 @@ def reflected_roll_wave(rw: RollWave, optics: dict) -> dict:
         "surface_pv_mm": 2 * A, "explained_fraction": rw.explained_fraction,
         "assumptions": "period and direction on the pane; power: reflective power along the wave "
                        "(2 A (2 pi / period)^2 at normal incidence); surface_pv_mm = 2 A from a one-dimensional, "
-                       "near-sinusoidal wave (explained_fraction near 1) at the stated incidence, constant over the view",
+                       "near-sinusoidal wave (explained_fraction near 1) at the stated incidence, constant over the view; "
+                       "oblique views: camera aimed at the view's centre, plane of incidence along an image axis",
     }
 
 
@@ -838,9 +841,19 @@ def standard_measures(result, *, gauge_mm: float = 4.0, directions_deg=(0.0, 90.
     step = (sy * result.mm_per_px, sx * result.mm_per_px)
     L = result.distance_m
     optics = getattr(result, "optics", None)
+    rw_step = step
     if optics is not None:  # reflection: D / cos(theta) turns the board displacement into reflective power
-        L = optics["board_distance_m"] / float(np.cos(np.radians(optics["incidence_deg"])))
-    rw = roll_wave(d, step_mm=step, distance_m=L)
+        cos_t = float(np.cos(np.radians(optics["incidence_deg"])))
+        L = optics["board_distance_m"] / cos_t
+        # a camera aimed at the view's centre sees the pane foreshortened by cos(theta) along the plane of
+        # incidence: pane mm per px mm_per_px / sqrt(cos) along it, x sqrt(cos) across (image axes only)
+        psi = np.radians(optics["plane_of_incidence_deg"])
+        f = np.sqrt(cos_t)
+        if abs(np.sin(psi)) < 1e-9:
+            rw_step = (step[0] * f, step[1] / f)
+        elif abs(np.cos(psi)) < 1e-9:
+            rw_step = (step[0] / f, step[1] * f)
+    rw = roll_wave(d, step_mm=rw_step, distance_m=L)
     return StandardMeasures(
         roll_wave=rw,
         angular_deviation=angular_deviation(d, step_mm=step, distance_m=L, gauge_mm=gauge_mm),
