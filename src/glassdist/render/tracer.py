@@ -165,6 +165,33 @@ def _refract_c(d, g, eta):
     return (eta * du + f * nu, eta * dv + f * nv, eta * dw + f * nw), k < 0
 
 
+def _front_hit(scene: Scene, dx, dy, dz):
+    """Where rays from the camera meet the pane's front face (pane frame).
+
+    Returns ``(o, (du, dv, dw), t, (pu, pv), inside, framed)``: the camera in pane
+    coordinates, the directions in pane coordinates (``dw`` NaN for rays not heading into
+    the pane), the ray parameter and in-plane hit point on the front face, the hits on the
+    clear pane, and the hits on the frame band (None without a frame).
+    """
+    pane = scene.pane
+    R = pane.rotation
+    o = R.T @ (np.asarray(scene.camera.position_mm, float) - np.asarray(pane.center_mm, float))
+    du = R[0, 0] * dx + R[1, 0] * dy + R[2, 0] * dz
+    dv = R[0, 1] * dx + R[1, 1] * dy + R[2, 1] * dz
+    dw = R[0, 2] * dx + R[1, 2] * dy + R[2, 2] * dz
+    dw = np.where(dw > 1e-9, dw, np.nan)
+    t = _intersect(pane.deformation.front_shape, -pane.thickness_mm / 2, o, (du, dv, dw))
+    pu, pv = o[0] + t * du, o[1] + t * dv
+    hw, hh = pane.size_mm[0] / 2, pane.size_mm[1] / 2
+    inside = (np.abs(pu) <= hw) & (np.abs(pv) <= hh)
+    framed = None
+    if pane.frame is not None:
+        fw = pane.frame.width_mm
+        framed = inside & ((np.abs(pu) > hw - fw) | (np.abs(pv) > hh - fw))
+        inside &= ~framed
+    return o, (du, dv, dw), t, (pu, pv), inside, framed
+
+
 def _trace_components(scene: Scene, dx, dy, dz):
     """Core of :func:`trace_rays` on flat component arrays; returns ``(X, Y, status)``."""
     cx, cy, cz = (float(a) for a in scene.camera.position_mm)
@@ -177,20 +204,7 @@ def _trace_components(scene: Scene, dx, dy, dz):
     d = pane.thickness_mm
     n = pane.refractive_index
     front, back = pane.deformation.front_shape, pane.deformation.back_shape
-    o = R.T @ (np.array([cx, cy, cz]) - c)
-    du = R[0, 0] * dx + R[1, 0] * dy + R[2, 0] * dz
-    dv = R[0, 1] * dx + R[1, 1] * dy + R[2, 1] * dz
-    dw = R[0, 2] * dx + R[1, 2] * dy + R[2, 2] * dz
-    dw = np.where(dw > 1e-9, dw, np.nan)
-    t = _intersect(front, -d / 2, o, (du, dv, dw))
-    pu, pv = o[0] + t * du, o[1] + t * dv
-    hw, hh = pane.size_mm[0] / 2, pane.size_mm[1] / 2
-    inside = (np.abs(pu) <= hw) & (np.abs(pv) <= hh)
-    framed = None
-    if pane.frame is not None:
-        fw = pane.frame.width_mm
-        framed = inside & ((np.abs(pu) > hw - fw) | (np.abs(pv) > hh - fw))
-        inside &= ~framed
+    o, (du, dv, dw), t, (pu, pv), inside, framed = _front_hit(scene, dx, dy, dz)
     if not inside.all():
         idx = np.flatnonzero(inside)
         pu, pv, du, dv, dw, tt = pu[idx], pv[idx], du[idx], dv[idx], dw[idx], t[idx]
@@ -294,27 +308,13 @@ def _reflection_components(scene: Scene, dx, dy, dz):
     to the board), and ``None`` or, with ``viewing.back_face``, ``(X2, Y2, w1, w2)``: the
     back face's landing and the Fresnel weights of the two rays.
     """
-    cx, cy, cz = (float(a) for a in scene.camera.position_mm)
     pane = scene.pane
-    R = pane.rotation
-    c = np.asarray(pane.center_mm, float)
     d, n = pane.thickness_mm, pane.refractive_index
     front, back = pane.deformation.front_shape, pane.deformation.back_shape
-    o = R.T @ (np.array([cx, cy, cz]) - c)
-    du = R[0, 0] * dx + R[1, 0] * dy + R[2, 0] * dz
-    dv = R[0, 1] * dx + R[1, 1] * dy + R[2, 1] * dz
-    dw = R[0, 2] * dx + R[1, 2] * dy + R[2, 2] * dz
-    dw = np.where(dw > 1e-9, dw, np.nan)
-    t = _intersect(front, -d / 2, o, (du, dv, dw))
-    pu, pv = o[0] + t * du, o[1] + t * dv
-    hw, hh = pane.size_mm[0] / 2, pane.size_mm[1] / 2
-    inside = (np.abs(pu) <= hw) & (np.abs(pv) <= hh)
+    o, (du, dv, dw), t, (pu, pv), inside, framed = _front_hit(scene, dx, dy, dz)
     status = np.zeros(dx.shape, np.int8)
-    if pane.frame is not None:
-        fw = pane.frame.width_mm
-        framed = inside & ((np.abs(pu) > hw - fw) | (np.abs(pv) > hh - fw))
+    if framed is not None:
         status[framed] = BLOCKED
-        inside &= ~framed
     X, Y = np.full(dx.shape, np.nan), np.full(dx.shape, np.nan)
     idx = np.flatnonzero(inside)
     pu, pv, du, dv, dw, tt = pu[idx], pv[idx], du[idx], dv[idx], dw[idx], t[idx]
