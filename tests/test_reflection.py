@@ -258,3 +258,37 @@ def test_cli_reflection_options_need_reflection(sphere_photos, capsys):
                  "--out", str(f / "x")])
     assert code == 2
     assert "--optics reflection" in capsys.readouterr().err
+
+
+def _reflection_spec(folder, max_mD=300.0):
+    spec = {"name": "reflection_line", "description": "reflected phi_eff limit, board at 1.997 m",
+            "protocol": {"optics": "reflection", "method": "comparative", "distance_m": 1.997, "pitch_mm": 12,
+                         "detrend_degree": 0},
+            "criteria": [{"channel": "phi_eff", "statistic": "p95_abs", "max_mD": max_mD}]}
+    path = folder / f"spec_{int(max_mD)}.json"
+    path.write_text(json.dumps(spec))
+    return path
+
+
+def test_spec_pins_reflection_and_judges_reflected_power(sphere_photos, capsys):
+    """A specification's protocol pins the optics: the run is in reflection without the option, PASS at 300 mD and
+    FAIL (exit 3) at 150 mD on the -200 mD sphere; an option contradicting the pin exits 2."""
+    f = sphere_photos
+    args = ["analyze", str(f / "pane.png"), "--reference", str(f / "flat.png"), "--quiet"]
+    assert main([*args, "--spec", str(_reflection_spec(f)), "--out", str(f / "s1")]) == 0
+    s = json.loads((f / "s1" / "summary.json").read_text())
+    assert s["optics"]["optics"] == "reflection" and s["verdict"]["passed"]
+    assert main([*args, "--spec", str(_reflection_spec(f, 150.0)), "--out", str(f / "s2")]) == 3
+    assert main([*args, "--spec", str(_reflection_spec(f)), "--optics", "transmission", "--out", str(f / "s3")]) == 2
+    assert "contradicts the protocol" in capsys.readouterr().err
+
+
+def test_batch_runs_reflection_through_the_spec(sphere_photos):
+    """A batch pane whose specification pins reflection is analysed in reflection."""
+    f = sphere_photos
+    manifest = f / "manifest.csv"
+    manifest.write_text(f"id,image,reference,spec\nsphere,pane.png,flat.png,{_reflection_spec(f).name}\n")
+    assert main(["batch", str(manifest), "--out", str(f / "batch")]) == 0
+    s = json.loads(next((f / "batch").rglob("summary.json")).read_text())
+    assert s["optics"]["optics"] == "reflection"
+    assert s["statistics"]["phi_eff_mD"]["mean"] == pytest.approx(-200.0, rel=0.02)

@@ -155,6 +155,10 @@ class AnalysisResult:
     noise_std : (float, float or None)
         White noise of the photo and of the reference (Comparative), intensity units,
         estimated from their spectra.
+    optics : dict or None
+        None in transmission; in reflection the geometry record of
+        :func:`glassdist.analyzer.reflection.reflect_result` (the channels are then the
+        reflective power on the pane, ``mm_per_px`` and ``sigma_mm`` in pane mm).
     """
 
     method: str
