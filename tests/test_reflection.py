@@ -292,3 +292,4 @@ def test_batch_runs_reflection_through_the_spec(sphere_photos):
     s = json.loads(next((f / "batch").rglob("summary.json")).read_text())
     assert s["optics"]["optics"] == "reflection"
     assert s["statistics"]["phi_eff_mD"]["mean"] == pytest.approx(-200.0, rel=0.02)
+

@@ -26,7 +26,8 @@ ROLES = {"image": None, "reference": "--reference", "mask": "--mask", "spec": "-
 #: Form fields passed to ``glassdist analyze`` as ``--option=value`` (checked there, as on the command line).
 FIELDS = {"pitch_mm": "--pitch-mm", "distance_m": "--distance-m", "pattern": "--pattern",
           "detrend_degree": "--detrend-degree", "sigma_mm": "--sigma-mm",
-          "pane_id": "--pane-id", "site": "--site", "operator": "--operator"}
+          "pane_id": "--pane-id", "site": "--site", "operator": "--operator", "optics": "--optics",
+          "camera_distance_m": "--camera-distance-m", "incidence_deg": "--incidence-deg"}
 
 # The first bytes of the formats analyze reads; an upload is stored under a name of our own with the
 # suffix its content shows (client file names never become paths).
