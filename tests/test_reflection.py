@@ -171,6 +171,15 @@ def test_sphere_at_normal_incidence_reads_minus_4000_over_R(R_mm):
     assert got == pytest.approx(want, rel=0.01)
 
 
+def test_sphere_with_the_camera_behind_the_board():
+    """--camera-distance-m: the camera 1 m behind the board plane (C = 3 m, m = 1 + D/C = 5/3) reads the same power."""
+    scene = _scene(_sphere(20000.0)).with_changes(camera={"position_mm": [0, 0, -3000], "focal_length_mm": 300})
+    img, ref = render_scene(scene), render_scene(scene, reference=True)
+    geometry = ReflectionGeometry(distance_m=(D_MM - THICK / 2) / 1000, camera_distance_m=(3000 - THICK / 2) / 1000)
+    res = analyze_reflection(img, pitch_mm=12, geometry=geometry, reference=ref, detrend_degree=0)
+    assert float(np.median(res.phi_eff_mD[_interior(res)])) == pytest.approx(-200.0, rel=0.01)
+
+
 def test_sphere_at_30_deg_reads_tangential_and_sagittal_powers():
     """At 30 deg incidence the principal powers of a concave sphere: -2000/(R cos) and -2000 cos/R, within 1 %."""
     R_m, th = 20.0, 30.0

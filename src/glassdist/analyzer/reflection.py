@@ -84,6 +84,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..errors import InputError
 from ..validation import DISTANCE_M, check_number
 from .metrics import channels_from_strain
 
@@ -134,13 +135,9 @@ class ReflectionGeometry:
             check_number(self.camera_distance_m, "camera_distance_m (--camera-distance-m, the camera-to-pane distance C)",
                          DISTANCE_M)
         if not (math.isfinite(self.incidence_deg) and 0.0 <= self.incidence_deg < 80.0):
-            from ..errors import InputError
-
-            raise InputError(f"incidence_deg must be in [0, 80) deg, got {self.incidence_deg!r}; "
+            raise InputError(f"incidence_deg (--incidence-deg) must be in [0, 80) deg, got {self.incidence_deg!r}; "
                              "give the angle between the line of sight and the pane normal")
         if not math.isfinite(self.plane_deg):
-            from ..errors import InputError
-
             raise InputError(f"plane_deg must be a finite angle in deg, got {self.plane_deg!r}")
 
     @property
@@ -191,7 +188,7 @@ class ReflectionGeometry:
         }
 
 
-def _tensor_in_frame(A, tu, tv, ptt, pss, pts):
+def _tensor_in_frame(tu, tv, ptt, pss, pts):
     """``Q^T [[ptt, pts], [pts, pss]] Q`` with ``Q`` rows ``t = (tu, tv)``, ``s = (-tv, tu)``: back to (u, v)."""
     su, sv = -tv, tu
     puu = tu * tu * ptt + 2 * tu * su * pts + su * su * pss
@@ -233,7 +230,7 @@ def coddington_power(hessian, incidence_deg, tangent=(1.0, 0.0)) -> np.ndarray:
     c = np.cos(np.radians(np.asarray(incidence_deg, float)))
     H = np.stack([np.stack([huu, huv], -1), np.stack([huv, hvv], -1)], -2)
     ztt, zss, zts = _components_ts(H, tu, tv)
-    return _tensor_in_frame(H, tu, tv, 2 * ztt / c, 2 * zss * c, 2 * zts)
+    return _tensor_in_frame(tu, tv, 2 * ztt / c, 2 * zss * c, 2 * zts)
 
 
 def power_from_strain(strain: np.ndarray, incidence_deg, plane_deg) -> np.ndarray:
@@ -260,7 +257,7 @@ def power_from_strain(strain: np.ndarray, incidence_deg, plane_deg) -> np.ndarra
     a = np.radians(np.asarray(plane_deg, float))
     tu, tv = np.cos(a), np.sin(a)
     ett, ess, ets = _components_ts(E, tu, tv)
-    return _tensor_in_frame(E, tu, tv, c * ett, c * ess, c * (2 * c / (1 + c * c)) * ets)
+    return _tensor_in_frame(tu, tv, c * ett, c * ess, c * (2 * c / (1 + c * c)) * ets)
 
 
 def power_channels(P: np.ndarray):
