@@ -181,6 +181,48 @@ def test_contract_spec_with_the_form_as_it_loads_in_headless_chromium(server):
             browser.close()
 
 
+def test_reflection_in_headless_chromium(server, tmp_path):
+    """The form's optics field: a concave mirror (R = 20 m, board at 1.997 m, camera in the board plane) rendered
+    in reflection reads -4000/R = -200 mD, and the job page names the reflection geometry."""
+    from playwright.sync_api import sync_playwright
+
+    from glassdist.io import write_png16
+    from glassdist.render import render_scene
+    from glassdist.scene import scene_from_dict
+
+    exe = _chromium()
+    sag = 20000.0 - (20000.0**2 - 1500.0**2) ** 0.5
+    scene = scene_from_dict({
+        "pane": {"size_mm": [2400, 1600], "thickness_mm": 6, "refractive_index": 1.52, "deformation": {"both": [
+            {"kind": "spherical_cap", "radius_mm": 20000.0, "aperture_mm": 1500.0}, {"kind": "plane", "offset_mm": -sag}]}},
+        "backdrop": {"pattern": "lines", "pitch_mm": 12, "line_width_mm": 3, "distance_m": 2},
+        "camera": {"focal_length_mm": 160, "sensor_width_mm": 36, "pixels": [256, 192], "position_mm": [0, 0, -2000]},
+        "viewing": {"mode": "reflection"}})
+    write_png16(tmp_path / "pane.png", render_scene(scene))
+    write_png16(tmp_path / "flat.png", render_scene(scene, reference=True))
+    url, _ = server
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=exe, args=["--headless", "--no-sandbox", "--disable-gpu",
+                                                               "--disable-background-networking"])
+        try:
+            page = browser.new_page()
+            page.goto(url)
+            page.set_input_files("#image", str(tmp_path / "pane.png"))
+            page.set_input_files("#reference", str(tmp_path / "flat.png"))
+            page.fill("#pitch_mm", "12")
+            page.fill("#distance_m", "1.997")
+            page.fill("#detrend_degree", "0")
+            page.select_option("#optics", "reflection")
+            page.click("#submit")
+            page.wait_for_selector("#verdict", timeout=240_000)
+            assert "reflective power on the pane" in page.inner_text("#optics")
+            summary = page.request.get(page.url + "/files/summary.json").json()
+            assert summary["optics"]["optics"] == "reflection"
+            assert summary["statistics"]["phi_eff_mD"]["mean"] == pytest.approx(-200.0, rel=0.02)
+        finally:
+            browser.close()
+
+
 def test_kept_jobs_have_a_disk_budget(tmp_path):
     """The oldest finished jobs go while the kept ones take more than max_disk_mb; the newest always stays."""
     from glassdist.web._jobs import JobStore

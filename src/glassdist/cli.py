@@ -87,13 +87,20 @@ def _register_analyze(sub) -> None:
                    help="photo of the grid through the glass (PNG/TIFF/BMP/JPEG, 8/16-bit); several photos of one set-up "
                    "(repeated exposures, small camera moves) are registered and averaged into one map")
     p.add_argument("--pitch-mm", type=number_option(PITCH_MM), help="grid pitch on the backdrop, mm (line spacing, or square size); required unless the --spec protocol pins pitch_mm")
-    p.add_argument("--distance-m", type=number_option(DISTANCE_M), help="glass-to-grid distance L, m; required unless the --spec protocol pins distance_m")
+    p.add_argument("--distance-m", type=number_option(DISTANCE_M), help="glass-to-grid distance L, m (reflection: board-to-pane distance D); required unless the --spec protocol pins distance_m")
+    p.add_argument("--optics", choices=["transmission", "reflection"],
+                   help="transmission (default: the grid seen through the pane) or reflection (a grid board seen in the "
+                   "pane; phi in reflective power on the pane, docs/reflection.md)")
+    p.add_argument("--camera-distance-m", type=number_option(DISTANCE_M),
+                   help="reflection: camera-to-pane distance C, m (default: the camera in the board plane, C = D)")
+    p.add_argument("--incidence-deg", type=float,
+                   help="reflection: angle between the line of sight and the pane normal at the view's centre, deg (default 0)")
     p.add_argument("--reference", type=Path, help="glass-less photo from the same camera position (Comparative Method)")
     p.add_argument("--pattern", choices=["auto", "lines", "checkerboard"],
                    help="backdrop pattern (default: from --spec or --params, else auto: decided from the photo's spectrum; "
                    "a given pattern the spectrum contradicts gets a warning)")
     p.add_argument("--detrend-degree", type=int, help="A2 polynomial detrend total degree N (default 2)")
-    p.add_argument("--sigma-mm", type=number_option(SIGMA_MM), help="reporting smoothing scale on the backdrop, mm (default: 2 carrier periods)")
+    p.add_argument("--sigma-mm", type=number_option(SIGMA_MM), help="reporting smoothing scale on the backdrop, mm (reflection: on the pane; default: 2 carrier periods)")
     p.add_argument("--params", type=Path, help="JSON file of analyzer parameters (unknown keys are errors)")
     p.add_argument("--mask", type=Path, help="image whose non-zero pixels mark the region to analyse")
     p.add_argument("--out", type=folder_option, required=True, help="output folder (created if needed)")
@@ -173,10 +180,39 @@ def _read_inputs(args):
     if protocol.sources["pattern"] == "default":  # neither given nor pinned: the photo decides
         protocol = _pattern_from_photo(protocol, protocol_with, reference if reference is not None else image)
     params = load_params(args.params, **protocol.params_overrides)
+    optics = _optics(args, spec[0].protocol if spec else None, protocol.distance_m)
+    if optics is not None and params.sigma_mm is not None and not (spec and spec[0].protocol.sigma_periods):
+        params = load_params({**params.model_dump(exclude_unset=True)}, sigma_mm=params.sigma_mm * optics.magnification)
     check_sigma_extent(params.sigma_mm, image.shape, protocol.pitch_mm, pattern=params.pattern,
                        min_period_px=params.min_period_px)
     mask = read_mask(args.mask, image.shape) if args.mask is not None else None
-    return spec, protocol, params, images, reference, mask
+    return spec, protocol, params, images, reference, mask, optics
+
+
+def _optics(args, pinned, distance_m: float):
+    """The reflection geometry asked for (options, else the specification's protocol), or None in transmission.
+
+    The smoothing scale of a reflection run is on the pane: the caller multiplies it by the
+    magnification ``m`` to the board, where the Analyzer works (a protocol's ``sigma_periods``
+    counts the board image's carrier periods and is left as it is).
+    """
+    from .analyzer.reflection import ReflectionGeometry
+
+    chosen = {}
+    for key, opt in (("optics", "--optics"), ("camera_distance_m", "--camera-distance-m"),
+                     ("incidence_deg", "--incidence-deg")):
+        mine, pin = getattr(args, key), getattr(pinned, key, None) if pinned is not None else None
+        if mine is not None and pin is not None and mine != pin:
+            raise InputError(f"{opt} {mine} contradicts the protocol of the specification '{args.spec}' ({key} = {pin}); "
+                             f"leave {opt} out to use the specification's value")
+        chosen[key] = mine if mine is not None else pin
+    if chosen["optics"] != "reflection":
+        for key, opt in (("camera_distance_m", "--camera-distance-m"), ("incidence_deg", "--incidence-deg")):
+            if chosen[key] is not None:
+                raise InputError(f"{opt} applies to --optics reflection only; add --optics reflection or leave {opt} out")
+        return None
+    return ReflectionGeometry(distance_m=distance_m, camera_distance_m=chosen["camera_distance_m"],
+                              incidence_deg=0.0 if chosen["incidence_deg"] is None else float(chosen["incidence_deg"]))
 
 
 def _pattern_from_photo(protocol, protocol_with, photo):
@@ -202,12 +238,13 @@ def _pattern_from_photo(protocol, protocol_with, photo):
 
 def _run_analyze(args) -> int:
     from .analyzer import FIELDS, analyze, analyze_captures, prepare_reference
+    from .analyzer.reflection import reflect_result
     from .report.outputs import open_output_folder, plan_outputs, preview, write_outputs
     from .report.spec import check_capture, spec_limits
 
     with _stage_progress(not args.quiet) as step:
         step("reading the inputs")
-        spec, protocol, params, images, reference, mask = _read_inputs(args)
+        spec, protocol, params, images, reference, mask, optics = _read_inputs(args)
         limits = spec_limits(spec[0]) if spec is not None else {}
         planned = plan_outputs(FIELDS, fields=args.fields, report=args.report, export=args.export, limits=limits)
         inputs = (*args.image, args.reference, args.mask, args.spec, args.params)
@@ -216,12 +253,14 @@ def _run_analyze(args) -> int:
                 step("preparing the reference")
                 reference = prepare_reference(reference, params=params)
             step("analysing")
-            kw = dict(pitch_mm=protocol.pitch_mm, distance_m=protocol.distance_m, reference=reference, params=params,
-                      mask=mask)
+            L = protocol.distance_m if optics is None else optics.effective_distance_m  # reflection: D / m
+            kw = dict(pitch_mm=protocol.pitch_mm, distance_m=L, reference=reference, params=params, mask=mask)
             small = preview(images[0])  # only the reduced photo is drawn from here on
             # a single photo is handed over, so that the analysis frees it once Block F is done
             result = analyze(images.pop(), **kw) if len(images) == 1 else analyze_captures(images, **kw)
             del images, reference, kw
+            if optics is not None:
+                result = reflect_result(result, optics)
             if spec is not None:  # a capture outside the protocol is not judged (exit 2), nothing written
                 check_capture(spec[0].protocol, result, spec_label=f"the specification '{args.spec}'")
             step("writing the outputs")
@@ -246,8 +285,10 @@ def _echo_run(result, folder, lines) -> None:
     for line in lines:
         print(line)
     s = json.loads((folder.path / "summary.json").read_text(encoding="utf-8"))["statistics"]
+    optics = "" if result.optics is None else (
+        f"reflection (D {result.optics['board_distance_m']:g} m, incidence {result.optics['incidence_deg']:g} deg), ")
     print(
-        f"{result.method} method: valid {100 * result.valid_fraction:.1f}% of the image, "
+        f"{optics}{result.method} method: valid {100 * result.valid_fraction:.1f}% of the image, "
         f"mean |phi_eff| {s['phi_eff_mD']['mean_abs']:.3g} mD, p95 |phi_eff| {s['phi_eff_mD']['p95_abs']:.3g} mD, "
         f"mean phi_shear {s['phi_shear_mD']['mean_abs']:.3g} mD"
     )

@@ -6,12 +6,15 @@ from .homography import HomographyFit
 from .metrics import Channels, channel_statistics, evaluate_displacement
 from .params import AnalyzerParams, default_params_path, load_params
 from .pipeline import ReferenceModel, analyze, prepare_reference
+from .reflection import ReflectionGeometry, analyze_reflection
 from .region import LABELS as QUALITY_LABELS
 from .result import FIELDS, AnalysisResult, FieldSpec
 
 __all__ = [
     "analyze",
     "analyze_captures",
+    "analyze_reflection",
+    "ReflectionGeometry",
     "prepare_reference",
     "AnalysisResult",
     "FIELDS",

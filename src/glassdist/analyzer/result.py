@@ -155,6 +155,10 @@ class AnalysisResult:
     noise_std : (float, float or None)
         White noise of the photo and of the reference (Comparative), intensity units,
         estimated from their spectra.
+    optics : dict or None
+        None in transmission; in reflection the geometry record of
+        :func:`glassdist.analyzer.reflection.reflect_result` (the channels are then the
+        reflective power on the pane, ``mm_per_px`` and ``sigma_mm`` in pane mm).
     """
 
     method: str
@@ -178,6 +182,7 @@ class AnalysisResult:
     guard_px: float = 0.0
     noise_std: tuple[float, float | None] = (float("nan"), None)
     effective_sigma_mm: float | None = None
+    optics: dict | None = None
     _deferred: dict | None = field(default=None, repr=False, compare=False)
 
     def field_specs(self) -> tuple[FieldSpec, ...]:
@@ -336,7 +341,13 @@ class AnalysisResult:
                 "displacement": "landing point on the backdrop with glass minus without, mm; [...,0]=x (columns), [...,1]=y (rows)",
                 "phi_eff": "tr(sym grad delta)/L in mD, gradients w.r.t. backdrop mm; converging lens -> phi_eff < 0",
                 "axis_deg": "astigmatism principal axis, degrees from +x towards +y (down)",
+            } if self.optics is None else {
+                "displacement": "landing point on the board with the pane minus with a flat reference surface, board mm",
+                "phi_eff": "tr P in mD, P = 2 [[Z_tt/cos, Z_ts], [Z_ts, Z_ss cos]] the reflective power on the pane's "
+                           "coordinates (glassdist.analyzer.reflection); concave pane -> phi_eff < 0",
+                "axis_deg": "axis of the larger principal power, degrees from +x towards +y (down)",
             },
+            **({"optics": self.optics} if self.optics is not None else {}),
         }
 
 

@@ -645,10 +645,14 @@ class CyclesRenderer:
         Raises
         ------
         InputError
-            Cycles is not installed (the message says how to install it).
+            Cycles is not installed (the message says how to install it), or the scene is
+            viewed in reflection (rendered by the exact engine only).
         CyclesError
             The render failed.
         """
+        if scene.reflection:
+            raise InputError("the cycles engine renders scenes viewed in transmission only; render a reflection "
+                             "scene with --engine exact")
         py = Path(self.python) if self.python is not None else find_cycles_python()
         seed = int(rng.integers(0, 2**31 - 1))
         if self.work_dir is not None:

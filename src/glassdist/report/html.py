@@ -199,15 +199,21 @@ def _fit_facts(result):
 
 def _geometry_rows(result, params, valid_percent, fit_facts):
     """Rows of the capture-geometry table (the homography and its fit for the Direct method)."""
+    optics = getattr(result, "optics", None)
+    where = "the grid plane" if optics is None else "the pane"
     geometry = [
         ("grid pitch", f"{_num(result.pitch_mm)} mm"),
-        ("glass-to-grid distance L", f"{_num(result.distance_m)} m"),
+        ("glass-to-grid distance L" if optics is None else "board-to-pane distance D", f"{_num(result.distance_m)} m"),
         ("grid pattern", escape(str(params.get("pattern", "—")))),
-        ("scale on the grid plane", f"{_num(result.mm_per_px)} mm per px"),
-        ("smoothing scale σ", f"{_num(result.sigma_mm)} mm"),
+        (f"scale on {where}", f"{_num(result.mm_per_px)} mm per px"),
+        (f"smoothing scale σ (on {where})", f"{_num(result.sigma_mm)} mm"),
         ("detrend degree N", _num(result.detrend_degree)),
         ("analysed area", f"{_num(valid_percent)} % of the image" if valid_percent is not None else "—"),
     ]
+    if optics is not None:
+        geometry.insert(2, ("optics", escape(
+            f"reflection: φ in reflective power on the pane (Coddington); camera at {_num(optics['camera_distance_m'])} m, "
+            f"incidence {_num(optics['incidence_deg'])}°, board mm per pane mm {_num(optics['magnification'])}")))
     if result.homography is not None:
         rows = "<br>".join(" ".join(f"{x: .6g}" for x in r) for r in np.asarray(result.homography, dtype=float))
         geometry.append(("homography (grid → image)", f'<span class="mono">{rows}</span>'))

@@ -54,6 +54,7 @@ __all__ = [
     "grid_line_slope",
     "equivalent_power",
     "standard_measures",
+    "reflected_roll_wave",
     "measures_rows",
     "ARCMIN_PER_RAD",
     "EQUIVALENT_POWER_CONVENTION",
@@ -766,6 +767,7 @@ class StandardMeasures:
     equivalent_power: EquivalentPower
     step_mm: tuple[float, float]
     field: str
+    reflection: dict | None = None
 
     def to_dict(self) -> dict:
         """JSON-serialisable summary (``summary.json["measures"]``)."""
@@ -776,7 +778,36 @@ class StandardMeasures:
             "angular_deviation": self.angular_deviation.statistics(),
             "grid_line_slope": self.grid_line_slope.statistics(),
             "equivalent_power": self.equivalent_power.to_dict(),
+            **({"reflected_roll_wave": self.reflection} if self.reflection is not None else {}),
         }
+
+
+def reflected_roll_wave(rw: RollWave, optics: dict) -> dict:
+    """The roll wave in reflection: period on the pane, reflective power amplitude, implied surface height.
+
+    ``rw`` is :func:`roll_wave` of the board displacement on pane mm with
+    ``L = D / cos(theta)``: then ``power_amplitude_mD`` is the reflective power amplitude
+    along the wave, ``2 A k^2 F`` with ``F = cos^2(b) / cos(theta) + sin^2(b) cos(theta)``
+    (``b`` the angle between the wave and the plane of incidence; ``F = 1`` at normal
+    incidence: ``2 A (2 pi / Lambda)^2``), and the surface amplitude is
+    ``A = P / (2 k^2 F)``, peak-to-valley ``2 A``. The pane mm along the image axes: with the
+    plane of incidence along an image axis, the camera (aimed at the view's centre) sees the
+    pane foreshortened by ``cos(theta)`` along it (:func:`standard_measures`).
+    """
+    theta = np.radians(optics["incidence_deg"])
+    b = np.radians(rw.direction_deg - optics["plane_of_incidence_deg"])
+    F = float(np.cos(b) ** 2 / np.cos(theta) + np.sin(b) ** 2 * np.cos(theta))
+    k = 2 * np.pi / rw.period_mm
+    A = rw.power_amplitude_mD * 1e-6 / (2 * k * k * F)
+    return {
+        "period_mm": rw.period_mm, "direction_deg": rw.direction_deg,
+        "power_amplitude_mD": rw.power_amplitude_mD, "power_pv_mD": rw.power_pv_mD,
+        "surface_pv_mm": 2 * A, "explained_fraction": rw.explained_fraction,
+        "assumptions": "period and direction on the pane; power: reflective power along the wave "
+                       "(2 A (2 pi / period)^2 at normal incidence); surface_pv_mm = 2 A from a one-dimensional, "
+                       "near-sinusoidal wave (explained_fraction near 1) at the stated incidence, constant over the view; "
+                       "oblique views: camera aimed at the view's centre, plane of incidence along an image axis",
+    }
 
 
 def standard_measures(result, *, gauge_mm: float = 4.0, directions_deg=(0.0, 90.0)) -> StandardMeasures:
@@ -809,8 +840,22 @@ def standard_measures(result, *, gauge_mm: float = 4.0, directions_deg=(0.0, 90.
     sy, sx = g.step
     step = (sy * result.mm_per_px, sx * result.mm_per_px)
     L = result.distance_m
+    optics = getattr(result, "optics", None)
+    rw_step = step
+    if optics is not None:  # reflection: D / cos(theta) turns the board displacement into reflective power
+        cos_t = float(np.cos(np.radians(optics["incidence_deg"])))
+        L = optics["board_distance_m"] / cos_t
+        # a camera aimed at the view's centre sees the pane foreshortened by cos(theta) along the plane of
+        # incidence: pane mm per px mm_per_px / sqrt(cos) along it, x sqrt(cos) across (image axes only)
+        psi = np.radians(optics["plane_of_incidence_deg"])
+        f = np.sqrt(cos_t)
+        if abs(np.sin(psi)) < 1e-9:
+            rw_step = (step[0] * f, step[1] / f)
+        elif abs(np.cos(psi)) < 1e-9:
+            rw_step = (step[0] / f, step[1] * f)
+    rw = roll_wave(d, step_mm=rw_step, distance_m=L)
     return StandardMeasures(
-        roll_wave=roll_wave(d, step_mm=step, distance_m=L),
+        roll_wave=rw,
         angular_deviation=angular_deviation(d, step_mm=step, distance_m=L, gauge_mm=gauge_mm),
         grid_line_slope=grid_line_slope(d, step_mm=step, directions_deg=directions_deg),
         equivalent_power=equivalent_power(phi),
@@ -819,6 +864,7 @@ def standard_measures(result, *, gauge_mm: float = 4.0, directions_deg=(0.0, 90.
             f"displacement_detrended_mm (degree-{result.detrend_degree} detrend, sigma_mm = {result.sigma_mm:.4g}) "
             "on the analysis grid"
         ),
+        reflection=None if optics is None else reflected_roll_wave(rw, optics),
     )
 
 

@@ -139,6 +139,13 @@ class Protocol(BaseModel):
         None, gt=0, allow_inf_nan=False,
         description="capture limit: shortest carrier period in the photo, px (pitch for lines, pitch*sqrt(2) "
                     "for checkerboards)")
+    optics: Literal["transmission", "reflection"] | None = Field(
+        None, description="transmission (grid seen through the pane) or reflection (grid board seen in it); "
+                          "in reflection distance_m is the board-to-pane distance D")
+    camera_distance_m: float | None = Field(None, gt=0, allow_inf_nan=False,
+                                            description="reflection: camera-to-pane distance C, m")
+    incidence_deg: float | None = Field(None, ge=0, lt=80, allow_inf_nan=False,
+                                        description="reflection: angle of incidence at the view's centre, deg")
 
     @model_validator(mode="after")
     def _one_sigma(self):

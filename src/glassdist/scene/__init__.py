@@ -36,6 +36,12 @@ Backdrop
     are the world ``(X, Y)`` (so, for a camera without roll, ``X`` points to the
     image's right and ``Y`` to its bottom). The pattern is drawn in pattern
     coordinates ``Rot(-rotation_deg) (X - offset_mm)``.
+Reflection (``viewing.mode: reflection``)
+    The backdrop is a grid board on the camera's side, the plane
+    ``z = pane.center_z - 1000 D`` (``D = backdrop.distance_m``) facing the pane; the lines
+    of sight reflect off the front face (and, with ``viewing.back_face``, off the back face
+    too, Fresnel-weighted) and land on it. The glass-less landing is the reflection in the
+    flat plane of the nominal front face (a flat reference surface at the same place).
 Displacement
     ``delta(pixel)`` = landing point of the pixel's line of sight on the
     backdrop with the glass minus without it, backdrop mm, ``[..., 0] = X``,
@@ -65,6 +71,7 @@ from .model import (
     Pane,
     RenderSettings,
     Scene,
+    Viewing,
     load_scene,
     rotation_yaw_pitch,
     scene_from_dict,
@@ -82,6 +89,7 @@ __all__ = [
     "Noise",
     "Lighting",
     "RenderSettings",
+    "Viewing",
     "load_scene",
     "scene_from_dict",
     "rotation_yaw_pitch",

@@ -61,8 +61,24 @@ def pixel_grid(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
 
 
 def straight_landing(scene: Scene, directions: np.ndarray) -> np.ndarray:
-    """Backdrop landing points ``(X, Y)`` in mm of straight rays from the camera (no glass)."""
+    """Backdrop landing points ``(X, Y)`` in mm of rays from the camera without the glass.
+
+    In transmission the rays go straight; in reflection (``scene.reflection``) they reflect
+    in the flat plane of the nominal front face (``w = -d/2``, the flat reference surface)
+    and land on the board: with ``p`` the hit point and ``w`` the pane normal,
+    ``r = a - 2 (a . w) w``, ``X = p + r (z_b - p_z) / r_z``.
+    """
     c = np.asarray(scene.camera.position_mm, float)
+    if scene.reflection:
+        pane = scene.pane
+        w = pane.rotation[:, 2]
+        plane_pt = np.asarray(pane.center_mm, float) - 0.5 * pane.thickness_mm * w
+        a = np.asarray(directions, float)
+        aw = a @ w
+        p = c + (((plane_pt - c) @ w) / aw)[..., None] * a
+        r = a - 2.0 * aw[..., None] * w
+        t = (scene.backdrop_z_mm - p[..., 2]) / r[..., 2]
+        return p[..., :2] + t[..., None] * r[..., :2]
     t = (scene.backdrop_z_mm - c[2]) / directions[..., 2]
     return c[:2] + t[..., None] * directions[..., :2]
 

@@ -23,6 +23,7 @@ __all__ = [
     "Lighting",
     "Imaging",
     "RenderSettings",
+    "Viewing",
     "Scene",
     "load_scene",
     "scene_from_dict",
@@ -210,6 +211,29 @@ class RenderSettings(BaseModel):
     seed: int = Field(0, ge=0, le=2**32 - 1)
 
 
+class Viewing(BaseModel):
+    """How the camera sees the backdrop: through the pane (transmission) or in it (reflection).
+
+    ``reflection``: the backdrop is a grid board on the camera's side of the pane, parallel
+    to the world ``(x, y)`` plane at ``backdrop.distance_m`` (the board-to-pane distance D)
+    before the pane's centre; the lines of sight reflect off the pane's front face (mirror
+    law on the true surface normal) and land on the board. ``back_face`` adds the back face's
+    reflection (the ghost of an uncoated pane: in through the front face, reflected by the
+    back face, out through the front face), each ray weighted by the Fresnel reflectances
+    of unpolarised light; the image is normalised by the sum of the two weights.
+    """
+
+    model_config = _FROZEN
+    mode: Literal["transmission", "reflection"] = "transmission"
+    back_face: bool = False
+
+    @model_validator(mode="after")
+    def _ghost(self):
+        if self.back_face and self.mode != "reflection":
+            raise ValueError("back_face applies to mode 'reflection' only")
+        return self
+
+
 class Scene(BaseModel):
     """A glass distortion definition (see :mod:`glassdist.scene` for the geometry)."""
 
@@ -221,6 +245,7 @@ class Scene(BaseModel):
     camera: Camera
     imaging: Imaging = Imaging()
     render: RenderSettings = RenderSettings()
+    viewing: Viewing = Viewing()
     analysis: dict[str, Any] = Field(
         default_factory=dict,
         description="analyzer parameter overrides used by 'glassdist validate' (checked by the analyzer)",
@@ -261,14 +286,23 @@ class Scene(BaseModel):
         corners = np.asarray(pane.center_mm)[:, None] + rot @ np.array(
             [[su * hw, sv * hh, sw] for su in (-1, 1) for sv in (-1, 1)
              for sw in (float(front.min()), float(back.max()))]).T
-        if float(corners[2].max()) >= self.backdrop_z_mm:
+        if self.reflection:
+            if float(corners[2].min()) <= self.backdrop_z_mm:
+                raise ValueError("the tilted pane reaches the board plane; increase backdrop.distance_m or reduce the tilt")
+        elif float(corners[2].max()) >= self.backdrop_z_mm:
             raise ValueError("the tilted pane reaches the backdrop plane; increase backdrop.distance_m or reduce the tilt")
         return self
 
     @property
+    def reflection(self) -> bool:
+        """True when the scene is viewed in reflection (:class:`Viewing`)."""
+        return self.viewing.mode == "reflection"
+
+    @property
     def backdrop_z_mm(self) -> float:
-        """World z of the backdrop plane, mm."""
-        return self.pane.center_mm[2] + 1000.0 * self.backdrop.distance_m
+        """World z of the backdrop plane, mm (behind the pane; in reflection, the board before it)."""
+        sign = -1.0 if self.reflection else 1.0
+        return self.pane.center_mm[2] + sign * 1000.0 * self.backdrop.distance_m
 
     def with_changes(self, **sections) -> "Scene":
         """Copy with some top-level sections replaced (dicts are merged into the section)."""

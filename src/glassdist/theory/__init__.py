@@ -6,13 +6,14 @@ forward model of the deformed slab evaluated on the camera pixel grid
 passage through the shared evaluation stack (:func:`predict_channels`).
 """
 
-from .channels import analysis_params, carrier_period_mm, predict_channels
+from .channels import analysis_params, carrier_period_mm, predict_channels, reflection_geometry
 from .model import Prediction, nominal_mm_per_px, predict_displacement, slab_shift
 
 __all__ = [
     "Prediction",
     "predict_displacement",
     "predict_channels",
+    "reflection_geometry",
     "analysis_params",
     "carrier_period_mm",
     "slab_shift",

@@ -30,11 +30,13 @@ def register(subparsers):
 
 def run(args) -> int:
     from ..analyzer.metrics import channel_statistics
-    from . import analysis_params, carrier_period_mm, nominal_mm_per_px, predict_channels
+    from . import analysis_params, carrier_period_mm, nominal_mm_per_px, predict_channels, reflection_geometry
 
     scene = load_scene(args.scene)
     params = analysis_params(scene, args.params, sigma_mm=args.sigma_mm, detrend_degree=args.detrend_degree)
     sigma = params.sigma_mm if params.sigma_mm is not None else params.sigma_periods * carrier_period_mm(scene)
+    if params.sigma_mm is None and scene.reflection:  # the periods of the board's image, as a length on the pane
+        sigma /= reflection_geometry(scene).magnification
     mpp = nominal_mm_per_px(scene)
     pred, ch, valid = predict_channels(
         scene, sigma_mm=sigma, detrend_degree=params.detrend_degree, mm_per_px=mpp,

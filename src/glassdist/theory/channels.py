@@ -7,10 +7,46 @@ import math
 import numpy as np
 
 from ..errors import InputError
-from ..scene import Scene, landing_jacobian
+from ..scene import Scene, landing_jacobian, pixel_directions, pixel_grid
 from .model import Prediction, nominal_mm_per_px, predict_displacement
 
-__all__ = ["analysis_params", "carrier_period_mm", "predict_channels"]
+__all__ = ["analysis_params", "carrier_period_mm", "predict_channels", "reflection_geometry"]
+
+
+def reflection_geometry(scene: Scene):
+    """The :class:`~glassdist.analyzer.reflection.ReflectionGeometry` of a scene viewed in reflection.
+
+    D and C: the board's and the camera's distances to the pane's nominal front plane along
+    its normal (C None when the camera lies in the board plane, within 1 mm); the
+    incidence and the plane of incidence of the central pixel's line of sight (the
+    direction of its in-plane component, from the board's +X towards +Y).
+    """
+    from ..analyzer.reflection import ReflectionGeometry
+
+    pane, cam = scene.pane, scene.camera
+    w = pane.rotation[:, 2]
+    front = np.asarray(pane.center_mm, float) - 0.5 * pane.thickness_mm * w
+    C_mm = float((front - np.asarray(cam.position_mm, float)) @ w)
+    H, W = cam.shape
+    a = pixel_directions(cam, W / 2, H / 2)
+    ca = float(a @ w)
+    perp = a - ca * w
+    D_mm = float(front[2] - scene.backdrop_z_mm) / float(w[2])
+    in_board = abs(C_mm - D_mm) < 1.0
+    return ReflectionGeometry(
+        distance_m=D_mm / 1000.0, camera_distance_m=None if in_board else C_mm / 1000.0,
+        incidence_deg=math.degrees(math.acos(min(1.0, abs(ca)))),
+        plane_deg=math.degrees(math.atan2(perp[1], perp[0])) if np.hypot(perp[0], perp[1]) > 1e-12 else 0.0,
+    )
+
+
+def _incidence(scene: Scene):
+    """Angle of incidence and direction of the plane of incidence (deg, from +x towards +y) of every pixel's line of sight."""
+    w = scene.pane.rotation[:, 2]
+    a = pixel_directions(scene.camera, *pixel_grid(scene.camera))
+    ca = np.clip(a @ w, -1.0, 1.0)
+    perp = a - ca[..., None] * w
+    return np.degrees(np.arccos(np.abs(ca))), np.degrees(np.arctan2(perp[..., 1], perp[..., 0]))
 
 
 def carrier_period_mm(scene: Scene) -> float:
@@ -54,7 +90,7 @@ def predict_channels(
     ----------
     scene : Scene
     sigma_mm : float
-        Reporting smoothing scale on the backdrop, mm.
+        Reporting smoothing scale on the backdrop, mm (in reflection: on the pane).
     detrend_degree : int
         Total degree of the A2 polynomial.
     mm_per_px : float, optional
@@ -74,6 +110,9 @@ def predict_channels(
     -------
     prediction : Prediction
     channels : glassdist.analyzer.Channels
+        In reflection the channels are the reflective power on the pane
+        (:func:`glassdist.analyzer.reflection.power_from_strain` of the board strain at the
+        scene's :func:`reflection_geometry`); ``strain`` stays the board's.
     valid : ndarray of bool (H, W)
     """
     from ..analyzer.metrics import evaluate_displacement
@@ -87,14 +126,24 @@ def predict_channels(
     # Connected parts of the region (e.g. the pane and the backdrop beside its frame) are
     # detrended and smoothed independently, as the Analyzer does with its regions.
     labels, _ = label_regions(region)
+    geom = reflection_geometry(scene) if scene.reflection else None
+    board = 1.0 if geom is None else geom.magnification  # board mm per pane mm
     ch = evaluate_displacement(
         np.nan_to_num(pred.displacement_mm),
         region,
-        distance_m=scene.backdrop.distance_m,
+        distance_m=scene.backdrop.distance_m if geom is None else geom.effective_distance_m,
         mm_per_px=mpp,
         detrend_degree=int(detrend_degree),
-        sigma_mm=float(sigma_mm),
+        sigma_mm=float(sigma_mm) * board,
         jacobian=landing_jacobian(scene) if projective else None,
         labels=labels,
     )
+    if geom is not None:
+        from dataclasses import replace
+
+        from ..analyzer.reflection import power_channels, power_from_strain
+
+        P = power_from_strain(ch.strain * (1000.0 / geom.effective_distance_m), *_incidence(scene))
+        eff, shear, total, axis = power_channels(P)
+        ch = replace(ch, phi_eff_mD=eff, phi_shear_mD=shear, phi_total_mD=total, axis_deg=axis)
     return pred, ch, region

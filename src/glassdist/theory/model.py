@@ -50,6 +50,21 @@ incidence, :math:`\\hat s = \\hat w \\times \\hat t` and
 6. Pinhole projection: the model is evaluated on the lines of sight of the
    camera's pixel centres, so it lives on the camera pixel grid.
 
+Reflection (``scene.reflection``, :func:`_predict_reflection`): the line of sight meets the
+nominal front plane at :math:`\\mathbf p_f` and reflects to
+:math:`\\mathbf r_0 = \\mathbf a - 2\\cos\\alpha\\,\\hat w`. The mirror law on the surface slope
+(normal :math:`\\hat w - \\mathbf g`, :math:`\\mathbf g = \\nabla h_f`) turns it by
+:math:`\\delta\\mathbf r = 2\\cos\\alpha\\,\\mathbf g + 2(\\mathbf a\\cdot\\mathbf g)\\,\\hat w`, and the
+height moves the hit point along the line of sight by :math:`h_f/\\cos\\alpha`; carried to the
+board with the oblique projection along :math:`\\mathbf r_0`,
+
+.. math::
+
+   \\delta = \\Pi_r\\!\\left(\\frac{h_f}{\\cos\\alpha}\\,\\mathbf a\\right) + \\ell\\,\\Pi_r\\,\\delta\\mathbf r ,
+
+whose gradient gives Coddington's factors off the normal (``1/cos^2`` along the plane of
+incidence: :mod:`glassdist.analyzer.reflection`). Terms ``height`` and ``slope``.
+
 Term 1 is exact; terms 2-4 are linear in the face heights and slopes, so the
 prediction of a sum of deformations is the sum of the predictions.
 
@@ -221,6 +236,8 @@ def predict_displacement(scene: Scene, col=None, row=None) -> Prediction:
     if col is None:
         col, row = pixel_grid(cam)
     a = pixel_directions(cam, col, row)
+    if scene.reflection:
+        return _predict_reflection(scene, a)
     R = pane.rotation
     c = np.asarray(pane.center_mm, float)
     d, n = pane.thickness_mm, pane.refractive_index
@@ -265,6 +282,37 @@ def predict_displacement(scene: Scene, col=None, row=None) -> Prediction:
     delta = sum(terms.values())
     delta = np.where((status == BLOCKED)[..., None], np.nan, delta)
     return Prediction(delta, status, np.degrees(np.arctan2(sa, ca)), terms)
+
+
+def _predict_reflection(scene: Scene, a: np.ndarray) -> Prediction:
+    """Reflection branch of :func:`predict_displacement` (module notes): mirror law on the front face's slope."""
+    pane = scene.pane
+    R = pane.rotation
+    c = np.asarray(pane.center_mm, float)
+    d = pane.thickness_mm
+    sight = _sight_through_pane(scene, a)
+    status = _sight_status(pane, sight.pfu, sight.pfv)
+    front = pane.deformation.front_shape
+    h = front.height(sight.pfu, sight.pfv)
+    gu, gv = front.gradient(sight.pfu, sight.pfv)
+    al = a @ R
+    ca = al[..., 2]
+    r0 = al * np.array([1.0, 1.0, -1.0])
+    dr = np.stack([2 * ca * gu, 2 * ca * gv, 2 * (al[..., 0] * gu + al[..., 1] * gv)], axis=-1)
+    dp = al * (h / ca)[..., None]
+    p0 = c + np.stack([sight.pfu, sight.pfv, np.full(h.shape, -d / 2)], axis=-1) @ R.T
+    r0w = r0 @ R.T
+    ell = (scene.backdrop_z_mm - p0[..., 2]) / r0w[..., 2]
+
+    def project(v_local):
+        v = v_local @ R.T
+        return v[..., :2] - r0w[..., :2] * (v[..., 2] / r0w[..., 2])[..., None]
+
+    glass = (status == GLASS)[..., None]
+    terms = {"height": project(dp), "slope": ell[..., None] * project(dr)}
+    terms = {k: np.where(glass, v, 0.0) for k, v in terms.items()}
+    delta = np.where((status == BLOCKED)[..., None], np.nan, sum(terms.values()))
+    return Prediction(delta, status, np.degrees(np.arccos(np.clip(ca, -1.0, 1.0))), terms)
 
 
 def nominal_mm_per_px(scene: Scene) -> float:

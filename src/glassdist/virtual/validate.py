@@ -20,7 +20,7 @@ from .._version import __version__
 from ..errors import InputError
 from ..render import get_renderer, landing_points, render_scene
 from ..scene import Scene
-from ..theory import Prediction, analysis_params, predict_channels, predict_displacement
+from ..theory import Prediction, analysis_params, predict_channels, predict_displacement, reflection_geometry
 
 __all__ = ["Validation", "procrustes", "compare", "compare_with_scene", "exact_truth", "validate_scene", "CHANNELS"]
 
@@ -169,8 +169,9 @@ def compare_with_scene(result, scene: Scene, *, model: Prediction, truth: Predic
         stack runs with the analyzer's ``sigma_mm``, ``detrend_degree``, ``mm_per_px``,
         valid region and A1 mode.
     """
+    board = 1.0 if result.optics is None else result.optics["magnification"]  # reflection: the board's mm per px
     settings = dict(
-        sigma_mm=result.sigma_mm, detrend_degree=result.detrend_degree, mm_per_px=result.mm_per_px,
+        sigma_mm=result.sigma_mm, detrend_degree=result.detrend_degree, mm_per_px=result.mm_per_px * board,
         valid=result.valid, projective=result.params.a1_mode == "projective",
     )
     _, analytical, region = predict_channels(scene, prediction=model, **settings)
@@ -208,7 +209,7 @@ def validate_scene(
         JSON-serialisable record (``validation.json``) including the images under
         the keys ``"_distorted"`` / ``"_reference"`` (arrays; not serialised).
     """
-    from ..analyzer import analyze
+    from ..analyzer import analyze, analyze_reflection
 
     if method not in ("direct", "comparative"):
         raise InputError(f"unknown method '{method}'; use 'direct' or 'comparative'")
@@ -219,13 +220,13 @@ def validate_scene(
     distorted, reference = _render_pair(scene, eng, progress)
     timings["render_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    result = analyze(
-        distorted,
-        pitch_mm=scene.backdrop.pitch_mm,
-        distance_m=scene.backdrop.distance_m,
-        reference=reference if method == "comparative" else None,
-        params=p,
-    )
+    ref = reference if method == "comparative" else None
+    if scene.reflection:  # phi in reflective power on the pane (glassdist.analyzer.reflection)
+        result = analyze_reflection(distorted, pitch_mm=scene.backdrop.pitch_mm, geometry=reflection_geometry(scene),
+                                    reference=ref, params=p)
+    else:
+        result = analyze(distorted, pitch_mm=scene.backdrop.pitch_mm, distance_m=scene.backdrop.distance_m,
+                         reference=ref, params=p)
     timings["analyze_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     model = predict_displacement(scene)

@@ -28,7 +28,8 @@ ROLES = {"image": None, "reference": "--reference", "mask": "--mask", "spec": "-
 #: a field left empty is not sent (analyze's default, or the specification's pinned value, applies).
 FIELDS = {"pitch_mm": "--pitch-mm", "distance_m": "--distance-m", "pattern": "--pattern",
           "detrend_degree": "--detrend-degree", "sigma_mm": "--sigma-mm",
-          "pane_id": "--pane-id", "site": "--site", "operator": "--operator"}
+          "pane_id": "--pane-id", "site": "--site", "operator": "--operator", "optics": "--optics",
+          "camera_distance_m": "--camera-distance-m", "incidence_deg": "--incidence-deg"}
 
 #: Opt-in checkboxes of the form and the ``glassdist analyze`` flag each adds when ticked.
 FLAGS = {"report": "--report", "export": "--export"}
