@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import os
 from pathlib import Path
 
 from ..distributed import add_scheduler_options, open_executor
@@ -38,6 +39,9 @@ def register(subparsers):
     p.add_argument("--sigma-mm", type=number_option(SIGMA_MM), help="smoothing scale, mm, by default")
     p.add_argument("--detrend-degree", type=int, help="detrend polynomial degree by default")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--db", metavar="PATH|URL", help="history database every pane is recorded in (default: "
+                   "$GLASSDIST_DB, else ~/.local/share/glassdist/history.sqlite)")
+    p.add_argument("--no-history", action="store_true", help="do not record the panes in the history database")
     add_scheduler_options(p)
     p.set_defaults(func=run)
     return p
@@ -59,6 +63,9 @@ def run(args):
     else:
         raise InputError(f"'{safe_text(source)}' is neither a folder nor a .csv manifest")
     check_panes(panes, defaults)
+    if args.no_history or args.db is not None:  # read by every pane's analyze process, here or on local workers
+        os.environ["GLASSDIST_DB"] = "off" if args.no_history else str(Path(args.db).absolute()) if "://" not in \
+            args.db else args.db
     with open_executor(args.scheduler, args.workers) as executor:
         code = run_batch(panes, args.out, report=args.report, export=args.export, progress=not args.no_progress,
                          executor=executor)

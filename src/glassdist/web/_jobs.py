@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import InputError
+from ..history._cli import record_as_args
 
 __all__ = ["Job", "JobStore", "ROLES"]
 
@@ -26,7 +27,7 @@ ROLES = {"image": None, "reference": "--reference", "mask": "--mask", "spec": "-
 #: Form fields passed to ``glassdist analyze`` as ``--option=value`` (checked there, as on the command line).
 FIELDS = {"pitch_mm": "--pitch-mm", "distance_m": "--distance-m", "pattern": "--pattern",
           "detrend_degree": "--detrend-degree", "sigma_mm": "--sigma-mm",
-          "pane_id": "--pane-id", "site": "--site", "operator": "--operator"}
+          "pane_id": "--pane-id", "lot": "--lot", "site": "--site", "operator": "--operator"}
 
 # The first bytes of the formats analyze reads; an upload is stored under a name of our own with the
 # suffix its content shows (client file names never become paths).
@@ -184,7 +185,8 @@ class JobStore:
         for role, option in ROLES.items():
             if option and role in job.names:
                 args += [option, job.names[role]]
-        args += ["--report", "--export", "--out", "out", "--", job.names["image"]]
+        args += ["--report", "--export", *record_as_args(source="web", job=job.id), "--out", "out", "--",
+                 job.names["image"]]
         job.args = args
         with self._lock:
             self._jobs[job.id] = job

@@ -1,0 +1,1 @@
+"""Alembic migration environment of the history database (``glassdist.history.store`` runs it)."""
