@@ -83,7 +83,7 @@ def _register_analyze(sub) -> None:
     p.add_argument("--site", help="where the pane was measured (factory line, building), for the report")
     p.add_argument("--operator", help="who took the photo, for the report")
     p.add_argument("--lot", help="production lot of the pane, for the report and the history's trend charts")
-    from .history._cli import add_recording_options
+    from .history.options import add_recording_options
 
     add_recording_options(p)
     p.add_argument("--report", action="store_true", help="also write a self-contained HTML report")
@@ -161,7 +161,7 @@ def _read_inputs(args):
 def _run_analyze(args) -> int:
     from .analyzer import FIELDS, analyze, analyze_captures, prepare_reference
     from .report.outputs import open_output_folder, plan_outputs, preview, write_outputs
-    from .history._cli import recording
+    from .history.options import recording
     from .report.spec import check_capture, spec_limits
 
     with _stage_progress(not args.quiet) as step:

@@ -2,52 +2,13 @@
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
 
-__all__ = ["register", "run", "add_recording_options", "recording"]
+from .options import DB_HELP
 
-_DB_HELP = ("history database: a file path or a database URL (default: $GLASSDIST_DB, else "
-            "~/.local/share/glassdist/history.sqlite); 'off' records nothing")
-_RECORD_KEYS = ("source", "job", "out_dir")
-
-
-def add_recording_options(p) -> None:
-    """``--db``, ``--no-history`` (and the hidden ``--record-as`` of batch and web children) on ``analyze``."""
-    p.add_argument("--db", metavar="PATH|URL", help=_DB_HELP)
-    p.add_argument("--no-history", action="store_true", help="do not record this run in the history database")
-    p.add_argument("--record-as", type=_record_as, help=argparse.SUPPRESS)
-
-
-def _record_as(text: str) -> dict:
-    try:
-        value = json.loads(text)
-    except ValueError:
-        value = None
-    if not isinstance(value, dict) or set(value) - set(_RECORD_KEYS) or not all(
-            isinstance(v, str) for v in value.values()):
-        raise argparse.ArgumentTypeError(f"must be a JSON object of text values with keys among {', '.join(_RECORD_KEYS)}")
-    return value
-
-
-def recording(args):
-    """The :class:`~glassdist.history.Recording` of a command-line run (False with ``--no-history``)."""
-    from .store import Recording
-
-    if args.no_history:
-        return False
-    ctx = dict(args.record_as or {"source": "cli"})
-    if ctx.get("out_dir"):
-        ctx["out_dir"] = str(Path(ctx["out_dir"]).absolute())
-    return Recording(db=args.db, **ctx)
-
-
-def record_as_args(**context) -> list[str]:
-    """The hidden ``--record-as`` option a batch or web child of ``glassdist analyze`` is given."""
-    return [f"--record-as={json.dumps({k: str(v) for k, v in context.items() if v is not None})}"]
-
+__all__ = ["register", "run"]
 
 _DESCRIPTION = """List, filter and export the runs recorded in the history database (every analyze, batch pane,
 web job and Python-API run), or draw a control chart of one statistic per lot: the lot's runs in order,
@@ -59,7 +20,7 @@ def register(subparsers):
     """Add the ``history`` sub-command."""
     p = subparsers.add_parser("history", help="list, filter, export and chart the recorded runs (per lot, per pane)",
                               description=_DESCRIPTION)
-    p.add_argument("--db", metavar="PATH|URL", help=_DB_HELP.replace("; 'off' records nothing", ""))
+    p.add_argument("--db", metavar="PATH|URL", help=DB_HELP.replace("; 'off' records nothing", ""))
     p.add_argument("--pane-id", help="only this pane")
     p.add_argument("--lot", help="only this lot")
     p.add_argument("--site", help="only this site")

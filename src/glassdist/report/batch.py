@@ -59,7 +59,7 @@ from html import escape
 from pathlib import Path
 
 from ..errors import InputError
-from ..history._cli import record_as_args
+from ..history.options import record_as_args
 from ..validation import DISTANCE_M, PITCH_MM, SIGMA_MM, check_number, read_csv_rows, safe_text
 from .exports import atomic_write_text
 from .outputs import EXIT_SPEC_FAIL

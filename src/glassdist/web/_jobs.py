@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import InputError
-from ..history._cli import record_as_args
+from ..history.options import record_as_args
 
 __all__ = ["Job", "JobStore", "ROLES"]
 
@@ -149,10 +149,14 @@ class JobStore:
         Analyses running at once.
     timeout_s : float
         An analysis running longer is stopped and reported as failed.
+    db : str, optional
+        History database every job is recorded in (default: ``GLASSDIST_DB``, else the
+        user's data folder; see :mod:`glassdist.history`), and the history page reads.
     """
 
     def __init__(self, root=None, *, max_jobs: int = 20, max_upload_mb: float = 64.0, concurrent: int = 1,
-                 timeout_s: float = 600.0):
+                 timeout_s: float = 600.0, db=None):
+        self.db = None if db is None else str(db)
         self._own_root = root is None
         self.root = Path(tempfile.mkdtemp(prefix="glassdist-web-") if root is None else root)
         self.root.mkdir(parents=True, exist_ok=True)
@@ -185,6 +189,8 @@ class JobStore:
         for role, option in ROLES.items():
             if option and role in job.names:
                 args += [option, job.names[role]]
+        if self.db is not None:
+            args.append(f"--db={self.db}")
         args += ["--report", "--export", *record_as_args(source="web", job=job.id), "--out", "out", "--",
                  job.names["image"]]
         job.args = args
