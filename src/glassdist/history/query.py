@@ -12,6 +12,7 @@ apply), so that the chart answers "how has lot 42 moved since Monday?".
 
 from __future__ import annotations
 
+import json
 import math
 import re
 from dataclasses import dataclass, fields
@@ -172,16 +173,17 @@ def query_runs(store, flt: HistoryFilter = HistoryFilter()) -> list[dict]:
     """
     if store is None:
         return []
-    from sqlalchemy import select, tuple_
+    from sqlalchemy import String, select, tuple_, type_coerce
 
     from .models import Run, StatisticRow
 
     ids = _run_ids(flt).subquery()
     zone, channel, stat = flt.key
     keys = {(zone, channel, stat), (REGION, "phi_eff", "p95_abs"), (REGION, "phi_shear", "p95_abs")}
-    cols = [Run.id, Run.recorded_utc, Run.source, Run.pane_id, Run.lot, Run.site, Run.operator, Run.verdict,
+    # time and warnings as stored (text on SQLite): turned into ISO text and a list below, without a parse per row
+    cols = [Run.id, type_coerce(Run.recorded_utc, String).label("recorded_utc"), Run.source, Run.pane_id, Run.lot, Run.site, Run.operator, Run.verdict,
             Run.spec_name, Run.valid_percent, Run.method, Run.pitch_mm, Run.distance_m, Run.sigma_mm,
-            Run.detrend_degree, Run.camera, Run.image, Run.image_sha256, Run.exit_code, Run.warnings, Run.out_dir,
+            Run.detrend_degree, Run.camera, Run.image, Run.image_sha256, Run.exit_code, type_coerce(Run.warnings, String).label("warnings"), Run.out_dir,
             Run.job]
     with store.engine.connect() as conn:
         runs = conn.execute(select(*cols).where(Run.id.in_(select(ids.c.id))).order_by(Run.recorded_utc, Run.id)).all()
@@ -191,18 +193,32 @@ def query_runs(store, flt: HistoryFilter = HistoryFilter()) -> list[dict]:
             .where(StatisticRow.run_id.in_(select(ids.c.id)),
                    tuple_(StatisticRow.zone, StatisticRow.channel, StatisticRow.statistic).in_(sorted(keys)))).all()
     values = {(r, z, c, s): v for r, z, c, s, v in stats}
+    names = ["run"] + [c.key if hasattr(c, "key") else c.name for c in cols[1:]]
+    label = f"{channel}.{stat}"
     out = []
     for row in runs:
-        rec = dict(row._mapping)
-        rid = rec.pop("id")
-        rec["run"] = rid
-        rec["recorded_utc"] = rec["recorded_utc"].isoformat(timespec="seconds")
-        rec.update(zone=zone, statistic=f"{channel}.{stat}", value=values.get((rid, zone, channel, stat)),
+        rec = dict(zip(names, row))
+        rid = rec["run"]
+        rec["recorded_utc"] = _iso(rec["recorded_utc"])
+        rec.update(zone=zone, statistic=label, value=values.get((rid, zone, channel, stat)),
                    phi_eff_p95_abs_mD=values.get((rid, REGION, "phi_eff", "p95_abs")),
                    phi_shear_p95_abs_mD=values.get((rid, REGION, "phi_shear", "p95_abs")),
-                   warnings=list(rec["warnings"] or []))
-        out.append({c: rec.get(c) for c in COLUMNS})
+                   warnings=_list(rec["warnings"]))
+        out.append({c: rec[c] for c in COLUMNS})
     return out
+
+
+def _iso(value) -> str:
+    """A stored time as ISO text to the second: SQLite gives ``YYYY-MM-DD HH:MM:SS[.ffffff]``, servers a datetime."""
+    if isinstance(value, datetime):
+        return value.isoformat(timespec="seconds")
+    return str(value)[:19].replace(" ", "T")
+
+
+def _list(value) -> list:
+    if value is None or isinstance(value, list):
+        return list(value or [])
+    return json.loads(value) if value not in ("[]", "") else []
 
 
 @dataclass(frozen=True)

@@ -374,18 +374,26 @@ def run_rows(summary: dict, *, exit_code: int, out_dir, recording: Recording = R
 
 
 def insert_runs(store: Store, entries) -> list[int]:
-    """Insert ``(run, checks, statistics)`` row sets (:func:`run_rows`) in one transaction; their new ids."""
+    """Insert ``(run, checks, statistics)`` row sets (:func:`run_rows`) in one transaction; their new ids.
+
+    The schema is checked (created, upgraded) in the same transaction, so a writer never
+    sees a half-made database; the rows go in as bulk inserts (one statement per table).
+    """
+    from sqlalchemy import insert
     from sqlalchemy.orm import Session
 
     from .models import CheckRow, Run, StatisticRow
 
+    entries = list(entries)
     with Session(store.engine) as session, session.begin():
         _ensure_schema(session.connection(), store.location)
-        runs = [Run(**run, checks=[CheckRow(**c) for c in checks], statistics=[StatisticRow(**s) for s in stats])
-                for run, checks, stats in entries]
-        session.add_all(runs)
-        session.flush()
-        return [r.id for r in runs]
+        ids = list(session.scalars(insert(Run).returning(Run.id, sort_by_parameter_order=True),
+                                   [run for run, _, _ in entries]))
+        for model, k in ((CheckRow, 1), (StatisticRow, 2)):
+            rows = [{**row, "run_id": rid} for rid, entry in zip(ids, entries) for row in entry[k]]
+            if rows:
+                session.execute(insert(model), rows)
+        return ids
 
 
 def describe_failure(exc: BaseException) -> str:
