@@ -17,7 +17,10 @@ A SQLite file is used in WAL mode with a busy timeout (``GLASSDIST_DB_TIMEOUT_S`
 transaction, so concurrent writers (several processes, Dask workers) queue for a few
 milliseconds each. A writer killed in the middle of its transaction leaves nothing: SQLite
 drops the uncommitted WAL frames and the operating system releases its locks. On
-PostgreSQL the first writer takes an advisory lock while it creates the schema.
+PostgreSQL each writer's transaction takes an advisory lock while it checks (and, the
+first time, creates) the schema, and the same timeout bounds the connection and any lock
+wait (``connect_timeout``, ``lock_timeout``); a killed client's transaction is rolled back
+by the server.
 
 The schema is versioned by Alembic (``migrations/versions``): every write checks the
 database's revision in the same transaction and upgrades an older one first; a database of
@@ -144,7 +147,10 @@ def _engine(loc: Location, *, write: bool):
 
     timeout = _timeout_s()
     if loc.path is None:
-        return create_engine(loc.url, poolclass=NullPool)
+        args = {}
+        if loc.url.startswith("postgresql"):  # wait for a lock, or for the server, no longer than a SQLite writer
+            args = {"connect_timeout": max(1, round(timeout)), "options": f"-c lock_timeout={int(timeout * 1000)}"}
+        return create_engine(loc.url, poolclass=NullPool, connect_args=args)
     from urllib.parse import quote
 
     uri = f"file:{quote(loc.path.as_posix())}" + ("" if write else "?mode=ro")
