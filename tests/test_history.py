@@ -299,6 +299,14 @@ def test_a_database_of_a_newer_schema_is_refused_and_left_alone(db, summary, tmp
     assert record_run(summary, exit_code=3, out_dir=tmp_path, warn=warnings.append) is None
     assert len(warnings) == 1 and "newer than this glassdist" in warnings[0]
     assert _rows(db) == before
+    assert main(["history"]) == 2  # nor read
+
+
+def test_history_command_on_a_corrupted_database_is_one_line_exit_2(sqlite_db, capsys):
+    sqlite_db.write_bytes(b"this is not a database\n" * 200)
+    assert main(["history", "--db", str(sqlite_db)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "not a readable SQLite database" in err
 
 
 # ---------------------------------------------------------------- queries, exports and the control chart

@@ -38,8 +38,9 @@ def recording(args):
     if args.no_history:
         return False
     ctx = dict(args.record_as or {"source": "cli"})
-    if ctx.get("out_dir"):
-        ctx["out_dir"] = str(Path(ctx["out_dir"]).absolute())
+    for key in ("out_dir", "job") if ctx.get("source") == "batch" else ("out_dir",):
+        if ctx.get(key):  # a batch's folders, relative to the folder the batch (and so this child) runs in
+            ctx[key] = str(Path(ctx[key]).absolute())
     return Recording(db=args.db, **ctx)
 
 

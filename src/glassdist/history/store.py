@@ -272,9 +272,12 @@ def open_store(db=None, *, write: bool = False) -> Store | None:
     except BaseException:
         engine.dispose()
         raise
-    if current is None:
+    if current is None or current not in KNOWN_REVISIONS:
         engine.dispose()
-        return None
+        if current is None:
+            return None
+        raise HistoryUnavailable(f"the database is of schema revision '{current}', newer than this glassdist's; "
+                                 "upgrade glassdist to read it")
     return Store(loc, engine, write=False)
 
 
