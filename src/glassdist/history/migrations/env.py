@@ -1,4 +1,4 @@
-"""Alembic environment: upgrades the connection :func:`glassdist.history.store.open_store` hands over."""
+"""Alembic environment: upgrades the connection (and transaction) :mod:`glassdist.history.store` hands over."""
 
 from alembic import context
 

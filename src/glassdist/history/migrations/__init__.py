@@ -1,1 +1,0 @@
-"""Alembic migration environment of the history database (``glassdist.history.store`` runs it)."""
