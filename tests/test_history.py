@@ -411,6 +411,18 @@ def test_python_api_write_report_is_recorded_as_an_api_run(pane, db, tmp_path):
     assert Path(run["out_dir"]) == (tmp_path / "r").absolute()
 
 
+def test_batch_records_each_pane_with_its_manifest_lot_into_db_and_not_with_no_history(tmp_path, monkeypatch,
+                                                                                       sqlite_db):
+    manifest = _tiny_panes(tmp_path / "in", 1, "L5")
+    other = tmp_path / "other.sqlite"
+    assert main(["batch", str(manifest), "--out", str(tmp_path / "b1"), "--no-progress", "--db", str(other)]) == 0
+    assert os.environ["GLASSDIST_DB"] == str(sqlite_db)  # the batch's --db was for its panes only
+    (run,) = _rows(other)
+    assert (run["source"], run["pane_id"], run["lot"], run["job"]) == ("batch", "L5-0", "L5", str(tmp_path / "b1"))
+    assert main(["batch", str(manifest), "--out", str(tmp_path / "b2"), "--no-progress", "--no-history"]) == 0
+    assert len(_rows(other)) == 1 and not sqlite_db.exists()
+
+
 # ---------------------------------------------------------------- concurrent writers
 
 

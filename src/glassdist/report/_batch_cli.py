@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 from pathlib import Path
@@ -47,6 +48,25 @@ def register(subparsers):
     return p
 
 
+@contextlib.contextmanager
+def _history_db(args):
+    """``GLASSDIST_DB`` of ``--db`` / ``--no-history`` while the batch runs: every pane's analyze process reads it
+    (here, or on the workers of a local cluster started meanwhile); restored afterwards."""
+    if not args.no_history and args.db is None:
+        yield
+        return
+    value = "off" if args.no_history else args.db if "://" in args.db else str(Path(args.db).absolute())
+    old = os.environ.get("GLASSDIST_DB")
+    os.environ["GLASSDIST_DB"] = value
+    try:
+        yield
+    finally:
+        if old is None:
+            os.environ.pop("GLASSDIST_DB", None)
+        else:
+            os.environ["GLASSDIST_DB"] = old
+
+
 def run(args):
     """Run the batch; returns the exit status (see :mod:`glassdist.report.batch`)."""
     from ..errors import InputError
@@ -63,10 +83,7 @@ def run(args):
     else:
         raise InputError(f"'{safe_text(source)}' is neither a folder nor a .csv manifest")
     check_panes(panes, defaults)
-    if args.no_history or args.db is not None:  # read by every pane's analyze process, here or on local workers
-        os.environ["GLASSDIST_DB"] = "off" if args.no_history else str(Path(args.db).absolute()) if "://" not in \
-            args.db else args.db
-    with open_executor(args.scheduler, args.workers) as executor:
+    with _history_db(args), open_executor(args.scheduler, args.workers) as executor:
         code = run_batch(panes, args.out, report=args.report, export=args.export, progress=not args.no_progress,
                          executor=executor)
     out = Path(args.out)
