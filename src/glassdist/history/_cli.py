@@ -6,9 +6,12 @@ import json
 import sys
 from pathlib import Path
 
+from ..validation import Range, number_option
 from .options import DB_HELP
 
 __all__ = ["register", "run"]
+
+_VALUE = number_option(Range(-1e12, 1e12))  # a finite value, mD or %
 
 _DESCRIPTION = """List, filter and export the runs recorded in the history database (every analyze, batch pane,
 web job and Python-API run), or draw a control chart of one statistic per lot: the lot's runs in order,
@@ -34,8 +37,8 @@ def register(subparsers):
                    "analysed region); runs without it are left out")
     p.add_argument("--statistic", metavar="CHANNEL.STAT", help="the value shown and charted, e.g. phi_eff.p95_abs "
                    "(default), phi_shear.max_abs, region.coverage_percent")
-    p.add_argument("--above", type=float, metavar="X", help="only runs whose value is above X")
-    p.add_argument("--below", type=float, metavar="X", help="only runs whose value is below X")
+    p.add_argument("--above", type=_VALUE, metavar="X", help="only runs whose value is above X")
+    p.add_argument("--below", type=_VALUE, metavar="X", help="only runs whose value is below X")
     p.add_argument("--failed-zone", metavar="ZONE", help="only runs that failed a check in this zone (e.g. edge)")
     p.add_argument("--limit", type=int, metavar="N", help="only the newest N runs")
     p.add_argument("--format", choices=["table", "csv", "json"], default="table", help="output (default: a table)")
