@@ -19,6 +19,7 @@ import numpy as np
 
 from ._version import __version__
 from .errors import GlassdistError, InputError
+from .history.options import add_recording_options, recording
 from .validation import DISTANCE_M, PITCH_MM, SIGMA_MM, check_sigma_extent, number_option, safe_text
 
 __all__ = ["main", "build_parser"]
@@ -83,8 +84,6 @@ def _register_analyze(sub) -> None:
     p.add_argument("--site", help="where the pane was measured (factory line, building), for the report")
     p.add_argument("--operator", help="who took the photo, for the report")
     p.add_argument("--lot", help="production lot of the pane, for the report and the history's trend charts")
-    from .history.options import add_recording_options
-
     add_recording_options(p)
     p.add_argument("--report", action="store_true", help="also write a self-contained HTML report")
     p.add_argument("--export", action="store_true", help="also export the fields as NPZ and 32-bit TIFF (statistics.csv is always written)")
@@ -161,7 +160,6 @@ def _read_inputs(args):
 def _run_analyze(args) -> int:
     from .analyzer import FIELDS, analyze, analyze_captures, prepare_reference
     from .report.outputs import open_output_folder, plan_outputs, preview, write_outputs
-    from .history.options import recording
     from .report.spec import check_capture, spec_limits
 
     with _stage_progress(not args.quiet) as step:
