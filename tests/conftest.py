@@ -6,6 +6,9 @@ import pytest
 
 os.environ.setdefault("MPLBACKEND", "Agg")
 
+# The results history of every run the tests make goes to a temporary database, never the user's.
+from _history_isolation import isolated_history_db  # noqa: E402,F401
+
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO / "examples" / "data"
 

@@ -175,7 +175,8 @@ def test_contract_spec_with_the_form_as_it_loads_in_headless_chromium(server):
             assert page.inner_text("#verdict") == "FAIL"
             job = app.state.store.get(page.url.rsplit("/", 1)[1])
             # only the photo, the specification and the output folder: no field, no report, no export
-            assert job.args == ["analyze", "--spec", "spec.json", "--out", "out", "--", "image.bmp"]
+            assert [a for a in job.args if not a.startswith("--record-as=")] == [
+                "analyze", "--spec", "spec.json", "--out", "out", "--", "image.bmp"]
             assert not any(n.startswith(("report", "fields", "tiff")) for n in job.outputs())
         finally:
             browser.close()
@@ -259,3 +260,55 @@ def test_a_server_reachable_from_elsewhere_says_so(capsys, monkeypatch):
     assert "warning: listening on 0.0.0.0:8123, reachable from other machines" in err
     web_app.serve("127.0.0.1", 8123)
     assert "warning" not in capsys.readouterr().err
+
+
+def test_history_page_filters_by_lot_shows_the_chart_and_links_kept_jobs(server, tmp_path, monkeypatch):
+    """Runs recorded before (lots A and B) and a job run from the page (lot A): the page filtered by lot A."""
+    from playwright.sync_api import sync_playwright
+
+    from conftest import write_lens_pair
+    from glassdist.history import open_store
+    from glassdist.history.store import insert_runs, run_rows
+
+    exe = _chromium()
+    url, _ = server
+    monkeypatch.setenv("GLASSDIST_DB", str(tmp_path / "history.sqlite"))  # read by the page and the jobs alike
+    values = {"A": [10.0, 11.0, 10.5, 10.2, 30.0, 10.4], "B": [50.0, 51.0]}
+    with open_store(write=True) as store:
+        insert_runs(store, [run_rows({"metadata": {"pane_id": f"{lot}{i}", "lot": lot},
+                                      "a4": {"statistics": {"phi_eff": {"p95_abs": v}}}}, exit_code=0, out_dir=tmp_path)
+                            for lot, vs in values.items() for i, v in enumerate(vs)])
+    pane = write_lens_pair(tmp_path)
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=exe, args=["--headless", "--no-sandbox", "--disable-gpu",
+                                                               "--disable-background-networking"])
+        try:
+            page = browser.new_page(viewport={"width": 1280, "height": 1000})
+            page.goto(url)
+            page.set_input_files("#image", str(pane / "pane.png"))
+            page.set_input_files("#reference", str(pane / "reference.png"))
+            page.fill("#pitch_mm", "2")
+            page.fill("#distance_m", "1")
+            page.fill("#pane_id", "W-1")
+            page.fill("#lot", "A")
+            page.click("#submit")
+            page.wait_for_selector("#verdict", timeout=240_000)
+            job_url = page.url
+            page.click("#nav-history")
+            assert "9 run(s)" in page.inner_text("#history-count")
+            page.fill("#f-lot", "A")
+            page.click("#filter")
+            page.wait_for_selector("#trend-chart")
+            assert "7 run(s)" in page.inner_text("#history-count")
+            lots = page.eval_on_selector_all("#history tr td:nth-child(4)", "tds => tds.map(t => t.textContent)")
+            assert lots == ["A"] * 7
+            assert page.evaluate("document.querySelector('#trend-chart').naturalWidth") > 300  # the chart loaded
+            chart = page.request.get(url + page.locator("#trend-chart").get_attribute("src"))
+            assert chart.ok and chart.headers["content-type"] == "image/png"
+            link = page.locator("#history a[href^='/jobs/']")
+            assert link.count() == 1  # the web job, kept by the server: its page
+            link.click()
+            page.wait_for_selector("#verdict")
+            assert page.url == job_url
+        finally:
+            browser.close()

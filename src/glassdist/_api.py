@@ -69,7 +69,7 @@ def evaluate_spec(result, spec, *, mask=None):
 
 
 def write_report(result, out, *, spec=None, image=None, reference=None, mask=None, pane_id=None, site=None,
-                 operator=None, export=False, fields="analysis", echo=None):
+                 operator=None, lot=None, export=False, fields="analysis", echo=None, history=None):
     """Write the self-contained HTML report of an analysis, with the rest of its output folder.
 
     Parameters
@@ -84,14 +84,17 @@ def write_report(result, out, *, spec=None, image=None, reference=None, mask=Non
         (the photo is drawn with the analysed region outlined).
     mask : path or ndarray of bool, optional
         The region the analysis was asked for: coverage is of it.
-    pane_id, site, operator : str, optional
-        Stated in the report and ``summary.json``.
+    pane_id, site, operator, lot : str, optional
+        Stated in the report and ``summary.json``, and recorded in the history.
     export : bool
         Also ``fields.npz`` and ``tiff/``.
     fields : {'analysis', 'pixel'}
         Layout of ``result.npz``.
     echo : callable, optional
         Receives the lines the command line prints (verdict, zones); default: none.
+    history : glassdist.history.Recording or False, optional
+        How the run is recorded in the results history (default: ``GLASSDIST_DB``, else
+        the user's data folder; False: not recorded); see :func:`glassdist.write_outputs`.
 
     Returns
     -------
@@ -122,6 +125,6 @@ def write_report(result, out, *, spec=None, image=None, reference=None, mask=Non
     if mask_path is not None:
         mask = read_mask(mask_path, result.valid.shape)
     write_outputs(result, out, fields=fields, report=True, export=export, spec_path=spec_path, spec=loaded, mask=mask,
-                  metadata={"pane_id": pane_id, "site": site, "operator": operator}, image_path=image,
-                  reference_path=reference, mask_path=mask_path, echo=echo or (lambda line: None))
+                  metadata={"pane_id": pane_id, "lot": lot, "site": site, "operator": operator}, image_path=image,
+                  reference_path=reference, mask_path=mask_path, echo=echo or (lambda line: None), history=history)
     return Path(out) / "report.html"

@@ -22,6 +22,7 @@ import numpy as np
 from ._cli_shared import folder_option
 from ._version import __version__
 from .errors import GlassdistError, InputError
+from .history.options import add_recording_options, recording
 from .validation import DISTANCE_M, PITCH_MM, SIGMA_MM, check_sigma_extent, number_option, safe_text
 
 __all__ = ["main", "build_parser"]
@@ -33,7 +34,7 @@ EXIT_INTERNAL = 1
 EXIT_BAD_INPUT = 2
 
 # Modules adding sub-commands: each provides register(subparsers) -> sets func=run(args) -> int.
-COMMAND_MODULES = ["glassdist.report._batch_cli", "glassdist.render._cli", "glassdist.theory._cli", "glassdist.virtual._cli", "glassdist.render.cycles", "glassdist.experiments._cli", "glassdist.virtual._sweep_cli", "glassdist.web._cli"]
+COMMAND_MODULES = ["glassdist.report._batch_cli", "glassdist.render._cli", "glassdist.theory._cli", "glassdist.virtual._cli", "glassdist.render.cycles", "glassdist.experiments._cli", "glassdist.virtual._sweep_cli", "glassdist.web._cli", "glassdist.history._cli"]
 
 
 class OneLineErrorParser(argparse.ArgumentParser):
@@ -108,6 +109,8 @@ def _register_analyze(sub) -> None:
     p.add_argument("--pane-id", help="pane identifier, stated in the report and summary.json")
     p.add_argument("--site", help="where the pane was measured (factory line, building), for the report")
     p.add_argument("--operator", help="who took the photo, for the report")
+    p.add_argument("--lot", help="production lot of the pane, for the report and the history's trend charts")
+    add_recording_options(p)
     p.add_argument("--report", action="store_true", help="also write a self-contained HTML report")
     p.add_argument("--export", action="store_true", help="also export the fields as NPZ and 32-bit TIFF (statistics.csv is always written)")
     p.add_argument("--fields", choices=["analysis", "pixel"], default="analysis",
@@ -269,7 +272,8 @@ def _run_analyze(args) -> int:
                 result, folder, fields=args.fields, report=args.report, export=args.export, spec_path=args.spec,
                 spec=spec, protocol=protocol, mask=mask, image=small, image_path=args.image[0],
                 reference_path=args.reference, mask_path=args.mask, captures=args.image,
-                metadata={"pane_id": args.pane_id, "site": args.site, "operator": args.operator}, echo=lines.append,
+                metadata={"pane_id": args.pane_id, "lot": args.lot, "site": args.site, "operator": args.operator},
+                echo=lines.append, history=recording(args),
             )
     for w in result.warnings:
         print(f"warning: {w}", file=sys.stderr)

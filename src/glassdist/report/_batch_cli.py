@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import os
 from pathlib import Path
 
 from .._cli_shared import folder_option
@@ -40,9 +42,31 @@ def register(subparsers):
     p.add_argument("--sigma-mm", type=number_option(SIGMA_MM), help="smoothing scale, mm, by default")
     p.add_argument("--detrend-degree", type=int, help="detrend polynomial degree by default")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--db", metavar="PATH|URL", help="history database every pane is recorded in (default: "
+                   "$GLASSDIST_DB, else ~/.local/share/glassdist/history.sqlite)")
+    p.add_argument("--no-history", action="store_true", help="do not record the panes in the history database")
     add_scheduler_options(p)
     p.set_defaults(func=run)
     return p
+
+
+@contextlib.contextmanager
+def _history_db(args):
+    """``GLASSDIST_DB`` of ``--db`` / ``--no-history`` while the batch runs: every pane's analyze process reads it
+    (here, or on the workers of a local cluster started meanwhile); restored afterwards."""
+    if not args.no_history and args.db is None:
+        yield
+        return
+    value = "off" if args.no_history else args.db if "://" in args.db else str(Path(args.db).absolute())
+    old = os.environ.get("GLASSDIST_DB")
+    os.environ["GLASSDIST_DB"] = value
+    try:
+        yield
+    finally:
+        if old is None:
+            os.environ.pop("GLASSDIST_DB", None)
+        else:
+            os.environ["GLASSDIST_DB"] = old
 
 
 def run(args):
@@ -61,7 +85,7 @@ def run(args):
     else:
         raise InputError(f"'{safe_text(source)}' is neither a folder nor a .csv manifest")
     check_panes(panes, defaults)
-    with open_executor(args.scheduler, args.workers) as executor:
+    with _history_db(args), open_executor(args.scheduler, args.workers) as executor:
         code = run_batch(panes, args.out, report=args.report, export=args.export, progress=not args.no_progress,
                          executor=executor)
     out = Path(args.out)

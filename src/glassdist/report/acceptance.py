@@ -333,7 +333,7 @@ def describe_clipping(field, valid, vmax, top=None):
 def metadata_rows(metadata):
     """``(label, text)`` rows of the pane metadata for a report."""
     rows = []
-    for key, label in (("pane_id", "pane ID"), ("site", "site"), ("operator", "operator")):
+    for key, label in (("pane_id", "pane ID"), ("lot", "lot"), ("site", "site"), ("operator", "operator")):
         if metadata.get(key):
             rows.append((label, str(metadata[key])))
     cam = metadata.get("camera")

@@ -32,8 +32,9 @@ Manifest columns
 ``image`` (required), ``id``, ``reference``, ``pitch_mm``, ``distance_m``,
 ``pattern``, ``params``, ``mask``, ``spec``, ``sigma_mm``, ``detrend_degree``,
 ``site``, ``operator``, ``lot``. ``pitch_mm`` and ``distance_m`` may be left to a
-pane's ``spec`` whose protocol pins them; ``id`` is passed as the pane ID, ``site``
-and ``operator`` to the report, ``lot`` groups the index's trend plot.
+pane's ``spec`` whose protocol pins them; ``id`` is passed as the pane ID, ``site``,
+``operator`` and ``lot`` to the report and the history; ``lot`` also groups the index's
+trend plot.
 Empty cells take the value of the matching command-line option. Relative paths
 are relative to the manifest's folder. Rows whose first cell starts with ``#``
 are comments.
@@ -58,6 +59,7 @@ from html import escape
 from pathlib import Path
 
 from ..errors import InputError
+from ..history.options import record_as_args
 from ..validation import DISTANCE_M, PITCH_MM, SIGMA_MM, check_number, read_csv_rows, safe_text
 from .exports import atomic_write_text
 from .outputs import EXIT_SPEC_FAIL
@@ -78,6 +80,7 @@ __all__ = [
     "lock_job_folder",
     "place_folder",
     "write_csv",
+    "csv_cell",
 ]
 
 logger = logging.getLogger(__name__)
@@ -111,6 +114,8 @@ class Pane:
     def analyze_args(self, out_dir, *, report=False, export=False):
         """Arguments of ``glassdist analyze`` for this pane, writing into ``out_dir``.
 
+        ``out_dir`` is the pane's temporary folder ``OUT/panes/.tmp-...``: the run is
+        recorded in the history as a pane of the batch ``OUT``, in ``OUT/panes/<id>``.
         The pane's ``id`` is its ``--pane-id``; pitch and distance may be left to the
         pane's specification when its protocol pins them. Every option is given as
         ``--name=value`` and the image comes last after ``--``, so that no manifest cell
@@ -123,13 +128,16 @@ class Pane:
         for flag, value in (("--reference", self.reference), ("--pattern", self.pattern), ("--params", self.params),
                             ("--mask", self.mask), ("--spec", self.spec), ("--sigma-mm", self.sigma_mm),
                             ("--detrend-degree", self.detrend_degree), ("--pane-id", self.id), ("--site", self.site),
-                            ("--operator", self.operator)):
+                            ("--operator", self.operator), ("--lot", self.lot)):
             if value is not None:
                 args.append(f"{flag}={value}")
         if report:
             args.append("--report")
         if export:
             args.append("--export")
+        # recorded in the history as a pane of this batch, in the folder it is renamed to once complete
+        panes = Path(out_dir).parent
+        args += record_as_args(source="batch", job=panes.parent, out_dir=panes / self.id)
         return args + [f"--out={out_dir}", "--", str(self.image)]
 
     def fingerprint(self, *, report=False, export=False):
@@ -664,7 +672,7 @@ def _round(v):
 _FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
 
 
-def _csv_cell(value):
+def csv_cell(value):
     """A text cell that a spreadsheet would run as a formula (``=``, ``+``, ``-``, ``@``, tab, CR) gets a ``'``."""
     if isinstance(value, str) and value.startswith(_FORMULA_START):
         try:
@@ -681,7 +689,7 @@ def write_csv(path, rows):
     buf = io.StringIO()
     writer = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
     writer.writeheader()
-    writer.writerows({k: _csv_cell(v) for k, v in row.items()} for row in rows)
+    writer.writerows({k: csv_cell(v) for k, v in row.items()} for row in rows)
     return atomic_write_text(path, buf.getvalue())
 
 

@@ -511,7 +511,7 @@ def output_record(out_dir, paths) -> dict[str, dict]:
 
 def write_outputs(result, out_dir, *, fields="analysis", report=False, export=False, spec_path=None, spec=None,
                   protocol=None, mask=None, metadata=None, image=None, image_path=None, reference_path=None,
-                  mask_path=None, captures=(), echo=print):
+                  mask_path=None, captures=(), echo=print, history=None):
     """Write every output of an analysis into ``out_dir``: the one output stage of glassdist.
 
     Parameters
@@ -538,6 +538,11 @@ def write_outputs(result, out_dir, *, fields="analysis", report=False, export=Fa
         Every photo when several captures were averaged.
     echo : callable
         Receives the user-facing lines (verdict, zones, report).
+    history : glassdist.history.Recording or False, optional
+        How the run is recorded in the results history once its files are written
+        (:func:`glassdist.history.record_run`: a history that cannot be written is a
+        warning on stderr, nothing more); default ``Recording(source='api')`` (the
+        database of ``GLASSDIST_DB``, else the user's data folder); False: not recorded.
 
     Returns
     -------
@@ -558,12 +563,13 @@ def write_outputs(result, out_dir, *, fields="analysis", report=False, export=Fa
             return write_outputs(result, folder, fields=fields, report=report, export=export, spec_path=spec_path,
                                  spec=spec, protocol=protocol, mask=mask, metadata=metadata, image=image,
                                  image_path=image_path, reference_path=reference_path, mask_path=mask_path,
-                                 captures=captures, echo=echo)
+                                 captures=captures, echo=echo, history=history)
     folder, out = out_dir, out_dir.path
     try:
         return _write_all(result, folder, fields=fields, report=report, export=export, spec_path=spec_path, spec=spec,
                           protocol=protocol, mask=mask, metadata=metadata, image=image, image_path=image_path,
-                          reference_path=reference_path, mask_path=mask_path, captures=captures, echo=echo)
+                          reference_path=reference_path, mask_path=mask_path, captures=captures, echo=echo,
+                          history=history)
     except OSError as exc:
         if exc.errno not in (errno.ENOSPC, errno.EDQUOT):
             raise
@@ -600,7 +606,7 @@ def estimate_output_bytes(result, planned, fields="analysis") -> int:
 
 
 def _write_all(result, folder, *, fields, report, export, spec_path, spec, protocol, mask, metadata, image,
-               image_path, reference_path, mask_path, captures, echo):
+               image_path, reference_path, mask_path, captures, echo, history):
     """The writing of :func:`write_outputs` into the folder it holds."""
     from .exports import atomic_write
 
@@ -625,10 +631,15 @@ def _write_all(result, folder, *, fields, report, export, spec_path, spec, proto
     atomic_write_text(out / SUMMARY_NAME, json.dumps(to_jsonable(summary), indent=2, allow_nan=False) + "\n")
     code = finish_analysis(result, out_dir=out, image_path=image_path, reference_path=reference_path,
                            spec_path=spec_path, report=report, exports=export, written=[npz], echo=echo,
-                           protocol=protocol, mask=mask, metadata=metadata, spec=spec, image=image, acceptance=acc)
+                           protocol=protocol, mask=mask, metadata=metadata, spec=spec, image=image, acceptance=acc,
+                           summary=summary)
     # The earlier run's files that this one did not write again (its report, masks of another spec).
     names = sorted(set(folder.previous) - set(recorded_outputs(out)))
     folder.removed, folder.problems = remove_outputs(out, folder.previous, names, keep=folder.inputs)
+    if history is not False:  # once every file is in place: the history can cost the run nothing
+        from ..history import Recording, record_run
+
+        record_run(to_jsonable(summary), exit_code=code, out_dir=out, recording=history or Recording())
     return code
 
 
@@ -820,7 +831,12 @@ def _map_axes(result, acceptance):
     return extent, to_axes, units, (scale, -float(x0) * scale)
 
 
-def _update_summary(path, additions):
+def _update_summary(path, additions, summary=None):
+    """Add ``additions`` to ``summary.json``: to ``summary`` (what the caller wrote, updated in place) or the file's."""
+    if summary is not None:
+        summary.update(additions)
+        atomic_write_text(path, json.dumps(to_jsonable(summary), indent=2, allow_nan=False) + "\n")
+        return summary
     summary = {}
     if path.is_file():
         try:
@@ -830,6 +846,7 @@ def _update_summary(path, additions):
             summary = {}
     summary.update(additions)
     atomic_write_text(path, json.dumps(to_jsonable(summary), indent=2, allow_nan=False) + "\n")
+    return summary
 
 
 def _echo_acceptance(acc, report_path, echo):
@@ -849,7 +866,7 @@ def _echo_acceptance(acc, report_path, echo):
 
 def finish_analysis(result, *, out_dir, image_path, reference_path=None, spec_path=None, report=False,
                     exports=False, written=(), echo=print, protocol=None, mask=None, metadata=None, spec=None,
-                    image=None, acceptance=None):
+                    image=None, acceptance=None, summary=None):
     """Statistics, verdict, zones, worst regions, A4 figures, report and exports of an analysis.
 
     Parameters
@@ -877,13 +894,16 @@ def finish_analysis(result, *, out_dir, image_path, reference_path=None, spec_pa
     mask : ndarray of bool, optional
         The user's region to analyse (coverage is of it).
     metadata : dict, optional
-        ``pane_id``, ``site``, ``operator`` for the report.
+        ``pane_id``, ``lot``, ``site``, ``operator`` for the report (and the history).
     spec : (Spec, str), optional
         The specification already loaded from ``spec_path`` and its SHA-256.
     image : ndarray, optional
         The photograph (any size), instead of reading ``image_path`` again.
     acceptance : Acceptance, optional
         The assessment already made (:func:`glassdist.report.acceptance.assess`).
+    summary : dict, optional
+        What the caller wrote to ``summary.json``: completed in place (and written) rather
+        than read back from the file.
 
     Returns
     -------
@@ -920,7 +940,7 @@ def finish_analysis(result, *, out_dir, image_path, reference_path=None, spec_pa
         "verdict": verdict.to_dict() if verdict else None,
         "a4": {"statistics": stats, "valid_percent": cover, "files": names, "inputs": inputs},
         **acc.summary(), "measures": measures, "outputs": output_record(out_dir, [*written, *files]),
-    })
+    }, summary)
     _echo_acceptance(acc, out_dir / "report.html" if report else None, echo)
     logger.info("A4 outputs written to %s: %s", out_dir, ", ".join(names))
     return EXIT_SPEC_FAIL if verdict is not None and not verdict.passed else EXIT_OK

@@ -8,6 +8,7 @@ import logging
 import sys
 import zipfile
 from pathlib import Path
+from urllib.parse import quote
 
 from fastapi import FastAPI, Request, UploadFile
 from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, RedirectResponse, Response
@@ -67,6 +68,7 @@ def create_app(*, public_host: str | None = None, **store_options) -> FastAPI:
     pages = _Pages(store, public_host)
     _add_upload_routes(app, store, pages)
     _add_job_routes(app, store, pages)
+    _add_history_routes(app, store, pages)
     return app
 
 
@@ -175,6 +177,60 @@ def _add_job_routes(app: FastAPI, store: JobStore, pages: _Pages) -> None:
 
 class _NotFound(Exception):
     pass
+
+
+#: the history page's filters (query parameters), as ``glassdist history`` options
+_HISTORY_FILTERS = ("pane_id", "lot", "site", "operator", "verdict", "since", "until", "zone", "statistic")
+_HISTORY_ROWS = 500
+
+
+def _history_filters(request: Request) -> dict:
+    return {k: v.strip() for k in _HISTORY_FILTERS if (v := request.query_params.get(k, "")).strip()}
+
+
+def _add_history_routes(app: FastAPI, store: JobStore, pages: _Pages) -> None:
+    """``GET /history`` (the recorded runs, filtered, newest last) and ``GET /history/chart.png`` (their control chart)."""
+    from starlette.concurrency import run_in_threadpool
+
+    from ..history import history as read_history
+
+    def records(filters):
+        return read_history(store.db, as_frame=False, **filters)
+
+    @app.get("/history", response_class=HTMLResponse)
+    async def history_page(request: Request):
+        filters = _history_filters(request)
+        try:
+            rows = await run_in_threadpool(records, filters)
+            error = ""
+        except InputError as exc:
+            rows, error = [], str(exc)
+        shown = rows[-_HISTORY_ROWS:]
+        for r in shown:  # a web job still kept by this server links to its page
+            r["job_link"] = f"/jobs/{r['job']}" if r["source"] == "web" and r["job"] and store.get(r["job"]) else ""
+        lots = sorted({r["lot"] for r in rows if r["lot"]})
+        query = "&".join(f"{k}={quote(v)}" for k, v in filters.items())
+        return pages.page(request, "history.html", status_code=400 if error else 200, rows=shown, total=len(rows),
+                          filters=filters, error=error, lots=lots, chart=f"/history/chart.png?{query}" if lots else "",
+                          label=f"{rows[0]['statistic']} ({rows[0]['zone']})" if rows else "")
+
+    @app.get("/history/chart.png")
+    async def history_chart(request: Request):
+        from ..history import plot_trends, trends
+        from ..report.figures import figure_png
+
+        filters = _history_filters(request)
+
+        def draw():
+            rows = records(filters)
+            label = f"{rows[0]['statistic']} ({rows[0]['zone']})" if rows else "value"
+            return figure_png(plot_trends(trends(rows), label=label), dpi=80)
+
+        try:
+            png = await run_in_threadpool(draw)
+        except InputError:
+            raise _NotFound() from None
+        return Response(png, media_type="image/png")
 
 
 def serve(host: str = "127.0.0.1", port: int = 8000, **options) -> None:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from ..validation import Range, number_option
 
 __all__ = ["register", "run"]
@@ -33,6 +35,8 @@ def register(subparsers):
     p.add_argument("--max-jobs", type=int, default=20, help="jobs kept (older ones and their files are removed; default 20)")
     p.add_argument("--max-disk-mb", type=number_option(Range(1.0, 1e9, unit="MB")), default=2048.0,
                    help="disk budget of the kept jobs, MB: the oldest are removed while their files take more (default 2048)")
+    p.add_argument("--db", metavar="PATH|URL", help="history database the jobs are recorded in and the history page "
+                   "shows (default: $GLASSDIST_DB, else ~/.local/share/glassdist/history.sqlite)")
     p.set_defaults(func=run)
     return p
 
@@ -49,5 +53,7 @@ def run(args) -> int:
         raise InputError("glassdist serve needs the web extra: pip install 'glassdist[web]'") from None
     if not args.max_upload_mb > 0 or args.max_jobs < 1:
         raise InputError("--max-upload-mb must be positive and --max-jobs at least 1")
-    serve(args.host, args.port, max_upload_mb=args.max_upload_mb, max_jobs=args.max_jobs, max_disk_mb=args.max_disk_mb)
+    db = args.db if args.db is None or "://" in args.db else str(Path(args.db).absolute())  # jobs run elsewhere
+    serve(args.host, args.port, max_upload_mb=args.max_upload_mb, max_jobs=args.max_jobs, max_disk_mb=args.max_disk_mb,
+          db=db)
     return 0

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import InputError
+from ..history.options import record_as_args
 
 __all__ = ["Job", "JobStore", "ROLES", "FIELDS", "FLAGS"]
 
@@ -28,7 +29,7 @@ ROLES = {"image": None, "reference": "--reference", "mask": "--mask", "spec": "-
 #: a field left empty is not sent (analyze's default, or the specification's pinned value, applies).
 FIELDS = {"pitch_mm": "--pitch-mm", "distance_m": "--distance-m", "pattern": "--pattern",
           "detrend_degree": "--detrend-degree", "sigma_mm": "--sigma-mm",
-          "pane_id": "--pane-id", "site": "--site", "operator": "--operator", "optics": "--optics",
+          "pane_id": "--pane-id", "lot": "--lot", "site": "--site", "operator": "--operator", "optics": "--optics",
           "camera_distance_m": "--camera-distance-m", "incidence_deg": "--incidence-deg"}
 
 #: Opt-in checkboxes of the form and the ``glassdist analyze`` flag each adds when ticked.
@@ -170,10 +171,14 @@ class JobStore:
         Disk budget of the kept jobs, MB: the oldest finished ones are removed while the
         jobs' folders take more (a job with report and export of a 24 Mpx photo takes
         about 1.9 GB; without them about 30 MB).
+    db : str, optional
+        History database every job is recorded in (default: ``GLASSDIST_DB``, else the
+        user's data folder; see :mod:`glassdist.history`), and the history page reads.
     """
 
     def __init__(self, root=None, *, max_jobs: int = 20, max_upload_mb: float = 64.0, concurrent: int = 1,
-                 timeout_s: float = 600.0, max_disk_mb: float = 2048.0):
+                 timeout_s: float = 600.0, max_disk_mb: float = 2048.0, db=None):
+        self.db = None if db is None else str(db)
         self._own_root = root is None
         self.root = Path(tempfile.mkdtemp(prefix="glassdist-web-") if root is None else root)
         self.root.mkdir(parents=True, exist_ok=True)
@@ -207,8 +212,10 @@ class JobStore:
         for role, option in ROLES.items():
             if option and role in job.names:
                 args += [option, job.names[role]]
+        if self.db is not None:
+            args.append(f"--db={self.db}")
         args += [flag for key, flag in FLAGS.items() if form.get(key)]
-        args += ["--out", "out", "--", job.names["image"]]
+        args += [*record_as_args(source="web", job=job.id), "--out", "out", "--", job.names["image"]]
         job.args = args
         with self._lock:
             self._jobs[job.id] = job

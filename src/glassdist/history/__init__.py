@@ -1,0 +1,90 @@
+"""The results history: every analysis the output stage writes, recorded in a database.
+
+Every ``glassdist analyze``, batch pane, web job and Python-API run (all write through
+:func:`glassdist.report.outputs.write_outputs`) adds one row: time, pane, lot, site,
+operator, camera, input hashes, the resolved protocol, the verdict with each check, the
+statistics per zone, the standard measures, warnings and the output folder. A re-run is a
+new row; rows are never changed. ``glassdist history`` lists, filters, exports and charts
+them; :func:`history` returns them to Python. See ``docs/history.md``.
+
+Modules: :mod:`~glassdist.history.models` (the tables), :mod:`~glassdist.history.store`
+(where the database is, opening, upgrading, writing), :mod:`~glassdist.history.query`
+(filters, records, control charts).
+"""
+
+from __future__ import annotations
+
+import contextlib
+
+from .store import HistoryUnavailable, Location, Recording, data_dir, locate, open_store, record_run
+
+_QUERY = ("COLUMNS", "HistoryFilter", "Trend", "plot_trends", "query_runs", "trends")
+
+
+def __getattr__(name):  # the query side (SQLAlchemy, numpy) is imported when first used
+    if name in _QUERY:
+        from . import query
+
+        return getattr(query, name)
+    raise AttributeError(f"module 'glassdist.history' has no attribute '{name}'")
+
+__all__ = ["history", "COLUMNS", "HistoryFilter", "HistoryUnavailable", "Location", "Recording", "Trend", "data_dir",
+           "locate", "open_store", "plot_trends", "query_runs", "record_run", "trends"]
+
+
+def history(db=None, *, as_frame=None, **filters):
+    """The recorded runs, filtered: a pandas DataFrame when pandas is installed, else a list of dicts.
+
+    Parameters
+    ----------
+    db : str or path, optional
+        Database file or URL (default: ``GLASSDIST_DB``, else the user's data folder;
+        see :func:`glassdist.history.locate`).
+    as_frame : bool, optional
+        True: a DataFrame (needs pandas); False: records; None: a DataFrame if pandas imports.
+    **filters
+        :class:`HistoryFilter` fields: ``pane_id``, ``lot``, ``site``, ``operator``,
+        ``source``, ``verdict`` (PASS, FAIL, none), ``since``, ``until`` (``YYYY-MM-DD``
+        or datetime, UTC), ``zone``, ``statistic`` (``'phi_eff.p95_abs'``), ``above``,
+        ``below``, ``failed_zone``, ``limit``.
+
+    Returns
+    -------
+    pandas.DataFrame or list of dict
+        One row per run, oldest first, columns :data:`COLUMNS` (``value``: the selected
+        statistic, mD).
+
+    Raises
+    ------
+    InputError
+        An unknown filter, a bad date or statistic, an unreadable database.
+
+    Examples
+    --------
+    >>> import glassdist
+    >>> runs = glassdist.history(lot="L42", statistic="phi_eff.p95_abs", as_frame=False)  # doctest: +SKIP
+    >>> [(r["pane_id"], r["value"]) for r in runs]                                        # doctest: +SKIP
+    [('P-1', 38.4), ('P-2', 41.0)]
+    """
+    from .query import COLUMNS, HistoryFilter, query_runs
+
+    flt = HistoryFilter.of(**filters)
+    try:
+        store = open_store(db)
+        with store if store is not None else contextlib.nullcontext():
+            records = query_runs(store, flt)
+    except HistoryUnavailable:
+        raise
+    except Exception as exc:  # noqa: BLE001 - a database error is the user's to fix: one line
+        from .store import describe_failure
+
+        raise HistoryUnavailable(f"cannot read the history '{locate(db)}': {describe_failure(exc)}") from None
+    if as_frame is False:
+        return records
+    try:
+        import pandas as pd
+    except ImportError:
+        if as_frame:
+            raise
+        return records
+    return pd.DataFrame.from_records(records, columns=list(COLUMNS))
