@@ -28,7 +28,8 @@ from scipy import ndimage
 from ..errors import AnalysisError, InputError
 from ..validation import DISTANCE_M, PITCH_MM, check_number
 from . import fourier as F
-from .homography import HomographyFit, apply_inverse, fit_grid_homography, inverse_jacobian
+from .homography import HomographyFit, fit_grid_homography
+from .lens import logical_coordinates, logical_jacobian
 from .metrics import evaluate_displacement, inverse_2x2, polynomial_detrend
 from .transfer import InstrumentTransfer
 from .params import AnalyzerParams, load_params
@@ -474,13 +475,14 @@ def _to_analysis_grid(phases, region: Region, grid: F.SamplingGrid, sigma_px: fl
 
 
 def _direct_pass2(ag: _AnalysisGrid, carriers: F.CarrierPair, fit: HomographyFit) -> np.ndarray:
-    """Phases against the homography-warped carrier: phase += 2 pi (f . r - H^-1(r)).
+    """Phases against the homography-warped carrier: phase += 2 pi (f . r - H^-1(L^-1(r))).
 
-    The term is smooth (affine up to perspective), so on the Block A grid its value at the
-    block centre equals its block mean.
+    ``L`` is the camera lens's distortion when Block I calibrated it (else the identity).
+    The term is smooth (affine up to perspective and the lens), so on the Block A grid its
+    value at the block centre equals its block mean.
     """
     yy, xx = ag.grid.coords()
-    u0, v0 = apply_inverse(fit.matrix, xx, yy)
+    u0, v0 = logical_coordinates(fit.matrix, fit.lens_model, xx, yy)
     return ag.phases + 2 * np.pi * np.stack(
         [carriers.k1.fx * xx + carriers.k1.fy * yy - u0, carriers.k2.fx * xx + carriers.k2.fy * yy - v0], axis=-1
     )
@@ -497,7 +499,7 @@ def _warn_deviation(ag: _AnalysisGrid, ks, method: str, warn: list[str]) -> None
         )
 
 
-def _channels(ag: _AnalysisGrid, ks, H_jac, p: AnalyzerParams, p_c, mm_per_px, sigma_mm, distance_m):
+def _channels(ag: _AnalysisGrid, ks, H_jac, p: AnalyzerParams, p_c, mm_per_px, sigma_mm, distance_m, lens=None):
     """A1-A3: displacement in backdrop mm (camera frame) and the channels, on the analysis grid.
 
     Returns ``(delta_cam, Channels, A1)``: ``A1`` holds what maps the phases to them (for the
@@ -510,7 +512,7 @@ def _channels(ag: _AnalysisGrid, ks, H_jac, p: AnalyzerParams, p_c, mm_per_px, s
                   labels=ag.labels, step_px=ag.grid.step, report_mask=ag.report)
     if p.a1_mode == "projective":
         delta = ag.phases * (p_c / (2 * np.pi))  # grid-frame components, exact
-        J = p_c * inverse_jacobian(H_jac, xx, yy)
+        J = p_c * logical_jacobian(H_jac, lens, xx, yy)
         hc, wc = ag.grid.shape
         R = _polar_rotation(J[hc // 2, wc // 2])
         ch = evaluate_displacement(delta, ag.valid, jacobian=J, transfer=ag.transfer, frame_rotation=R, **common)
@@ -843,7 +845,8 @@ def _evaluate(meas: _Measurement, ag: _AnalysisGrid, warn: list[str]):
     p, p_c, carriers = meas.inputs.params, meas.inputs.carrier_period_mm, meas.carriers
     ks = (carriers.k1, carriers.k2)
     _warn_deviation(ag, ks, "direct" if meas.fit is not None else "comparative", warn)
-    delta_cam, ch, a1 = _channels(ag, ks, meas.baseline, p, p_c, meas.mm_per_px, meas.sigma_mm, meas.distance_m)
+    delta_cam, ch, a1 = _channels(ag, ks, meas.baseline, p, p_c, meas.mm_per_px, meas.sigma_mm, meas.distance_m,
+                                  lens=None if meas.fit is None else meas.fit.lens_model)
     if meas.fit is not None:
         _warn_cubic(ag, ch, p, p_c, meas.mm_per_px, meas.distance_m, warn)
     fields = _result_fields(delta_cam, ch)
