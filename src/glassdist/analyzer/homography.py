@@ -354,6 +354,12 @@ _LENS_MIN_POINTS = 50
 #: samples reach (95th percentiles, from the principal point): a radial term is told from the
 #: homography's scale only by its growth with radius.
 _LENS_MIN_REACH = 0.7
+#: The lens is applied when it removes at least this share of the mean squared residual a bare
+#: homography leaves on the same samples (else no lens distortion stands out of the glass's).
+_LENS_MIN_GAIN = 0.5
+#: Ring means of the residual below this many carrier periods are not a feature (the demodulation's
+#: own error on a chirped grid reaches ~0.005 period).
+_AMBIGUITY_FLOOR_PERIODS = 0.01
 #: Share of the residual energy radially symmetric about the principal point above which a centred,
 #: radially symmetric feature is reported (glass and lens alike have that form).
 _RADIAL_AMBIGUITY = 0.5
@@ -405,8 +411,10 @@ def refit_with_lens(
     (a radial term is then a change of scale the homography takes): it is reported, not
     applied, and ``fit`` is returned with a warning. When the residual the model leaves is
     radially symmetric about the principal point (``_RADIAL_AMBIGUITY`` of its energy, above
-    the fit's own residual), a warning says that a centred radially symmetric feature cannot
-    be told from the lens: it was kept as glass.
+    the fit's own residual and ``_AMBIGUITY_FLOOR_PERIODS``), a warning says that a centred
+    radially symmetric feature cannot be told from the lens: it is kept as glass and the lens
+    is not applied. The lens is applied only where it removes ``_LENS_MIN_GAIN`` of the
+    mean squared residual a bare homography leaves on the same samples.
     """
     warn = [] if warn is None else warn
     S = _strain_samples(U, V, y, x, valid, step_px, period_px)
@@ -439,27 +447,45 @@ def refit_with_lens(
         if lens is not None and share >= _MIN_CLEAN and share > best[4] and m.sum() >= _LENS_MIN_POINTS:
             best = (H, lens, sig, m, share)
     H, lens, sig, m, share = best
+
+    def bare(cal: LensCalibration) -> HomographyFit:  # the lens reported, not applied
+        return HomographyFit(fit.matrix, fit.inlier_fraction, fit.n_points, fit.rms_inlier_px, fit.excluded_fraction, cal)
+
+    e = _lens_reproj(H, lens, S.src, S.dst)
+    e2 = np.sum(e[m] ** 2, axis=1)
+    rms = float(np.sqrt(np.mean(e2)))
+    # A radially symmetric residual about the principal point: glass or lens, the grid cannot tell.
+    gross = np.linalg.norm(e, axis=1) < _GROSS_PERIODS * period_px
+    sym, sym_rms = radial_ambiguity(e[gross], S.dst[gross], center, scale,
+                                    noise_px=max(_AMBIGUITY_FLOOR_PERIODS * period_px, 3 * rms if share else 0.0))
+    ambiguous = (
+        f"a radially symmetric distortion centred on the optical axis ({sym_rms:.2g} px RMS, {100 * sym:.0f}% of what the "
+        "lens model leaves) has the form of a camera lens's own distortion, and the Direct Method cannot tell the two "
+        "apart" if sym >= _RADIAL_AMBIGUITY else "")
+    advice = "confirm with a calibration photo or a camera file (--lens-photo, --camera-file), or use the Comparative Method"
+    # Significance: the lens must explain most of what a bare homography leaves on the same samples
+    # (a glass distortion over the whole view projects only partly on the lens's radial form).
+    H0 = _lsq(S.src[m], S.dst[m])
+    gain = 0.0 if H0 is None else 1.0 - float(np.mean(e2)) / max(float(np.mean(_reproj_error(H0, S.src[m], S.dst[m]) ** 2)), 1e-30)
+    if gain < _LENS_MIN_GAIN:
+        if ambiguous:
+            warn.append(f"{ambiguous}: it was kept as glass (no lens distortion stands out of it) - {advice}")
+        return bare(LensCalibration(lens, "self", sig, False, float(m.mean()), rms, None, (
+            f"the lens terms explain {100 * max(gain, 0.0):.0f}% of what a bare homography leaves (needs "
+            f"{100 * _LENS_MIN_GAIN:.0f}%): no lens distortion stands out of the glass's own")))
     radius = np.linalg.norm(S.dst - np.asarray(center), axis=1)
     reach = float(np.percentile(radius[m], 95) / max(np.percentile(radius, 95), 1e-9))
-    e = _lens_reproj(H, lens, S.src, S.dst)
-    rms = float(np.sqrt(np.mean(np.sum(e[m] ** 2, axis=1))))
-    note = "" if reach >= _LENS_MIN_REACH else (
-        f"the unstrained part of the view reaches {100 * reach:.0f}% of the view's radius (needs "
-        f"{100 * _LENS_MIN_REACH:.0f}%): the lens's growth with radius is not pinned")
-    cal = LensCalibration(lens, "self", sig, not note, float(m.mean()), rms, None, note)
-    if note:
+    if reach < _LENS_MIN_REACH:
+        note = (f"the unstrained part of the view reaches {100 * reach:.0f}% of the view's radius (needs "
+                f"{100 * _LENS_MIN_REACH:.0f}%): the lens's growth with radius is not pinned")
         warn.append(f"Block I could not calibrate the camera lens from the photo: {note}; the baseline is a bare "
                     "homography - give a calibration photo or a camera file (--lens-photo, --camera-file)")
-        return HomographyFit(fit.matrix, fit.inlier_fraction, fit.n_points, fit.rms_inlier_px, fit.excluded_fraction, cal)
-    gross = np.linalg.norm(e, axis=1) < _GROSS_PERIODS * period_px
-    sym, sym_rms = radial_ambiguity(e[gross], S.dst[gross], center, scale, noise_px=max(rms, 1e-3 * period_px))
-    if sym >= _RADIAL_AMBIGUITY:
-        warn.append(
-            f"a radially symmetric distortion centred on the optical axis ({sym_rms:.2g} px RMS, {100 * sym:.0f}% of what "
-            "the lens model leaves) has the form of a lens's own distortion: the Direct Method cannot tell the two apart "
-            "and kept it as glass (the lens was fitted where the grid is unstrained) - confirm with a calibration photo "
-            "or a camera file (--lens-photo, --camera-file), or the Comparative Method"
-        )
+        return bare(LensCalibration(lens, "self", sig, False, float(m.mean()), rms, None, note))
+    if ambiguous:  # the lens fit may hold part of it (its tail reaches the unstrained part): not applied
+        note = "a centred radially symmetric feature and the camera lens cannot be separated from the photo alone"
+        warn.append(f"{ambiguous}: it was kept as glass and the lens model was not applied - {advice}")
+        return bare(LensCalibration(lens, "self", sig, False, float(m.mean()), rms, None, note))
+    cal = LensCalibration(lens, "self", sig, True, float(m.mean()), rms, None, "")
     src, dst = logical_grid_points(U, V, y, x, valid, spacing)
     err = np.linalg.norm(_lens_reproj(H, lens, src, dst), axis=1)
     inl = err < threshold_px
