@@ -394,6 +394,7 @@ def refit_with_lens(
     fit: HomographyFit, U: np.ndarray, V: np.ndarray, y: np.ndarray, x: np.ndarray, valid: np.ndarray, spacing: int, *,
     period_px: float, step_px: tuple[float, float], threshold_px: float, image_shape: tuple[int, int],
     tangential: bool = False, principal_point: bool = False, warn: list[str] | None = None,
+    known: LensCalibration | None = None,
 ) -> HomographyFit:
     """Block I with the camera lens: homography and Brown distortion fitted jointly on the unstrained view.
 
@@ -405,6 +406,9 @@ def refit_with_lens(
     share of the view unstrained (at least ``_MIN_CLEAN``) wins, else the fit of every sample.
     The lens is normalised by half the image diagonal about the image centre (the principal
     point, fitted too with ``principal_point``).
+
+    With a ``known`` lens (a calibration photo, a camera file) only the homography is fitted,
+    through it, on the samples it leaves unstrained.
 
     The result carries a :class:`~glassdist.analyzer.lens.LensCalibration`. When the fitted
     samples do not reach ``_LENS_MIN_REACH`` of the view's radius the lens is not identifiable
@@ -420,6 +424,8 @@ def refit_with_lens(
     S = _strain_samples(U, V, y, x, valid, step_px, period_px)
     if S is None or len(S.src) < 2 * _LENS_MIN_POINTS:
         return fit
+    if known is not None:
+        return _refit_through(fit, known, S, U, V, y, x, valid, spacing, period_px, threshold_px)
     h, w = image_shape
     center, scale = ((w - 1) / 2.0, (h - 1) / 2.0), float(np.hypot(w, h) / 2.0)
     opts = dict(center_px=center, scale_px=scale, tangential=tangential, principal_point=principal_point)
@@ -493,6 +499,25 @@ def refit_with_lens(
     return HomographyFit(H, float(inl.mean()), int(len(src)), rms_inl, 1.0 - float(m.mean()), cal)
 
 
+def _refit_through(fit: HomographyFit, known: LensCalibration, S: _StrainSamples, U, V, y, x, valid, spacing,
+                   period_px: float, threshold_px: float) -> HomographyFit:
+    """The homography through a known lens: least squares on the samples it leaves unstrained, three times."""
+    lens = known.model
+    H, m = fit.matrix, np.ones(len(S.src), bool)
+    for _ in range(4):
+        H, _, _, _ = fit_lens_homography(S.src[_thin(m)], S.dst[_thin(m)], H, center_px=lens.center_px,
+                                         scale_px=lens.scale_px, start=lens.distortion, fix_distortion=True)
+        m2 = _lens_strain(H, lens, S, period_px) < S.tol
+        if m2.sum() < _LENS_MIN_POINTS:
+            break
+        m = m2
+    src, dst = logical_grid_points(U, V, y, x, valid, spacing)
+    err = np.linalg.norm(_lens_reproj(H, lens, src, dst), axis=1)
+    inl = err < threshold_px
+    rms_inl = float(np.sqrt(np.mean(err[inl] ** 2))) if inl.any() else float("nan")
+    return HomographyFit(H, float(inl.mean()), int(len(src)), rms_inl, 1.0 - float(m.mean()), known)
+
+
 def _reproj_error(H: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     p = np.c_[src, np.ones(len(src))] @ H.T
     return np.linalg.norm(p[:, :2] / p[:, 2:3] - dst, axis=1)
@@ -535,11 +560,13 @@ def _points_spacing(carriers: F.CarrierPair, grid: F.SamplingGrid) -> int:
 _INTERIOR_PERIODS = 1.5
 
 
-def fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParams, warn: list[str]):
+def fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParams, warn: list[str],
+                        lens: LensCalibration | None = None):
     """I1 + I2 over all regions, aligning each region's free integer grid offset to the largest.
 
     ``UV``: logical grid coordinates (carrier periods) on the demodulation grid ``(yy, xx)``;
-    ``labels``/``n``: the valid region's parts (:class:`~glassdist.analyzer.region.Region`).
+    ``labels``/``n``: the valid region's parts (:class:`~glassdist.analyzer.region.Region`);
+    ``lens``: a camera lens known beforehand (else fitted per ``p.lens_model``, :func:`refit_with_lens`).
 
     Returns the fit and, per region label (index 0 unused), the integer offsets (periods)
     subtracted from U and V.
@@ -571,11 +598,11 @@ def fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParams
     fit = refit_undistorted(
         fit, U, V, yy, xx, (labels > 0) & interior, spacing, period_px=period, step_px=grid.step, threshold_px=thr,
     )
-    if p.lens_model != "none":
+    if p.lens_model != "none" or lens is not None:
         fit = refit_with_lens(
             fit, U, V, yy, xx, (labels > 0) & interior, spacing, period_px=period, step_px=grid.step, threshold_px=thr,
             image_shape=grid.full_shape, tangential="tangential" in p.lens_model, principal_point="center" in p.lens_model,
-            warn=warn,
+            warn=warn, known=lens,
         )
     if fit.inlier_fraction < 0.1:
         warn.append(

@@ -49,6 +49,8 @@ __all__ = [
     "logical_jacobian",
     "radial_ambiguity",
     "read_camera_file",
+    "calibration_from_camera_file",
+    "calibrate_from_photo",
 ]
 
 
@@ -154,7 +156,7 @@ def _project(H: np.ndarray, pts: np.ndarray) -> np.ndarray:
 
 def fit_lens_homography(
     src: np.ndarray, dst: np.ndarray, H0: np.ndarray, *, center_px, scale_px: float, tangential: bool = False,
-    principal_point: bool = False, start: BrownDistortion | None = None,
+    principal_point: bool = False, start: BrownDistortion | None = None, fix_distortion: bool = False,
 ):
     """Homography and Brown distortion jointly, by Levenberg-Marquardt on the reprojection error.
 
@@ -172,6 +174,8 @@ def fit_lens_homography(
         Principal point (start value when ``principal_point``).
     scale_px : float
         Normalising length of the distortion coefficients, px.
+    start : BrownDistortion, optional
+        Starting distortion (held fixed with ``fix_distortion``: only ``H`` is fitted).
 
     Returns
     -------
@@ -194,13 +198,17 @@ def fit_lens_homography(
     c0 = np.asarray(center_px, float)
     s = float(scale_px)
     b0 = start or BrownDistortion()
-    names = ["k1", "k2"] + (["p1", "p2"] if tangential else []) + (["cx", "cy"] if principal_point else [])
-    x0 = np.r_[Hn.ravel()[:8], b0.k1, b0.k2, [b0.p1, b0.p2] if tangential else [], [0.0, 0.0] if principal_point else []]
+    if fix_distortion:
+        names = []
+        x0 = Hn.ravel()[:8]
+    else:
+        names = ["k1", "k2"] + (["p1", "p2"] if tangential else []) + (["cx", "cy"] if principal_point else [])
+        x0 = np.r_[Hn.ravel()[:8], b0.k1, b0.k2, [b0.p1, b0.p2] if tangential else [], [0.0, 0.0] if principal_point else []]
 
     def unpack(t):
         H = Tdi @ np.r_[t[:8], 1.0].reshape(3, 3) @ Ts
-        extra = dict(zip(names, t[8:]))
-        b = BrownDistortion(extra["k1"], extra["k2"], extra.get("p1", 0.0), extra.get("p2", 0.0))
+        extra = {"k1": b0.k1, "k2": b0.k2, "p1": b0.p1, "p2": b0.p2, **dict(zip(names, t[8:]))}
+        b = BrownDistortion(extra["k1"], extra["k2"], extra["p1"], extra["p2"])
         c = c0 + s * np.array([extra.get("cx", 0.0), extra.get("cy", 0.0)])
         return H, LensModel(b, (float(c[0]), float(c[1])), s)
 
@@ -366,3 +374,60 @@ def read_camera_file(path) -> tuple[np.ndarray, BrownDistortion, tuple[int, int]
         size = (doc["image_width"], doc["image_height"])
     size = None if size is None else (int(size[0]), int(size[1]))
     return K, BrownDistortion(*(float(c) for c in dc[:4])), size
+
+
+def calibration_from_camera_file(path, image_shape: tuple[int, int]) -> LensCalibration:
+    """The lens of an OpenCV-style camera file (:func:`read_camera_file`) for photos of ``image_shape`` ``(H, W)``.
+
+    The coefficients keep OpenCV's normalisation (the focal length ``fx`` in px) and its
+    principal point ``(cx, cy)`` (OpenCV's pixel centres are at integers, as here).
+
+    Raises
+    ------
+    InputError
+        When the file states an image size other than the photo's.
+    """
+    from pathlib import Path
+
+    K, dist, size = read_camera_file(path)
+    h, w = image_shape
+    if size is not None and tuple(size) != (w, h):
+        raise InputError(
+            f"camera file {Path(path).name} is for {size[0]}x{size[1]} px photos but the photo is {w}x{h} px; "
+            "calibrate the camera at the photo's resolution"
+        )
+    f = float(K[0, 0])
+    return LensCalibration(LensModel(dist, (float(K[0, 2]), float(K[1, 2])), f), "file", focal_px=f)
+
+
+def calibrate_from_photo(image, *, pitch_mm: float, pattern: str | None = None, params=None,
+                         image_shape: tuple[int, int] | None = None) -> LensCalibration:
+    """The lens from a calibration photo: the same grid without glass, same camera and focus, any pose.
+
+    Block I's self-calibration on a photo without glass, where the whole view is unstrained
+    (:func:`glassdist.analyzer.homography.refit_with_lens`); the ``params.lens_model`` terms
+    are fitted ("radial" when it is "none").
+
+    Raises
+    ------
+    InputError
+        When the photo's size differs from ``image_shape`` (the photos to analyse), or the
+        photo does not pin the lens (its grid does not reach out towards the corners).
+    """
+    from .params import AnalyzerParams, load_params
+    from .pipeline import analyze
+
+    if image_shape is not None and tuple(np.shape(image)[:2]) != tuple(image_shape):
+        h, w = np.shape(image)[:2]
+        raise InputError(f"the calibration photo is {w}x{h} px but the photo is {image_shape[1]}x{image_shape[0]} px; "
+                         "take it with the same camera at the same resolution")
+    p = params if isinstance(params, AnalyzerParams) else load_params(params)
+    if p.lens_model == "none":
+        p = p.model_copy(update={"lens_model": "radial"})
+    res = analyze(image, pitch_mm=pitch_mm, distance_m=1.0, params=p, pattern=pattern)
+    cal = res.homography_fit.lens if res.homography_fit is not None else None
+    if cal is None or not cal.identifiable:
+        why = "too few grid points" if cal is None else cal.note
+        raise InputError(f"the calibration photo does not pin the lens ({why}); photograph the grid filling the view, "
+                         "without glass")
+    return LensCalibration(cal.model, "photo", cal.sigma, True, cal.fit_fraction, cal.rms_px, None, "")

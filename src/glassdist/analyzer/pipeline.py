@@ -29,7 +29,7 @@ from ..errors import AnalysisError, InputError
 from ..validation import DISTANCE_M, PITCH_MM, check_number
 from . import fourier as F
 from .homography import HomographyFit, fit_grid_homography
-from .lens import logical_coordinates, logical_jacobian
+from .lens import LensCalibration, logical_coordinates, logical_jacobian
 from .metrics import evaluate_displacement, inverse_2x2, polynomial_detrend
 from .transfer import InstrumentTransfer
 from .params import AnalyzerParams, load_params
@@ -374,13 +374,14 @@ def _unwrapped_phases(demod: _Demodulation, region: Region, p: AnalyzerParams) -
     return np.stack(psi, axis=-1).astype(np.float32)
 
 
-def _direct_baseline(phases, demod: _Demodulation, region: Region, p: AnalyzerParams, warn: list[str]) -> HomographyFit:
-    """Block I (pass 1): homography of the logical grid; each region's integer offset removed from ``phases``."""
+def _direct_baseline(phases, demod: _Demodulation, region: Region, p: AnalyzerParams, warn: list[str],
+                     lens: LensCalibration | None = None) -> HomographyFit:
+    """Block I (pass 1): homography (and camera lens) of the logical grid; each region's integer offset removed from ``phases``."""
     carriers = demod.carriers
     yy, xx = demod.grid.coords()
     U = carriers.k1.fx * xx + carriers.k1.fy * yy + phases[..., 0] / (2 * np.pi)
     V = carriers.k2.fx * xx + carriers.k2.fy * yy + phases[..., 1] / (2 * np.pi)
-    fit, offsets = fit_grid_homography((U, V), yy, xx, region.labels, region.n, carriers, demod.grid, p, warn)
+    fit, offsets = fit_grid_homography((U, V), yy, xx, region.labels, region.n, carriers, demod.grid, p, warn, lens=lens)
     if 0.1 <= fit.inlier_fraction < _MIN_INLIERS:
         warn.append(
             f"Direct Method: only {100 * fit.inlier_fraction:.0f}% of the grid points lie within "
@@ -679,6 +680,7 @@ def analyze(
     pattern: str | None = None,
     detrend_degree: int | None = None,
     sigma_mm: float | None = None,
+    lens: LensCalibration | None = None,
 ) -> AnalysisResult:
     """Measure the distortion field of a photo of a grid seen through glass.
 
@@ -703,6 +705,11 @@ def analyze(
         Overrides ``params.detrend_degree`` (A2 polynomial degree N).
     sigma_mm : float, optional
         Overrides ``params.sigma_mm``: reporting smoothing scale on the backdrop, mm.
+    lens : LensCalibration, optional
+        Direct Method: the camera lens's distortion, known beforehand (a calibration photo,
+        :func:`~glassdist.analyzer.lens.calibrate_from_photo`, or a camera file,
+        :func:`~glassdist.analyzer.lens.calibration_from_camera_file`); Block I then fits the
+        homography through it. None: the lens is fitted from the photo (``params.lens_model``).
 
     Returns
     -------
@@ -751,7 +758,7 @@ def analyze(
     image, reference, params, mask = _api_inputs(image, reference, params, mask, detrend_degree, sigma_mm)
     warn: list[str] = []
     with _routed_warnings(warn):
-        meas = _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn)
+        meas = _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn, lens=lens)
         del image  # Block A needs no photo: freed here unless the caller keeps it (the command line does not)
         evaluated = _evaluate(meas, meas.ag, warn)
     return _result(meas, evaluated, warn)
@@ -800,7 +807,7 @@ class _Measurement:
     phase_noise: tuple
 
 
-def _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn: list[str]) -> _Measurement:
+def _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn: list[str], lens=None) -> _Measurement:
     """Inputs, F1-F4, Block I (Direct) and the Block A grid with its phases (pass 2 applied).
 
     ``baseline``: the homography the phases are relative to in the logical frame (Direct:
@@ -818,7 +825,7 @@ def _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn
     del wrapped
     _check_region(region, demod.mods, warn)
     phases = _unwrapped_phases(demod, region, p)  # F4
-    fit = _direct_baseline(phases, demod, region, p, warn) if demod.method == "direct" else None
+    fit = _direct_baseline(phases, demod, region, p, warn, lens) if demod.method == "direct" else None
     H_jac = fit.matrix if fit is not None else inp.reference.homography.matrix
     phases[~region.valid] = np.nan
     mm_per_px = p_c * float(np.sqrt(carriers.k1.norm * carriers.k2.norm))
