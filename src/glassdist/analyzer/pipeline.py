@@ -28,6 +28,7 @@ from scipy import ndimage
 from ..errors import AnalysisError, InputError
 from ..validation import DISTANCE_M, PITCH_MM, check_number
 from . import fourier as F
+from .bulk import DIRECT_BULK_REASON, BulkChannel, bulk_channel
 from .homography import HomographyFit, fit_grid_homography
 from .lens import LensCalibration, logical_coordinates, logical_jacobian
 from .metrics import evaluate_displacement, inverse_2x2, polynomial_detrend
@@ -864,6 +865,24 @@ def _evaluate(meas: _Measurement, ag: _AnalysisGrid, warn: list[str]):
     return ag, fields, valid_full, idx
 
 
+def _bulk(meas: _Measurement, ag: _AnalysisGrid, fields: dict) -> BulkChannel:
+    """The bulk channel (:mod:`glassdist.analyzer.bulk`): measured by the Comparative Method, not identifiable by the Direct."""
+    p = meas.inputs.params
+    if meas.fit is not None:
+        return BulkChannel(None, None, None, None, None, p.detrend_degree, {}, DIRECT_BULK_REASON)
+    yy, xx = ag.grid.coords()
+    delta = fields["displacement_mm"]
+    if p.a1_mode == "projective":
+        J = meas.inputs.carrier_period_mm * logical_jacobian(meas.baseline, None, xx, yy)
+        hc, wc = ag.grid.shape
+        R = _polar_rotation(J[hc // 2, wc // 2])
+        delta = delta @ R.T  # back to the component frame
+    else:
+        J, R = np.broadcast_to(meas.mm_per_px * np.eye(2), xx.shape + (2, 2)), None
+    return bulk_channel(delta, ag.valid, ag.labels, degree=p.detrend_degree, step_px=ag.grid.step, jacobian=J,
+                        frame_rotation=R, distance_m=meas.distance_m, sigma_px=meas.sigma_mm / meas.mm_per_px, xx=xx, yy=yy)
+
+
 def _result(meas: _Measurement, evaluated, warn: list[str], *, extra_fields: dict | None = None,
             n_regions: int | None = None) -> AnalysisResult:
     """The :class:`AnalysisResult` of :func:`_evaluate`'s output (``extra_fields``: more registered fields)."""
@@ -891,6 +910,7 @@ def _result(meas: _Measurement, evaluated, warn: list[str], *, extra_fields: dic
         margin_px=meas.margin_px,
         guard_px=meas.guard_px,
         noise_std=meas.noise_std,
+        bulk=_bulk(meas, ag, fields),
         _deferred={"fields": {**fields, "quality": meas.quality, **(extra_fields or {})}, "idx": idx, "grid": ag.grid,
                    "label_grid": meas.label_grid, "mask": meas.inputs.mask},
     )

@@ -15,6 +15,7 @@ import numpy as np
 
 from .._version import __version__
 from . import fourier as F
+from .bulk import BulkChannel
 from .homography import HomographyFit
 from .metrics import channel_statistics
 from .params import AnalyzerParams
@@ -155,6 +156,9 @@ class AnalysisResult:
     noise_std : (float, float or None)
         White noise of the photo and of the reference (Comparative), intensity units,
         estimated from their spectra.
+    bulk : BulkChannel or None
+        The pane-level sphere and cylinder the detrend removed (:mod:`glassdist.analyzer.bulk`),
+        or why it is not identifiable (Direct Method).
     """
 
     method: str
@@ -178,6 +182,7 @@ class AnalysisResult:
     guard_px: float = 0.0
     noise_std: tuple[float, float | None] = (float("nan"), None)
     effective_sigma_mm: float | None = None
+    bulk: BulkChannel | None = None
     _deferred: dict | None = field(default=None, repr=False, compare=False)
 
     def field_specs(self) -> tuple[FieldSpec, ...]:
@@ -318,6 +323,7 @@ class AnalysisResult:
             "detrend_degree": self.detrend_degree,
             "carriers": self.carriers.to_dict(),
             "homography": None if self.homography_fit is None else self.homography_fit.to_dict(),
+            "bulk": None if self.bulk is None else self.bulk.to_dict(),
             "valid_fraction": self.valid_fraction,
             "trusted_fraction": self.trusted_fraction,
             "quality_counts": self.quality_counts(),
