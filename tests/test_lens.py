@@ -281,3 +281,31 @@ def test_full_view_ripple_at_n1():
     assert np.mean(np.abs(m)) / np.mean(np.abs(t)) == pytest.approx(1.0, abs=0.02)
     assert np.corrcoef(m, t)[0, 1] >= 0.98
     assert res.homography_fit.lens is not None and not res.homography_fit.lens.identifiable
+
+
+def test_camera_file_formats_and_bad_files(tmp_path):
+    """JSON and OpenCV's FileStorage YAML read alike; a file without the matrix, with k3, or for another
+    image size is refused with one line (InputError)."""
+    from glassdist.analyzer.lens import calibration_from_camera_file
+    from glassdist.errors import InputError
+
+    yml = tmp_path / "cam.yml"
+    yml.write_text("%YAML:1.0\n---\ncamera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n"
+                   "   data: [ 700., 0., 255.5, 0., 700., 191.5, 0., 0., 1. ]\n"
+                   "dist_coeffs: !!opencv-matrix\n   rows: 1\n   cols: 5\n   dt: d\n"
+                   "   data: [ -0.05, 0.01, 0.001, -0.002, 0. ]\n")
+    cal = calibration_from_camera_file(yml, (384, 512))
+    assert cal.source == "file" and cal.focal_px == 700.0 and cal.model.center_px == (255.5, 191.5)
+    assert cal.to_dict()["opencv"] == {"k1": -0.05, "k2": 0.01, "p1": 0.001, "p2": -0.002}
+    bad = {"no_matrix": {"dist_coeffs": [0, 0, 0, 0]},
+           "k3": {"camera_matrix": [[700, 0, 255.5], [0, 700, 191.5], [0, 0, 1]], "dist_coeffs": [0, 0, 0, 0, 0.1]},
+           "size": {"camera_matrix": [[700, 0, 255.5], [0, 700, 191.5], [0, 0, 1]], "dist_coeffs": [0, 0, 0, 0],
+                    "image_size": [640, 480]}}
+    import json
+
+    for name, doc in bad.items():
+        f = tmp_path / f"{name}.json"
+        f.write_text(json.dumps(doc))
+        with pytest.raises(InputError) as exc:
+            calibration_from_camera_file(f, (384, 512))
+        assert "\n" not in str(exc.value)
