@@ -104,7 +104,11 @@ def _register_analyze(sub) -> None:
     p.add_argument("--sigma-mm", type=number_option(SIGMA_MM), help="reporting smoothing scale on the backdrop, mm (reflection: on the pane; default: 2 carrier periods)")
     p.add_argument("--params", type=Path, help="JSON file of analyzer parameters (unknown keys are errors)")
     p.add_argument("--mask", type=Path, help="image whose non-zero pixels mark the region to analyse")
-    p.add_argument("--out", type=folder_option, required=True, help="output folder (created if needed)")
+    p.add_argument("--lens-photo", type=Path, help="Direct Method: calibration photo of the same grid without glass "
+                   "(same camera and focus, any pose): the camera lens is measured from it")
+    p.add_argument("--camera-file", type=Path, help="Direct Method: OpenCV-style camera file (JSON/YAML: camera_matrix, "
+                   "dist_coeffs k1 k2 p1 p2): the camera lens it states is used")
+        p.add_argument("--out", type=folder_option, required=True, help="output folder (created if needed)")
     p.add_argument("--spec", type=Path, help="acceptance specification JSON: prints PASS/FAIL, exit 3 on FAIL; its protocol supplies omitted options and refuses contradicting ones (exit 2)")
     p.add_argument("--pane-id", help="pane identifier, stated in the report and summary.json")
     p.add_argument("--site", help="where the pane was measured (factory line, building), for the report")
@@ -189,7 +193,7 @@ def _read_inputs(args):
     check_sigma_extent(params.sigma_mm, image.shape, protocol.pitch_mm, pattern=params.pattern,
                        min_period_px=params.min_period_px)
     mask = read_mask(args.mask, image.shape) if args.mask is not None else None
-    return spec, protocol, params, images, reference, mask, optics
+    return spec, protocol, params, images, reference, mask, optics, _lens_source(args, spec, protocol, params, images)
 
 
 def _optics(args, pinned, distance_m: float):
@@ -239,6 +243,29 @@ def _pattern_from_photo(protocol, protocol_with, photo):
     return replace(decided, sources={**decided.sources, "pattern": "auto"})
 
 
+def _lens_source(args, spec, protocol, params, images):
+    """The camera lens from ``--camera-file`` or ``--lens-photo`` (Direct Method), or None."""
+    from .analyzer.lens import calibrate_from_photo, calibration_from_camera_file
+    from .io import read_image
+    from .report.spec import check_lens_source
+
+    check_lens_source(spec[0].protocol if spec else None, lens_photo=args.lens_photo is not None,
+                      camera_file=args.camera_file is not None, spec_label=f"the specification '{args.spec}'")
+    if args.lens_photo is None and args.camera_file is None:
+        return None
+    if args.lens_photo is not None and args.camera_file is not None:
+        raise InputError("give --lens-photo or --camera-file, not both")
+    if args.reference is not None:
+        raise InputError("--lens-photo and --camera-file are for the Direct Method; the reference photo of the "
+                         "Comparative Method already cancels the lens - leave them out")
+    if len(images) > 1:
+        raise InputError("--lens-photo and --camera-file take one image to analyse; analyse the captures one by one")
+    if args.camera_file is not None:
+        return calibration_from_camera_file(args.camera_file, images[0].shape)
+    photo = read_image(args.lens_photo, dtype=np.float32)
+    return calibrate_from_photo(photo, pitch_mm=protocol.pitch_mm, params=params, image_shape=images[0].shape)
+
+
 def _run_analyze(args) -> int:
     from .analyzer import FIELDS, analyze, analyze_captures, prepare_reference
     from .analyzer.reflection import reflect_result
@@ -247,10 +274,10 @@ def _run_analyze(args) -> int:
 
     with _stage_progress(not args.quiet) as step:
         step("reading the inputs")
-        spec, protocol, params, images, reference, mask, optics = _read_inputs(args)
+        spec, protocol, params, images, reference, mask, optics, lens = _read_inputs(args)
         limits = spec_limits(spec[0]) if spec is not None else {}
         planned = plan_outputs(FIELDS, fields=args.fields, report=args.report, export=args.export, limits=limits)
-        inputs = (*args.image, args.reference, args.mask, args.spec, args.params)
+        inputs = (*args.image, args.reference, args.mask, args.spec, args.params, args.lens_photo, args.camera_file)
         with open_output_folder(args.out, planned=planned, inputs=inputs) as folder:
             if reference is not None:
                 step("preparing the reference")
@@ -260,7 +287,7 @@ def _run_analyze(args) -> int:
             kw = dict(pitch_mm=protocol.pitch_mm, distance_m=L, reference=reference, params=params, mask=mask)
             small = preview(images[0])  # only the reduced photo is drawn from here on
             # a single photo is handed over, so that the analysis frees it once Block F is done
-            result = analyze(images.pop(), **kw) if len(images) == 1 else analyze_captures(images, **kw)
+            result = analyze(images.pop(), lens=lens, **kw) if len(images) == 1 else analyze_captures(images, **kw)
             del images, reference, kw
             if optics is not None:
                 result = reflect_result(result, optics)

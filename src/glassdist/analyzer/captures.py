@@ -41,6 +41,7 @@ from scipy import ndimage
 
 from ..errors import InputError
 from .homography import apply_inverse, fit_homography, logical_grid_points
+from .lens import logical_coordinates
 from .metrics import masked_gaussian, polynomial_detrend
 from .params import AnalyzerParams
 from .pipeline import (
@@ -130,7 +131,7 @@ def _phases(m: _Measurement) -> np.ndarray:
 def _logical(m: _Measurement):
     """``U_k`` (h, w, 2) on the capture's analysis grid, carrier periods (NaN where invalid)."""
     yy, xx = m.ag.grid.coords()
-    u0, v0 = apply_inverse(m.baseline, xx, yy)
+    u0, v0 = logical_coordinates(m.baseline, None if m.fit is None else m.fit.lens_model, xx, yy)
     return np.stack([u0, v0], axis=-1) + _phases(m) / (2 * np.pi)
 
 
@@ -178,7 +179,7 @@ def _registered(m1: _Measurement, U1_base: np.ndarray, G1: np.ndarray, mk: _Meas
     rows, cols = (yk - g.offset[0]) / g.step[0], (xk - g.offset[1]) / g.step[1]
     w = _invalid_weight(ready[2], rows, cols)
     ph = np.stack([_sample_ready(ready[c], w, rows, cols, 0.25) for c in range(2)], axis=-1)
-    bu, bv = apply_inverse(mk.baseline, xk, yk)
+    bu, bv = logical_coordinates(mk.baseline, None if mk.fit is None else mk.fit.lens_model, xk, yk)
     Uk = np.stack([bu, bv], axis=-1) + ph / (2 * np.pi)
     U = Uk @ P.T + np.asarray(offset, float)
     return 2 * np.pi * (U - U1_base), np.hypot(xk - xx, yk - yy)
@@ -395,7 +396,7 @@ def _registered_sums(meas: list[_Measurement]) -> tuple[np.ndarray, np.ndarray, 
     m1 = meas[0]
     degree = m1.inputs.params.detrend_degree
     yy, xx = m1.ag.grid.coords()
-    U1_base = np.stack(apply_inverse(m1.baseline, xx, yy), axis=-1)
+    U1_base = np.stack(logical_coordinates(m1.baseline, None if m1.fit is None else m1.fit.lens_model, xx, yy), axis=-1)
     G1 = _grid_homography(m1, _logical(m1))
     total = np.zeros(m1.ag.phases.shape)
     count = np.zeros(m1.ag.grid.shape, np.int32)

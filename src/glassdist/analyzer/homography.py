@@ -20,6 +20,7 @@ import numpy as np
 
 from ..errors import AnalysisError
 from . import fourier as F
+from .lens import LensCalibration, LensModel, fit_lens_homography, logical_jacobian, radial_ambiguity
 from .params import AnalyzerParams
 from .region import erode
 
@@ -29,6 +30,7 @@ __all__ = [
     "fit_homography",
     "fit_grid_homography",
     "refit_undistorted",
+    "refit_with_lens",
     "apply_inverse",
     "inverse_jacobian",
 ]
@@ -49,6 +51,9 @@ class HomographyFit:
     excluded_fraction : float
         Share of the fitted samples whose local strain stands out of the noise
         (weighed down by :func:`refit_undistorted`).
+    lens : LensCalibration or None
+        The camera lens's distortion the baseline includes (:mod:`glassdist.analyzer.lens`):
+        the pixel of ``(U, V)`` is then the distorted image of ``H(U, V)``.
     """
 
     matrix: np.ndarray
@@ -56,6 +61,12 @@ class HomographyFit:
     n_points: int
     rms_inlier_px: float
     excluded_fraction: float = 0.0
+    lens: LensCalibration | None = None
+
+    @property
+    def lens_model(self) -> LensModel | None:
+        """The lens model applied, or None."""
+        return None if self.lens is None or not self.lens.identifiable else self.lens.model
 
     def to_dict(self) -> dict:
         return {
@@ -64,6 +75,7 @@ class HomographyFit:
             "n_points": self.n_points,
             "rms_inlier_px": self.rms_inlier_px,
             "excluded_fraction": self.excluded_fraction,
+            "lens": None if self.lens is None else self.lens.to_dict(),
         }
 
 
@@ -339,6 +351,178 @@ def refit_undistorted(
     return HomographyFit(best, float(inl.mean()), int(len(src)), rms, 1.0 - share)
 
 
+#: Most samples a lens fit uses (a regular subsample of those chosen): 12 parameters need far fewer.
+_LENS_MAX_POINTS = 6000
+#: Fewest samples a lens fit is made from.
+_LENS_MIN_POINTS = 50
+#: The lens is identifiable when its fitted samples reach out to this share of the radius the view's
+#: samples reach (95th percentiles, from the principal point): a radial term is told from the
+#: homography's scale only by its growth with radius.
+_LENS_MIN_REACH = 0.7
+#: The lens is applied when it removes at least this share of the mean squared residual a bare
+#: homography leaves on the same samples (else no lens distortion stands out of the glass's).
+_LENS_MIN_GAIN = 0.5
+#: Ring means of the residual below this many carrier periods are not a feature (the demodulation's
+#: own error on a chirped grid reaches ~0.005 period).
+_AMBIGUITY_FLOOR_PERIODS = 0.01
+#: Share of the residual energy radially symmetric about the principal point above which a centred,
+#: radially symmetric feature is reported (glass and lens alike have that form).
+_RADIAL_AMBIGUITY = 0.5
+
+
+def _lens_strain(H: np.ndarray, lens: LensModel | None, S: _StrainSamples, period_px: float) -> np.ndarray:
+    """Like :func:`_strain`, against the homography seen through ``lens``."""
+    J = logical_jacobian(H, lens, S.dst[:, 0], S.dst[:, 1]).reshape(-1, 4) * period_px
+    return np.max(np.abs(J - S.freq), axis=1)
+
+
+def _lens_reproj(H: np.ndarray, lens: LensModel | None, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """Residual vectors ``dst - lens(H(src))``, px, (n, 2)."""
+    q = np.c_[src, np.ones(len(src))] @ H.T
+    pu = q[:, :2] / q[:, 2:3]
+    if lens is not None:
+        pu = np.stack(lens.distort_px(pu[:, 0], pu[:, 1]), axis=1)
+    return dst - pu
+
+
+def _thin(m: np.ndarray) -> np.ndarray:
+    """``m`` with at most ``_LENS_MAX_POINTS`` of its samples kept (a regular subsample)."""
+    idx = np.flatnonzero(m)
+    if len(idx) <= _LENS_MAX_POINTS:
+        return m
+    out = np.zeros_like(m)
+    out[idx[:: int(np.ceil(len(idx) / _LENS_MAX_POINTS))]] = True
+    return out
+
+
+def refit_with_lens(
+    fit: HomographyFit, U: np.ndarray, V: np.ndarray, y: np.ndarray, x: np.ndarray, valid: np.ndarray, spacing: int, *,
+    period_px: float, step_px: tuple[float, float], threshold_px: float, image_shape: tuple[int, int],
+    tangential: bool = False, principal_point: bool = False, warn: list[str] | None = None,
+    known: LensCalibration | None = None,
+) -> HomographyFit:
+    """Block I with the camera lens: homography and Brown distortion fitted jointly on the unstrained view.
+
+    As :func:`refit_undistorted`, with the model of :mod:`glassdist.analyzer.lens` in place of
+    the bare homography: starting from ``fit`` (no lens) and from a least-squares fit of
+    every sample (gross errors, farther than ``_GROSS_PERIODS`` carrier period, trimmed), the
+    samples whose local frequencies match the model's within the measured noise are taken as
+    undistorted and the model is refitted to them, three times; the start leaving the larger
+    share of the view unstrained (at least ``_MIN_CLEAN``) wins, else the fit of every sample.
+    The lens is normalised by half the image diagonal about the image centre (the principal
+    point, fitted too with ``principal_point``).
+
+    With a ``known`` lens (a calibration photo, a camera file) only the homography is fitted,
+    through it, on the samples it leaves unstrained.
+
+    The result carries a :class:`~glassdist.analyzer.lens.LensCalibration`. When the fitted
+    samples do not reach ``_LENS_MIN_REACH`` of the view's radius the lens is not identifiable
+    (a radial term is then a change of scale the homography takes): it is reported, not
+    applied, and ``fit`` is returned with a warning. When the residual the model leaves is
+    radially symmetric about the principal point (``_RADIAL_AMBIGUITY`` of its energy, above
+    the fit's own residual and ``_AMBIGUITY_FLOOR_PERIODS``), a warning says that a centred
+    radially symmetric feature cannot be told from the lens: it is kept as glass and the lens
+    is not applied. The lens is applied only where it removes ``_LENS_MIN_GAIN`` of the
+    mean squared residual a bare homography leaves on the same samples.
+    """
+    warn = [] if warn is None else warn
+    S = _strain_samples(U, V, y, x, valid, step_px, period_px)
+    if S is None or len(S.src) < 2 * _LENS_MIN_POINTS:
+        return fit
+    if known is not None:
+        return _refit_through(fit, known, S, U, V, y, x, valid, spacing, period_px, threshold_px)
+    h, w = image_shape
+    center, scale = ((w - 1) / 2.0, (h - 1) / 2.0), float(np.hypot(w, h) / 2.0)
+    opts = dict(center_px=center, scale_px=scale, tangential=tangential, principal_point=principal_point)
+
+    def fit_on(m, H, lens):
+        m = _thin(m)
+        return fit_lens_homography(S.src[m], S.dst[m], H, start=None if lens is None else lens.distortion, **opts)
+
+    keep = np.ones(len(S.src), bool)
+    H, lens = fit.matrix, None
+    for _ in range(3):
+        H, lens, sig, _ = fit_on(keep, H, lens)
+        keep = np.linalg.norm(_lens_reproj(H, lens, S.src, S.dst), axis=1) < _GROSS_PERIODS * period_px
+        if keep.sum() < _LENS_MIN_POINTS:
+            return fit
+    best = (H, lens, sig, keep, 0.0)
+    for H, lens in ((fit.matrix, None), (best[0], best[1])):
+        m = _lens_strain(H, lens, S, period_px) < S.tol
+        for _ in range(3):
+            if m.sum() < _LENS_MIN_POINTS:
+                break
+            H, lens, sig, _ = fit_on(m, H, lens)
+            m = _lens_strain(H, lens, S, period_px) < S.tol
+        share = float(m.mean())
+        if lens is not None and share >= _MIN_CLEAN and share > best[4] and m.sum() >= _LENS_MIN_POINTS:
+            best = (H, lens, sig, m, share)
+    H, lens, sig, m, share = best
+
+    def bare(cal: LensCalibration) -> HomographyFit:  # the lens reported, not applied
+        return HomographyFit(fit.matrix, fit.inlier_fraction, fit.n_points, fit.rms_inlier_px, fit.excluded_fraction, cal)
+
+    e = _lens_reproj(H, lens, S.src, S.dst)
+    e2 = np.sum(e[m] ** 2, axis=1)
+    rms = float(np.sqrt(np.mean(e2)))
+    # A radially symmetric residual about the principal point: glass or lens, the grid cannot tell.
+    gross = np.linalg.norm(e, axis=1) < _GROSS_PERIODS * period_px
+    sym, sym_rms = radial_ambiguity(e[gross], S.dst[gross], center, scale,
+                                    noise_px=max(_AMBIGUITY_FLOOR_PERIODS * period_px, 3 * rms if share else 0.0))
+    ambiguous = (
+        f"a radially symmetric distortion centred on the optical axis ({sym_rms:.2g} px RMS, {100 * sym:.0f}% of what the "
+        "lens model leaves) has the form of a camera lens's own distortion, and the Direct Method cannot tell the two "
+        "apart" if sym >= _RADIAL_AMBIGUITY else "")
+    advice = "confirm with a calibration photo or a camera file (--lens-photo, --camera-file), or use the Comparative Method"
+    # Significance: the lens must explain most of what a bare homography leaves on the same samples
+    # (a glass distortion over the whole view projects only partly on the lens's radial form).
+    H0 = _lsq(S.src[m], S.dst[m])
+    gain = 0.0 if H0 is None else 1.0 - float(np.mean(e2)) / max(float(np.mean(_reproj_error(H0, S.src[m], S.dst[m]) ** 2)), 1e-30)
+    if gain < _LENS_MIN_GAIN:
+        if ambiguous:
+            warn.append(f"{ambiguous}: it was kept as glass (no lens distortion stands out of it) - {advice}")
+        return bare(LensCalibration(lens, "self", sig, False, float(m.mean()), rms, None, (
+            f"the lens terms explain {100 * max(gain, 0.0):.0f}% of what a bare homography leaves (needs "
+            f"{100 * _LENS_MIN_GAIN:.0f}%): no lens distortion stands out of the glass's own")))
+    radius = np.linalg.norm(S.dst - np.asarray(center), axis=1)
+    reach = float(np.percentile(radius[m], 95) / max(np.percentile(radius, 95), 1e-9))
+    if reach < _LENS_MIN_REACH:
+        note = (f"the unstrained part of the view reaches {100 * reach:.0f}% of the view's radius (needs "
+                f"{100 * _LENS_MIN_REACH:.0f}%): the lens's growth with radius is not pinned")
+        warn.append(f"Block I could not calibrate the camera lens from the photo: {note}; the baseline is a bare "
+                    "homography - give a calibration photo or a camera file (--lens-photo, --camera-file)")
+        return bare(LensCalibration(lens, "self", sig, False, float(m.mean()), rms, None, note))
+    if ambiguous:  # the lens fit may hold part of it (its tail reaches the unstrained part): not applied
+        note = "a centred radially symmetric feature and the camera lens cannot be separated from the photo alone"
+        warn.append(f"{ambiguous}: it was kept as glass and the lens model was not applied - {advice}")
+        return bare(LensCalibration(lens, "self", sig, False, float(m.mean()), rms, None, note))
+    cal = LensCalibration(lens, "self", sig, True, float(m.mean()), rms, None, "")
+    src, dst = logical_grid_points(U, V, y, x, valid, spacing)
+    err = np.linalg.norm(_lens_reproj(H, lens, src, dst), axis=1)
+    inl = err < threshold_px
+    rms_inl = float(np.sqrt(np.mean(err[inl] ** 2))) if inl.any() else float("nan")
+    return HomographyFit(H, float(inl.mean()), int(len(src)), rms_inl, 1.0 - float(m.mean()), cal)
+
+
+def _refit_through(fit: HomographyFit, known: LensCalibration, S: _StrainSamples, U, V, y, x, valid, spacing,
+                   period_px: float, threshold_px: float) -> HomographyFit:
+    """The homography through a known lens: least squares on the samples it leaves unstrained, three times."""
+    lens = known.model
+    H, m = fit.matrix, np.ones(len(S.src), bool)
+    for _ in range(4):
+        H, _, _, _ = fit_lens_homography(S.src[_thin(m)], S.dst[_thin(m)], H, center_px=lens.center_px,
+                                         scale_px=lens.scale_px, start=lens.distortion, fix_distortion=True)
+        m2 = _lens_strain(H, lens, S, period_px) < S.tol
+        if m2.sum() < _LENS_MIN_POINTS:
+            break
+        m = m2
+    src, dst = logical_grid_points(U, V, y, x, valid, spacing)
+    err = np.linalg.norm(_lens_reproj(H, lens, src, dst), axis=1)
+    inl = err < threshold_px
+    rms_inl = float(np.sqrt(np.mean(err[inl] ** 2))) if inl.any() else float("nan")
+    return HomographyFit(H, float(inl.mean()), int(len(src)), rms_inl, 1.0 - float(m.mean()), known)
+
+
 def _reproj_error(H: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     p = np.c_[src, np.ones(len(src))] @ H.T
     return np.linalg.norm(p[:, :2] / p[:, 2:3] - dst, axis=1)
@@ -381,11 +565,13 @@ def _points_spacing(carriers: F.CarrierPair, grid: F.SamplingGrid) -> int:
 _INTERIOR_PERIODS = 1.5
 
 
-def fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParams, warn: list[str]):
+def fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParams, warn: list[str],
+                        lens: LensCalibration | None = None):
     """I1 + I2 over all regions, aligning each region's free integer grid offset to the largest.
 
     ``UV``: logical grid coordinates (carrier periods) on the demodulation grid ``(yy, xx)``;
-    ``labels``/``n``: the valid region's parts (:class:`~glassdist.analyzer.region.Region`).
+    ``labels``/``n``: the valid region's parts (:class:`~glassdist.analyzer.region.Region`);
+    ``lens``: a camera lens known beforehand (else fitted per ``p.lens_model``, :func:`refit_with_lens`).
 
     Returns the fit and, per region label (index 0 unused), the integer offsets (periods)
     subtracted from U and V.
@@ -417,6 +603,12 @@ def fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParams
     fit = refit_undistorted(
         fit, U, V, yy, xx, (labels > 0) & interior, spacing, period_px=period, step_px=grid.step, threshold_px=thr,
     )
+    if p.lens_model != "none" or lens is not None:
+        fit = refit_with_lens(
+            fit, U, V, yy, xx, (labels > 0) & interior, spacing, period_px=period, step_px=grid.step, threshold_px=thr,
+            image_shape=grid.full_shape, tangential="tangential" in p.lens_model, principal_point="center" in p.lens_model,
+            warn=warn, known=lens,
+        )
     if fit.inlier_fraction < 0.1:
         warn.append(
             f"only {100 * fit.inlier_fraction:.0f}% of grid points fit the homography; strong distortion or "

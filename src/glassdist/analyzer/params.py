@@ -39,6 +39,11 @@ class AnalyzerParams(BaseModel):
         "'auto' (decided from the photo's spectrum: glassdist.analyzer.pattern)",
     )
     detrend_degree: int = Field(2, ge=0, le=8, description="A2: total degree N of the polynomial detrend")
+    lens_model: Literal["none", "radial", "radial+center", "radial+tangential", "radial+tangential+center"] = Field(
+        "radial",
+        description="Block I (Direct): camera lens distortion fitted with the homography from the grid itself: "
+        "'radial' (Brown k1, k2), with 'tangential' p1, p2, with 'center' the principal point; 'none' = pinhole",
+    )
     sigma_mm: float | None = Field(
         None,
         ge=SIGMA_MM.lo,

@@ -28,7 +28,9 @@ from scipy import ndimage
 from ..errors import AnalysisError, InputError
 from ..validation import DISTANCE_M, PITCH_MM, check_number
 from . import fourier as F
-from .homography import HomographyFit, apply_inverse, fit_grid_homography, inverse_jacobian
+from .bulk import DIRECT_BULK_REASON, BulkChannel, bulk_channel
+from .homography import HomographyFit, fit_grid_homography
+from .lens import LensCalibration, logical_coordinates, logical_jacobian
 from .metrics import evaluate_displacement, inverse_2x2, polynomial_detrend
 from .transfer import InstrumentTransfer
 from .params import AnalyzerParams, load_params
@@ -375,13 +377,14 @@ def _unwrapped_phases(demod: _Demodulation, region: Region, p: AnalyzerParams) -
     return np.stack(psi, axis=-1).astype(np.float32)
 
 
-def _direct_baseline(phases, demod: _Demodulation, region: Region, p: AnalyzerParams, warn: list[str]) -> HomographyFit:
-    """Block I (pass 1): homography of the logical grid; each region's integer offset removed from ``phases``."""
+def _direct_baseline(phases, demod: _Demodulation, region: Region, p: AnalyzerParams, warn: list[str],
+                     lens: LensCalibration | None = None) -> HomographyFit:
+    """Block I (pass 1): homography (and camera lens) of the logical grid; each region's integer offset removed from ``phases``."""
     carriers = demod.carriers
     yy, xx = demod.grid.coords()
     U = carriers.k1.fx * xx + carriers.k1.fy * yy + phases[..., 0] / (2 * np.pi)
     V = carriers.k2.fx * xx + carriers.k2.fy * yy + phases[..., 1] / (2 * np.pi)
-    fit, offsets = fit_grid_homography((U, V), yy, xx, region.labels, region.n, carriers, demod.grid, p, warn)
+    fit, offsets = fit_grid_homography((U, V), yy, xx, region.labels, region.n, carriers, demod.grid, p, warn, lens=lens)
     if 0.1 <= fit.inlier_fraction < _MIN_INLIERS:
         warn.append(
             f"Direct Method: only {100 * fit.inlier_fraction:.0f}% of the grid points lie within "
@@ -398,39 +401,41 @@ def _direct_baseline(phases, demod: _Demodulation, region: Region, p: AnalyzerPa
 # wave of 0.375 carrier period amplitude keeps 30% of the points as inliers (the outliers are the
 # signal); a rig whose lens the homography cannot follow was seen at 20%.
 _MIN_INLIERS = 0.25
-# Share of the map's RMS phi_total above which the cubic terms left by an N < 3 detrend are reported
-# (they then dominate the map: a flat pane seen through a real lens reads ~95%, a synthetic roller wave
-# of five periods across the view 24%, of two periods 61%).
-_CUBIC_WARN = 0.5
+# The Direct Method's statistics are called N-dependent when mean or p95 |phi_eff| over the trusted
+# region moves by more than this share between degree N and N + 1 (the bundled photos' Direct-Comparative
+# agreement target).
+_N_MOVE_WARN = 0.05
 
 
-def _warn_cubic(ag: _AnalysisGrid, ch, p: AnalyzerParams, p_c: float, mm_per_px: float, distance_m: float,
-                warn: list[str]) -> None:
-    """Direct, N < 3: warn when the displacement's cubic terms carry a good share of the map's power.
+def _warn_n_dependence(meas, ag: _AnalysisGrid, ch, ks, warn: list[str]) -> None:
+    """Direct: warn when the trusted-region statistics move between detrend degree N and N + 1.
 
-    A camera lens's distortion is cubic; the Direct Method cannot tell it from the glass's,
-    and the degree-N detrend removes it only from N = 3. The part of a degree-3 fit beyond
-    degree N is differentiated and its RMS phi_total compared with the map's (the real
-    glass-less reference of examples/data reads 95%).
+    The Direct Method's baseline (Block I) leaves whatever the camera and the glass share
+    with a homography and the lens model to the degree-N detrend; where that matters, raising
+    N changes the result. Block A runs again at N + 1 on the same phases, and mean and p95
+    |phi_eff| over the analysis-grid samples farther than the guard band from the region's
+    border are compared (``_N_MOVE_WARN``, and at least 0.01 mD).
     """
-    if p.detrend_degree >= 3 or ag.valid.sum() < 64:
+    p = meas.inputs.params
+    n = p.detrend_degree
+    if n >= 8 or ag.valid.sum() < 64:
         return
-    delta = ag.phases * (p_c / (2 * np.pi))
-    lab = np.where(ag.valid, ag.labels, 0)
-    extra = polynomial_detrend(delta, lab, p.detrend_degree, ag.grid.step) - polynomial_detrend(delta, lab, 3, ag.grid.step)
-    ok = ag.valid & np.all(np.isfinite(extra), axis=-1)
+    _, ch2, _ = _channels(ag, ks, meas.baseline, p.model_copy(update={"detrend_degree": n + 1}), meas.inputs.carrier_period_mm,
+                          meas.mm_per_px, meas.sigma_mm, meas.distance_m, lens=meas.fit.lens_model)
+    inner = ndimage.distance_transform_edt(np.pad(ag.valid, 1), sampling=ag.grid.step)[1:-1, 1:-1] > meas.guard_px
+    a, b = ch.phi_eff_mD, ch2.phi_eff_mD
+    ok = inner & np.isfinite(a) & np.isfinite(b)
     if ok.sum() < 64:
         return
-    sy, sx = ag.grid.step
-    g2 = sum(np.gradient(extra[..., c], sy, sx)[a] ** 2 for c in range(2) for a in range(2))
-    cubic = float(np.sqrt(np.nanmean(g2[ok]))) / mm_per_px * 1000.0 / distance_m
-    total = float(np.sqrt(np.nanmean(ch.phi_total_mD[ok] ** 2)))
-    if total > 0 and cubic > _CUBIC_WARN * total:
+    a, b = np.abs(a[ok]), np.abs(b[ok])
+    stats = [(float(np.mean(a)), float(np.mean(b)), "mean"), (float(np.percentile(a, 95)), float(np.percentile(b, 95)), "p95")]
+    s0, s1, what = max(stats, key=lambda t: abs(t[1] - t[0]) / max(t[0], 1e-12))
+    if abs(s1 - s0) > _N_MOVE_WARN * s0 and abs(s1 - s0) > 0.01:
         warn.append(
-            f"Direct Method with detrend degree {p.detrend_degree}: the displacement has cubic terms worth "
-            f"{cubic:.3g} mD RMS ({100 * cubic / total:.0f}% of the map's phi_total), as a camera lens's distortion "
-            "gives; the Direct Method cannot tell them from the glass - use --detrend-degree 3 with a real camera "
-            "(or the Comparative Method)"
+            f"Direct Method with detrend degree {n}: the result depends on N - {what} |phi_eff| moves from "
+            f"{s0:.3g} to {s1:.3g} mD ({100 * (s1 - s0) / s0:+.0f}%) with --detrend-degree {n + 1}: a distortion the "
+            "homography and the lens model leave (an uncalibrated camera lens, or glass curved over the whole view) - "
+            "calibrate the lens (--lens-photo, --camera-file) or use the Comparative Method"
         )
 
 
@@ -476,13 +481,14 @@ def _to_analysis_grid(phases, region: Region, grid: F.SamplingGrid, sigma_px: fl
 
 
 def _direct_pass2(ag: _AnalysisGrid, carriers: F.CarrierPair, fit: HomographyFit) -> np.ndarray:
-    """Phases against the homography-warped carrier: phase += 2 pi (f . r - H^-1(r)).
+    """Phases against the homography-warped carrier: phase += 2 pi (f . r - H^-1(L^-1(r))).
 
-    The term is smooth (affine up to perspective), so on the Block A grid its value at the
-    block centre equals its block mean.
+    ``L`` is the camera lens's distortion when Block I calibrated it (else the identity).
+    The term is smooth (affine up to perspective and the lens), so on the Block A grid its
+    value at the block centre equals its block mean.
     """
     yy, xx = ag.grid.coords()
-    u0, v0 = apply_inverse(fit.matrix, xx, yy)
+    u0, v0 = logical_coordinates(fit.matrix, fit.lens_model, xx, yy)
     return ag.phases + 2 * np.pi * np.stack(
         [carriers.k1.fx * xx + carriers.k1.fy * yy - u0, carriers.k2.fx * xx + carriers.k2.fy * yy - v0], axis=-1
     )
@@ -499,7 +505,7 @@ def _warn_deviation(ag: _AnalysisGrid, ks, method: str, warn: list[str]) -> None
         )
 
 
-def _channels(ag: _AnalysisGrid, ks, H_jac, p: AnalyzerParams, p_c, mm_per_px, sigma_mm, distance_m):
+def _channels(ag: _AnalysisGrid, ks, H_jac, p: AnalyzerParams, p_c, mm_per_px, sigma_mm, distance_m, lens=None):
     """A1-A3: displacement in backdrop mm (camera frame) and the channels, on the analysis grid.
 
     Returns ``(delta_cam, Channels, A1)``: ``A1`` holds what maps the phases to them (for the
@@ -512,7 +518,7 @@ def _channels(ag: _AnalysisGrid, ks, H_jac, p: AnalyzerParams, p_c, mm_per_px, s
                   labels=ag.labels, step_px=ag.grid.step, report_mask=ag.report)
     if p.a1_mode == "projective":
         delta = ag.phases * (p_c / (2 * np.pi))  # grid-frame components, exact
-        J = p_c * inverse_jacobian(H_jac, xx, yy)
+        J = p_c * logical_jacobian(H_jac, lens, xx, yy)
         hc, wc = ag.grid.shape
         R = _polar_rotation(J[hc // 2, wc // 2])
         ch = evaluate_displacement(delta, ag.valid, jacobian=J, transfer=ag.transfer, frame_rotation=R, **common)
@@ -678,6 +684,7 @@ def analyze(
     pattern: str | None = None,
     detrend_degree: int | None = None,
     sigma_mm: float | None = None,
+    lens: LensCalibration | None = None,
 ) -> AnalysisResult:
     """Measure the distortion field of a photo of a grid seen through glass.
 
@@ -702,6 +709,11 @@ def analyze(
         Overrides ``params.detrend_degree`` (A2 polynomial degree N).
     sigma_mm : float, optional
         Overrides ``params.sigma_mm``: reporting smoothing scale on the backdrop, mm.
+    lens : LensCalibration, optional
+        Direct Method: the camera lens's distortion, known beforehand (a calibration photo,
+        :func:`~glassdist.analyzer.lens.calibrate_from_photo`, or a camera file,
+        :func:`~glassdist.analyzer.lens.calibration_from_camera_file`); Block I then fits the
+        homography through it. None: the lens is fitted from the photo (``params.lens_model``).
 
     Returns
     -------
@@ -750,7 +762,7 @@ def analyze(
     image, reference, params, mask = _api_inputs(image, reference, params, mask, detrend_degree, sigma_mm)
     warn: list[str] = []
     with _routed_warnings(warn):
-        meas = _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn)
+        meas = _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn, lens=lens)
         del image  # Block A needs no photo: freed here unless the caller keeps it (the command line does not)
         evaluated = _evaluate(meas, meas.ag, warn)
     return _result(meas, evaluated, warn)
@@ -799,7 +811,7 @@ class _Measurement:
     phase_noise: tuple
 
 
-def _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn: list[str]) -> _Measurement:
+def _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn: list[str], lens=None) -> _Measurement:
     """Inputs, F1-F4, Block I (Direct) and the Block A grid with its phases (pass 2 applied).
 
     ``baseline``: the homography the phases are relative to in the logical frame (Direct:
@@ -817,7 +829,7 @@ def _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn
     del wrapped
     _check_region(region, demod.mods, warn)
     phases = _unwrapped_phases(demod, region, p)  # F4
-    fit = _direct_baseline(phases, demod, region, p, warn) if demod.method == "direct" else None
+    fit = _direct_baseline(phases, demod, region, p, warn, lens) if demod.method == "direct" else None
     H_jac = fit.matrix if fit is not None else inp.reference.homography.matrix
     phases[~region.valid] = np.nan
     mm_per_px = p_c * float(np.sqrt(carriers.k1.norm * carriers.k2.norm))
@@ -846,13 +858,32 @@ def _evaluate(meas: _Measurement, ag: _AnalysisGrid, warn: list[str]):
     p, p_c, carriers = meas.inputs.params, meas.inputs.carrier_period_mm, meas.carriers
     ks = (carriers.k1, carriers.k2)
     _warn_deviation(ag, ks, "direct" if meas.fit is not None else "comparative", warn)
-    delta_cam, ch, a1 = _channels(ag, ks, meas.baseline, p, p_c, meas.mm_per_px, meas.sigma_mm, meas.distance_m)
+    delta_cam, ch, a1 = _channels(ag, ks, meas.baseline, p, p_c, meas.mm_per_px, meas.sigma_mm, meas.distance_m,
+                                  lens=None if meas.fit is None else meas.fit.lens_model)
     if meas.fit is not None:
-        _warn_cubic(ag, ch, p, p_c, meas.mm_per_px, meas.distance_m, warn)
+        _warn_n_dependence(meas, ag, ch, ks, warn)
     fields = _result_fields(delta_cam, ch)
     fields.update(_uncertainty(ag, meas.phase_noise, ch, a1, meas.sigma_mm / meas.mm_per_px, meas.distance_m))
     valid_full, idx = _reported_region(fields, ag, meas.inputs.mask, meas.margin_px[1], warn)
     return ag, fields, valid_full, idx
+
+
+def _bulk(meas: _Measurement, ag: _AnalysisGrid, fields: dict) -> BulkChannel:
+    """The bulk channel (:mod:`glassdist.analyzer.bulk`): measured by the Comparative Method, not identifiable by the Direct."""
+    p = meas.inputs.params
+    if meas.fit is not None:
+        return BulkChannel(None, None, None, None, None, p.detrend_degree, {}, DIRECT_BULK_REASON)
+    yy, xx = ag.grid.coords()
+    delta = fields["displacement_mm"]
+    if p.a1_mode == "projective":
+        J = meas.inputs.carrier_period_mm * logical_jacobian(meas.baseline, None, xx, yy)
+        hc, wc = ag.grid.shape
+        R = _polar_rotation(J[hc // 2, wc // 2])
+        delta = delta @ R.T  # back to the component frame
+    else:
+        J, R = np.broadcast_to(meas.mm_per_px * np.eye(2), xx.shape + (2, 2)), None
+    return bulk_channel(delta, ag.valid, ag.labels, degree=p.detrend_degree, step_px=ag.grid.step, jacobian=J,
+                        frame_rotation=R, distance_m=meas.distance_m, sigma_px=meas.sigma_mm / meas.mm_per_px, xx=xx, yy=yy)
 
 
 def _result(meas: _Measurement, evaluated, warn: list[str], *, extra_fields: dict | None = None,
@@ -882,6 +913,7 @@ def _result(meas: _Measurement, evaluated, warn: list[str], *, extra_fields: dic
         margin_px=meas.margin_px,
         guard_px=meas.guard_px,
         noise_std=meas.noise_std,
+        bulk=_bulk(meas, ag, fields),
         _deferred={"fields": {**fields, "quality": meas.quality, **(extra_fields or {})}, "idx": idx, "grid": ag.grid,
                    "label_grid": meas.label_grid, "mask": meas.inputs.mask},
     )

@@ -15,6 +15,7 @@ import numpy as np
 
 from .._version import __version__
 from . import fourier as F
+from .bulk import BulkChannel
 from .homography import HomographyFit
 from .metrics import channel_statistics
 from .params import AnalyzerParams
@@ -159,6 +160,9 @@ class AnalysisResult:
         None in transmission; in reflection the geometry record of
         :func:`glassdist.analyzer.reflection.reflect_result` (the channels are then the
         reflective power on the pane, ``mm_per_px`` and ``sigma_mm`` in pane mm).
+    bulk : BulkChannel or None
+        The pane-level sphere and cylinder the detrend removed (:mod:`glassdist.analyzer.bulk`),
+        or why it is not identifiable (Direct Method).
     """
 
     method: str
@@ -183,6 +187,7 @@ class AnalysisResult:
     noise_std: tuple[float, float | None] = (float("nan"), None)
     effective_sigma_mm: float | None = None
     optics: dict | None = None
+    bulk: BulkChannel | None = None
     _deferred: dict | None = field(default=None, repr=False, compare=False)
 
     def field_specs(self) -> tuple[FieldSpec, ...]:
@@ -323,6 +328,7 @@ class AnalysisResult:
             "detrend_degree": self.detrend_degree,
             "carriers": self.carriers.to_dict(),
             "homography": None if self.homography_fit is None else self.homography_fit.to_dict(),
+            "bulk": None if self.bulk is None else self.bulk.to_dict(),
             "valid_fraction": self.valid_fraction,
             "trusted_fraction": self.trusted_fraction,
             "quality_counts": self.quality_counts(),

@@ -418,6 +418,8 @@ def _chunk_count(pixels: int, samples: int) -> int:
 def _camera_section(scene: Scene) -> dict:
     """The job's ``camera`` section: pinhole, world-frame position and rotation (columns right, down, optical axis)."""
     cam = scene.camera
+    if cam.distortion is not None:
+        raise InputError("the Cycles engine renders a pinhole camera only; remove camera.distortion or use --engine exact")
     return {
         "focal_mm": cam.focal_length_mm,
         "sensor_width_mm": cam.sensor_width_mm,

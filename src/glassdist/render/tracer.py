@@ -457,13 +457,9 @@ def render_intensity(
         jit = rng.random((2, r1 - r0, W, samples_per_pixel))
         cs = col[..., None] + ox + jit[0] / sx
         rs = row[..., None] + oy + jit[1] / sy
-        p = scene.camera.pixel_pitch_mm
-        xs, ys, f = ((cs - W / 2) * p).ravel(), ((rs - H / 2) * p).ravel(), scene.camera.focal_length_mm
-        inv = 1.0 / np.sqrt(xs * xs + ys * ys + f * f)
-        Rc = scene.camera.rotation
-        dx = (Rc[0, 0] * xs + Rc[0, 1] * ys + Rc[0, 2] * f) * inv
-        dy = (Rc[1, 0] * xs + Rc[1, 1] * ys + Rc[1, 2] * f) * inv
-        dz = (Rc[2, 0] * xs + Rc[2, 1] * ys + Rc[2, 2] * f) * inv
+        dirs = pixel_directions(scene.camera, cs.ravel(), rs.ravel())
+        dx, dy, dz = dirs[:, 0].copy(), dirs[:, 1].copy(), dirs[:, 2].copy()
+        del dirs
         if scene.reflection:
             I = _reflected_intensity(scene, dx, dy, dz, reference, (hx[..., None], hy[..., None]), cs.shape)
             out[r0:r1] = I.mean(axis=-1)

@@ -146,6 +146,9 @@ class Protocol(BaseModel):
                                             description="reflection: camera-to-pane distance C, m")
     incidence_deg: float | None = Field(None, ge=0, lt=80, allow_inf_nan=False,
                                         description="reflection: angle of incidence at the view's centre, deg")
+    lens_calibration: Literal["photo", "file", "photo_or_file"] | None = Field(
+        None, description="Direct Method: the camera lens must come from a calibration photo (--lens-photo), a "
+                          "camera file (--camera-file) or either, not from the photo alone")
 
     @model_validator(mode="after")
     def _one_sigma(self):
@@ -672,6 +675,25 @@ def px_per_period(result):
     except AttributeError:
         period = getattr(result, "carrier_period_mm", None)
         return float(period / result.mm_per_px) if period else float("nan")
+
+
+def check_lens_source(protocol, *, lens_photo: bool, camera_file: bool, spec_label="the specification") -> None:
+    """Refuse a run without the lens calibration source the protocol requires (``lens_calibration``).
+
+    Raises
+    ------
+    InputError
+        The protocol requires a calibration photo or a camera file that was not given.
+    """
+    want = None if protocol is None else protocol.lens_calibration
+    if want is None:
+        return
+    ok = {"photo": lens_photo, "file": camera_file, "photo_or_file": lens_photo or camera_file}[want]
+    if not ok:
+        need = {"photo": "--lens-photo PHOTO", "file": "--camera-file FILE",
+                "photo_or_file": "--lens-photo PHOTO or --camera-file FILE"}[want]
+        raise InputError(f"the protocol of {spec_label} requires the camera lens calibrated beforehand "
+                         f"(lens_calibration = {want}); give {need}")
 
 
 def check_capture(protocol, result, *, spec_label="the specification"):

@@ -20,7 +20,11 @@ Camera
     ``f``, sensor width ``s_w`` mapped on ``W`` columns (square pixels), principal
     point at the image centre. Pixel ``(row i, col j)`` is the square
     ``[j, j+1) x [i, i+1)``; its line of sight has camera-frame direction
-    ``((j + 0.5 - W/2) p, (i + 0.5 - H/2) p, f)``, ``p = s_w / W``.
+    ``((j + 0.5 - W/2) p, (i + 0.5 - H/2) p, f)``, ``p = s_w / W``. With
+    ``camera.distortion`` (Brown ``k1, k2, p1, p2``, OpenCV's convention) the
+    point's normalised coordinates ``((j + 0.5 - W/2) p / f, (i + 0.5 - H/2) p / f)``
+    are the *distorted* ones: the direction is ``(x, y, 1)`` with ``(x, y)`` their
+    undistorted preimage (:meth:`glassdist.brown.BrownDistortion.undistort`).
 Pane
     A slab of thickness ``d`` and refractive index ``n`` in air. Pane axes
     ``(u, v, w)`` are the columns of ``R_pane = R_y(pane.yaw) R_x(pane.pitch)``,
@@ -66,6 +70,7 @@ from .model import (
     Deformation,
     Frame,
     Imaging,
+    LensDistortion,
     Lighting,
     Noise,
     Pane,
@@ -85,6 +90,7 @@ __all__ = [
     "Deformation",
     "Backdrop",
     "Camera",
+    "LensDistortion",
     "Imaging",
     "Noise",
     "Lighting",

@@ -37,18 +37,23 @@ def pixel_directions(camera: Camera, col, row) -> np.ndarray:
 
     Notes
     -----
-    Pinhole model, principal point at the image centre, square pixels of
-    pitch :math:`p = s_w / W`:
+    Principal point at the image centre, square pixels of pitch :math:`p = s_w / W`,
+    normalised image coordinates :math:`x_d = (c - W/2)\\,p/f`, :math:`y_d = (r - H/2)\\,p/f`;
+    with Brown distortion :math:`D` (``camera.distortion``) they are undistorted first,
+    :math:`(x, y) = D^{-1}(x_d, y_d)`, else :math:`(x, y) = (x_d, y_d)` (pinhole):
 
     .. math::
 
-       \\mathbf{d}_{cam} = \\big((c - W/2)\\,p,\\ (r - H/2)\\,p,\\ f\\big), \\qquad
+       \\mathbf{d}_{cam} = (x,\\ y,\\ 1), \\qquad
        \\mathbf{d} = R_{cam}\\,\\mathbf{d}_{cam} / \\lVert\\mathbf{d}_{cam}\\rVert .
     """
     H, W = camera.shape
-    p = camera.pixel_pitch_mm
+    s = camera.pixel_pitch_mm / camera.focal_length_mm
     col, row = np.broadcast_arrays(np.asarray(col, float), np.asarray(row, float))
-    d = np.stack([(col - W / 2) * p, (row - H / 2) * p, np.full(col.shape, camera.focal_length_mm)], axis=-1)
+    x, y = (col - W / 2) * s, (row - H / 2) * s
+    if camera.distortion is not None:
+        x, y = camera.distortion.brown.undistort(x, y)
+    d = np.stack([x, y, np.ones(col.shape)], axis=-1)
     d = d @ camera.rotation.T
     return d / np.linalg.norm(d, axis=-1, keepdims=True)
 

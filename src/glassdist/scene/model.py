@@ -11,6 +11,7 @@ from pydantic import BaseModel, Field, model_validator
 from ..validation import (
     DISTANCE_M, MODEL_CONFIG, Angle_deg, Length_mm, PositiveLength_mm, load_mapping, validate_model,
 )
+from ..brown import BrownDistortion
 from .surfaces import FaceShape, Term
 
 __all__ = [
@@ -19,6 +20,7 @@ __all__ = [
     "Pane",
     "Backdrop",
     "Camera",
+    "LensDistortion",
     "Noise",
     "Lighting",
     "Imaging",
@@ -141,11 +143,30 @@ class Backdrop(BaseModel):
         return self
 
 
+class LensDistortion(BaseModel):
+    """Brown lens distortion of the camera, OpenCV's coefficients (normalised by the focal length).
+
+    ``k1 < 0`` barrel, ``k1 > 0`` pincushion, ``k1 < 0 < k2`` moustache; ``p1``, ``p2``
+    tangential (:class:`glassdist.brown.BrownDistortion`).
+    """
+
+    model_config = _FROZEN
+    k1: float = Field(0.0, ge=-1, le=1)
+    k2: float = Field(0.0, ge=-1, le=1)
+    p1: float = Field(0.0, ge=-0.1, le=0.1)
+    p2: float = Field(0.0, ge=-0.1, le=0.1)
+
+    @property
+    def brown(self) -> BrownDistortion:
+        return BrownDistortion(self.k1, self.k2, self.p1, self.p2)
+
+
 class Camera(BaseModel):
-    """Pinhole camera: focal length and sensor width in mm, ``pixels = (width, height)``.
+    """Camera: focal length and sensor width in mm, ``pixels = (width, height)``.
 
     Square pixels of ``sensor_width_mm / width``; principal point at the image
-    centre; pose ``position_mm`` and ``R_y(yaw) R_x(pitch)`` (no roll).
+    centre; pose ``position_mm`` and ``R_y(yaw) R_x(pitch)`` (no roll). A pinhole,
+    or with ``distortion`` a lens with Brown distortion about the principal point.
     """
 
     model_config = _FROZEN
@@ -155,12 +176,25 @@ class Camera(BaseModel):
     position_mm: tuple[Length_mm, Length_mm, Length_mm]
     yaw_deg: float = Field(0.0, ge=-80, le=80)
     pitch_deg: float = Field(0.0, ge=-80, le=80)
+    distortion: LensDistortion | None = None
 
     @model_validator(mode="after")
     def _pixels(self):
         if min(self.pixels) < 8:
             raise ValueError("pixels must be (width, height) with both at least 8")
+        if self.distortion is not None:
+            # the distortion must stay monotonic out to the image corners (a real lens's field)
+            H, W = self.shape
+            r = np.linspace(0.0, np.hypot(W, H) / 2 * self.pixel_pitch_mm / self.focal_length_mm, 64)
+            d = self.distortion
+            if np.any(1 + 3 * d.k1 * r**2 + 5 * d.k2 * r**4 <= 0.2):
+                raise ValueError("camera distortion folds the image before its corners; use smaller k1, k2")
         return self
+
+    @property
+    def focal_length_px(self) -> float:
+        """Focal length in px (the normalising length of OpenCV's distortion coefficients)."""
+        return self.focal_length_mm / self.pixel_pitch_mm
 
     @property
     def shape(self) -> tuple[int, int]:
