@@ -108,7 +108,7 @@ def _register_analyze(sub) -> None:
                    "(same camera and focus, any pose): the camera lens is measured from it")
     p.add_argument("--camera-file", type=Path, help="Direct Method: OpenCV-style camera file (JSON/YAML: camera_matrix, "
                    "dist_coeffs k1 k2 p1 p2): the camera lens it states is used")
-        p.add_argument("--out", type=folder_option, required=True, help="output folder (created if needed)")
+    p.add_argument("--out", type=folder_option, required=True, help="output folder (created if needed)")
     p.add_argument("--spec", type=Path, help="acceptance specification JSON: prints PASS/FAIL, exit 3 on FAIL; its protocol supplies omitted options and refuses contradicting ones (exit 2)")
     p.add_argument("--pane-id", help="pane identifier, stated in the report and summary.json")
     p.add_argument("--site", help="where the pane was measured (factory line, building), for the report")
