@@ -22,14 +22,15 @@ def real_data():
     }
 
 
-def truth_channels(cap, res, *, labels=None):
-    """The true displacement through the same evaluation stack (same N, sigma, region) as ``res``."""
-    from glassdist.analyzer import evaluate_displacement
+def truth_channels(cap, res):
+    """The true displacement of ``cap`` evaluated independently of the analyzer (``tests/_truth.py``).
 
-    return evaluate_displacement(
-        cap.displacement_mm, res.valid, distance_m=res.distance_m, mm_per_px=res.mm_per_px,
-        detrend_degree=res.detrend_degree, sigma_mm=res.sigma_mm, jacobian=cap.jacobian,
-    )
+    Same detrend degree, smoothing scale, distance and region (``res.valid``) as ``res``;
+    detrend, smoothing and channels written out in the test helper, not the analyzer's stack.
+    """
+    from _truth import truth_for
+
+    return truth_for(cap, res)
 
 
 def agreement(measured, truth, valid):
