@@ -140,13 +140,40 @@ def test_outline_found_in_image_or_standing_in():
     assert whole.source == "analysed_region" and "stands in" in whole.warning
 
 
+class _PixelGridResult(SimpleNamespace):
+    """Known fields with the analyzer's result interface, on an analysis grid that is the pixel grid itself.
+
+    Statistics and verdicts are checked against closed forms here; a real analysis cannot hold
+    such fields. The interface is the real one (``grid_field``, ``grid_valid``, ``grid_trusted``,
+    ``carriers``): the production code has no second path for it.
+    """
+
+    def grid_field(self, name):
+        return getattr(self, name)
+
+    @property
+    def grid_valid(self):
+        return self.valid
+
+    @property
+    def grid_trusted(self):
+        return getattr(self, "trusted", self.valid)
+
+    @property
+    def analysis_grid(self):
+        from glassdist.analyzer.fourier import SamplingGrid
+
+        return SamplingGrid(self.valid.shape, self.valid.shape)
+
+
 def _field_result(shape=(200, 260)):
     eff = np.zeros(shape)
     eff[:, :130] = 10.0  # left half 10 mD, right half 0
-    return SimpleNamespace(phi_eff_mD=eff, phi_shear_mD=np.abs(eff) / 2, phi_total_mD=np.abs(eff),
+    return _PixelGridResult(phi_eff_mD=eff, phi_shear_mD=np.abs(eff) / 2, phi_total_mD=np.abs(eff),
                            valid=np.ones(shape, bool), method="comparative", sigma_mm=2.0, detrend_degree=2,
                            mm_per_px=2.0, carrier_period_mm=5.0, pitch_mm=5.0, distance_m=1.0,
-                           params=SimpleNamespace(border_periods=1.5, pattern="lines"))
+                           params=SimpleNamespace(border_periods=1.5, pattern="lines"),
+                           carriers=SimpleNamespace(k1=SimpleNamespace(period_px=2.5), k2=SimpleNamespace(period_px=2.5)))
 
 
 def test_per_zone_statistics_and_coverage_against_the_zone():

@@ -1,4 +1,9 @@
-"""A2-A3: closed-form strain fields, detrending, smoothing, conventions."""
+"""A2-A3: closed-form strain fields, detrending, smoothing, conventions.
+
+These tests check the shared evaluation stack itself (``evaluate_displacement`` and its
+parts), each against a closed form; the analyzer's accuracy tests compare it with the
+independent truth of ``tests/_truth.py`` instead.
+"""
 
 import numpy as np
 import pytest
