@@ -17,7 +17,7 @@ messages are not mutated.
 
 Usage::
 
-    python scripts/mutation.py [--per-module 25] [--seed 0] [--modules metrics,acceptance]
+    python scripts/mutation.py [--per-module 25] [--seed 0] [--modules metrics,acceptance:10]
                                [--out mutation.json] [--python PYTHON]
 
 Writes a JSON record (every mutant: module, line, the changed source line, the outcome)
@@ -156,7 +156,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--per-module", type=int, default=25, help="mutants sampled per module (0: all)")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--modules", default=",".join(MODULES), help="comma-separated subset of " + ", ".join(MODULES))
+    ap.add_argument("--modules", default=",".join(MODULES),
+                    help="comma-separated subset of " + ", ".join(MODULES) + "; NAME:N samples N mutants of that one")
     ap.add_argument("--out", type=Path, default=Path("mutation.json"))
     ap.add_argument("--python", default=sys.executable)
     args = ap.parse_args(argv)
@@ -165,7 +166,9 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory(prefix="glassdist-mutation-") as tmp:
         src = Path(tmp) / "src"
         shutil.copytree(REPO / "src", src, ignore=shutil.ignore_patterns("__pycache__"))
-        for name in args.modules.split(","):
+        for item in args.modules.split(","):
+            name, _, count = item.partition(":")
+            per_module = int(count) if count else args.per_module
             rel, tests = MODULES[name]
             path = src / "glassdist" / rel
             original = path.read_text()
@@ -174,7 +177,7 @@ def main(argv=None) -> int:
                 raise SystemExit(f"{name}: the targeted tests fail on the unchanged code ({base})")
             tree = ast.parse(original)
             points = _points(tree)
-            chosen = sorted(rng.sample(points, min(len(points), args.per_module)) if args.per_module else points)
+            chosen = sorted(rng.sample(points, min(len(points), per_module)) if per_module else points)
             lines = original.splitlines()
             results = []
             print(f"## {name}: {len(chosen)} of {len(points)} mutants, tests {base_s:.0f} s unchanged", flush=True)

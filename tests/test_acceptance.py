@@ -425,3 +425,27 @@ def test_grow_region_is_the_distance_threshold(radius):
     mask[20:40, 30:70] = True
     assert np.array_equal(grow_region(mask, radius), distance_to_outside(~mask) <= radius)
     assert not grow_region(np.zeros((9, 9), bool), radius).any()
+
+
+def test_coverage_is_of_the_mask_asked_for():
+    """With a mask, coverage is the measured share of the mask (closed form), else of the image."""
+    from glassdist.report.acceptance import assess
+
+    res = _field_result()  # 200 x 260 px, every pixel measured
+    res.valid = res.valid.copy()
+    res.valid[:, :65] = False  # a quarter of the image not measured
+    mask = np.zeros(res.valid.shape, bool)
+    mask[:, :130] = True  # the left half asked for: half of it measured
+    assert assess(res, None, mask=mask).coverage_percent == pytest.approx(50.0)
+    assert assess(res, None).coverage_percent == pytest.approx(75.0)
+
+
+def test_caption_says_clipped_only_beyond_the_colour_limit():
+    from glassdist.report.acceptance import describe_clipping
+
+    f = np.array([[1.0, -10.0], [4.0, np.nan]])
+    ok = np.ones(f.shape, bool)
+    assert describe_clipping(f, ok, vmax=20.0) == "max |phi| 10 mD"  # well under the limit
+    assert describe_clipping(f, ok, vmax=10.0) == "max |phi| 10 mD"  # at it
+    clipped = describe_clipping(f, ok, vmax=5.0)
+    assert clipped.startswith("max |phi| 10 mD; colours clipped at 5 mD") and "(33 % of the region beyond)" in clipped
