@@ -160,6 +160,8 @@ def main(argv=None) -> int:
                     help="comma-separated subset of " + ", ".join(MODULES) + "; NAME:N samples N mutants of that one")
     ap.add_argument("--out", type=Path, default=Path("mutation.json"))
     ap.add_argument("--python", default=sys.executable)
+    ap.add_argument("--timeout-factor", type=float, default=3.0,
+                    help="a mutant whose tests run longer than this many times the unchanged run is killed (timeout)")
     args = ap.parse_args(argv)
     rng = random.Random(args.seed)
     record = {"seed": args.seed, "per_module": args.per_module, "modules": {}}
@@ -184,7 +186,7 @@ def main(argv=None) -> int:
             for index, kind in chosen:
                 mutant, line = _mutate(tree, index)
                 path.write_text(ast.unparse(mutant))
-                outcome, dt = _run_tests(args.python, src, tests, max(60.0, 3 * base_s))
+                outcome, dt = _run_tests(args.python, src, tests, max(60.0, args.timeout_factor * base_s))
                 after = ast.unparse(mutant).splitlines()
                 results.append({"line": line, "kind": kind, "source": lines[line - 1].strip(), "outcome": outcome,
                                 "seconds": round(dt, 1), "mutant_context": _changed(ast.unparse(tree), after)})
