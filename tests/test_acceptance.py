@@ -449,3 +449,15 @@ def test_caption_says_clipped_only_beyond_the_colour_limit():
     assert describe_clipping(f, ok, vmax=10.0) == "max |phi| 10 mD"  # at it
     clipped = describe_clipping(f, ok, vmax=5.0)
     assert clipped.startswith("max |phi| 10 mD; colours clipped at 5 mD") and "(33 % of the region beyond)" in clipped
+
+
+def test_the_frame_warning_is_given_only_where_zones_need_the_frame():
+    """Without a pane in the spec the analysed region stands in for it: a warning only when zones use it."""
+    from glassdist.report.acceptance import assess
+
+    res = _field_result()
+    crit = [{"channel": "phi_eff", "statistic": "max_abs", "max_mD": 50}]
+    plain = assess(res, Spec(name="p", criteria=crit))
+    assert plain.frame.warning and plain.warnings == ()
+    zoned = assess(res, Spec(name="z", zones=[Zone(name="vision", inset_mm=50)], criteria=crit))
+    assert zoned.warnings == (zoned.frame.warning,)
