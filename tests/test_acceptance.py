@@ -461,3 +461,22 @@ def test_the_frame_warning_is_given_only_where_zones_need_the_frame():
     assert plain.frame.warning and plain.warnings == ()
     zoned = assess(res, Spec(name="z", zones=[Zone(name="vision", inset_mm=50)], criteria=crit))
     assert zoned.warnings == (zoned.frame.warning,)
+
+
+def test_camera_metadata_from_exif(tmp_path):
+    """The camera's EXIF tags, the sub-IFD's too; blank text tags left out; a file without EXIF gives None."""
+    from PIL import Image
+
+    from glassdist.report.acceptance import camera_metadata
+
+    im = Image.fromarray(np.full((16, 16), 128, np.uint8))
+    exif = Image.Exif()
+    exif[0x010F] = "Canon"  # make
+    exif[0x0110] = " \x00 "  # model, blank
+    sub = exif.get_ifd(0x8769)
+    sub[0x920A] = 50.0  # focal length, mm
+    sub[0x8827] = 200  # ISO
+    im.save(tmp_path / "photo.jpg", exif=exif)
+    assert camera_metadata(tmp_path / "photo.jpg") == {"make": "Canon", "focal_length_mm": 50.0, "iso": 200.0}
+    im.save(tmp_path / "plain.png")
+    assert camera_metadata(tmp_path / "plain.png") is None
