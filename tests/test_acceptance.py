@@ -480,3 +480,23 @@ def test_camera_metadata_from_exif(tmp_path):
     assert camera_metadata(tmp_path / "photo.jpg") == {"make": "Canon", "focal_length_mm": 50.0, "iso": 200.0}
     im.save(tmp_path / "plain.png")
     assert camera_metadata(tmp_path / "plain.png") is None
+
+
+def test_heatmap_axes_and_overlays_keep_the_frame_limits():
+    """Axes in the pane's mm when the frame is axis-aligned (backdrop mm without a pane), and the
+    overlays (zones, worst regions) leave the heatmap's limits where the extent put them."""
+    from matplotlib.figure import Figure
+
+    from glassdist.report.acceptance import assess, draw_overlays, heatmap_axes
+
+    res = _field_result()
+    crit = [{"channel": "phi_eff", "statistic": "max_abs", "max_mD": 50}]
+    spec = Spec(name="z", zones=[Zone(name="vision", inset_mm=50)], criteria=crit,
+                pane={"corners_px": [[20, 10], [220, 10], [220, 160], [20, 160]], "size_mm": [400, 300]})
+    acc = assess(res, spec)
+    extent, to_axes, label = heatmap_axes(acc.frame, res.mm_per_px, res.valid.shape)
+    assert acc.frame.units == "pane_mm" and label == "pane mm"
+    assert heatmap_axes(pane_frame_from_region(res.valid, res.mm_per_px), res.mm_per_px, res.valid.shape)[2] == "backdrop mm"
+    ax = Figure().add_subplot()
+    draw_overlays(ax, acc, "phi_eff", to_axes, extent)
+    assert ax.get_xlim() == pytest.approx(extent[:2]) and ax.get_ylim() == pytest.approx(extent[2:])
