@@ -44,7 +44,8 @@ REPO = Path(__file__).resolve().parents[1]
 
 #: module (under src/glassdist) -> the tests that target it (fast: about 10-20 s each run)
 MODULES = {
-    "fourier": ("analyzer/fourier.py", ["tests/test_analyzer_fourier.py", "tests/test_accuracy_truth.py"]),
+    "fourier": ("analyzer/fourier.py", ["tests/test_analyzer_fourier.py", "tests/test_accuracy_truth.py",
+                                       "tests/test_adversarial_limits.py::test_a_grid_finer_than_3_px_is_refused"]),
     "unwrap": ("analyzer/unwrap.py", ["tests/test_analyzer_unwrap.py", "tests/test_accuracy_truth.py"]),
     "homography": ("analyzer/homography.py", ["tests/test_analyzer_homography.py", "tests/test_homography_refit.py",
                                              "tests/test_accuracy_truth.py"]),
