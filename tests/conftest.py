@@ -1,3 +1,4 @@
+import json
 import os
 from pathlib import Path
 
@@ -25,14 +26,15 @@ def real_data():
     }
 
 
-def truth_channels(cap, res, *, labels=None):
-    """The true displacement through the same evaluation stack (same N, sigma, region) as ``res``."""
-    from glassdist.analyzer import evaluate_displacement
+def truth_channels(cap, res):
+    """The true displacement of ``cap`` evaluated independently of the analyzer (``tests/_truth.py``).
 
-    return evaluate_displacement(
-        cap.displacement_mm, res.valid, distance_m=res.distance_m, mm_per_px=res.mm_per_px,
-        detrend_degree=res.detrend_degree, sigma_mm=res.sigma_mm, jacobian=cap.jacobian,
-    )
+    Same detrend degree, smoothing scale, distance and region (``res.valid``) as ``res``;
+    detrend, smoothing and channels written out in the test helper, not the analyzer's stack.
+    """
+    from _truth import truth_for
+
+    return truth_for(cap, res)
 
 
 def agreement(measured, truth, valid):
@@ -57,3 +59,29 @@ def write_lens_pair(root):
     write_png16(root / "pane.png", cap.image)
     write_png16(root / "reference.png", cap.reference)
     return root
+
+
+@pytest.fixture(scope="session")
+def real_pane_outputs(tmp_path_factory):
+    """Output folders of real ``glassdist analyze`` runs on the small lens pair (the failing one with ``--report``).
+
+    ``{"none": folder, "PASS": folder, "FAIL": folder}``: without a specification, with one the
+    pane passes (p95 |phi_eff| <= 1e5 mD) and with one it fails (<= 1 mD). About a second each:
+    batch tests replay them instead of inventing a summary's layout.
+    """
+    from glassdist.cli import main
+
+    root = write_lens_pair(tmp_path_factory.mktemp("real_pane"))
+    limits, codes = {"PASS": 1e5, "FAIL": 1.0}, {"none": 0, "PASS": 0, "FAIL": 3}
+    out = {}
+    for verdict, code in codes.items():
+        args = ["analyze", str(root / "pane.png"), "--reference", str(root / "reference.png"), "--pitch-mm", "2",
+                "--distance-m", "1", "--out", str(root / verdict), "-q"] + (["--report"] if verdict == "FAIL" else [])
+        if verdict in limits:
+            spec = root / f"{verdict}.json"
+            spec.write_text(json.dumps({"name": verdict.lower(), "criteria": [
+                {"channel": "phi_eff", "statistic": "p95_abs", "max_mD": limits[verdict]}]}))
+            args += ["--spec", str(spec)]
+        assert main(args) == code, verdict
+        out[verdict] = root / verdict
+    return out

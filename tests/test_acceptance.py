@@ -140,13 +140,40 @@ def test_outline_found_in_image_or_standing_in():
     assert whole.source == "analysed_region" and "stands in" in whole.warning
 
 
+class _PixelGridResult(SimpleNamespace):
+    """Known fields with the analyzer's result interface, on an analysis grid that is the pixel grid itself.
+
+    Statistics and verdicts are checked against closed forms here; a real analysis cannot hold
+    such fields. The interface is the real one (``grid_field``, ``grid_valid``, ``grid_trusted``,
+    ``carriers``): the production code has no second path for it.
+    """
+
+    def grid_field(self, name):
+        return getattr(self, name)
+
+    @property
+    def grid_valid(self):
+        return self.valid
+
+    @property
+    def grid_trusted(self):
+        return getattr(self, "trusted", self.valid)
+
+    @property
+    def analysis_grid(self):
+        from glassdist.analyzer.fourier import SamplingGrid
+
+        return SamplingGrid(self.valid.shape, self.valid.shape)
+
+
 def _field_result(shape=(200, 260)):
     eff = np.zeros(shape)
     eff[:, :130] = 10.0  # left half 10 mD, right half 0
-    return SimpleNamespace(phi_eff_mD=eff, phi_shear_mD=np.abs(eff) / 2, phi_total_mD=np.abs(eff),
+    return _PixelGridResult(phi_eff_mD=eff, phi_shear_mD=np.abs(eff) / 2, phi_total_mD=np.abs(eff),
                            valid=np.ones(shape, bool), method="comparative", sigma_mm=2.0, detrend_degree=2,
                            mm_per_px=2.0, carrier_period_mm=5.0, pitch_mm=5.0, distance_m=1.0,
-                           params=SimpleNamespace(border_periods=1.5, pattern="lines"))
+                           params=SimpleNamespace(border_periods=1.5, pattern="lines"),
+                           carriers=SimpleNamespace(k1=SimpleNamespace(period_px=2.5), k2=SimpleNamespace(period_px=2.5)))
 
 
 def test_per_zone_statistics_and_coverage_against_the_zone():
@@ -398,3 +425,78 @@ def test_grow_region_is_the_distance_threshold(radius):
     mask[20:40, 30:70] = True
     assert np.array_equal(grow_region(mask, radius), distance_to_outside(~mask) <= radius)
     assert not grow_region(np.zeros((9, 9), bool), radius).any()
+
+
+def test_coverage_is_of_the_mask_asked_for():
+    """With a mask, coverage is the measured share of the mask (closed form), else of the image."""
+    from glassdist.report.acceptance import assess
+
+    res = _field_result()  # 200 x 260 px, every pixel measured
+    res.valid = res.valid.copy()
+    res.valid[:, :65] = False  # a quarter of the image not measured
+    mask = np.zeros(res.valid.shape, bool)
+    mask[:, :130] = True  # the left half asked for: half of it measured
+    assert assess(res, None, mask=mask).coverage_percent == pytest.approx(50.0)
+    assert assess(res, None).coverage_percent == pytest.approx(75.0)
+
+
+def test_caption_says_clipped_only_beyond_the_colour_limit():
+    from glassdist.report.acceptance import describe_clipping
+
+    f = np.array([[1.0, -10.0], [4.0, np.nan]])
+    ok = np.ones(f.shape, bool)
+    assert describe_clipping(f, ok, vmax=20.0) == "max |phi| 10 mD"  # well under the limit
+    assert describe_clipping(f, ok, vmax=10.0) == "max |phi| 10 mD"  # at it
+    clipped = describe_clipping(f, ok, vmax=5.0)
+    assert clipped.startswith("max |phi| 10 mD; colours clipped at 5 mD") and "(33 % of the region beyond)" in clipped
+
+
+def test_the_frame_warning_is_given_only_where_zones_need_the_frame():
+    """Without a pane in the spec the analysed region stands in for it: a warning only when zones use it."""
+    from glassdist.report.acceptance import assess
+
+    res = _field_result()
+    crit = [{"channel": "phi_eff", "statistic": "max_abs", "max_mD": 50}]
+    plain = assess(res, Spec(name="p", criteria=crit))
+    assert plain.frame.warning and plain.warnings == ()
+    zoned = assess(res, Spec(name="z", zones=[Zone(name="vision", inset_mm=50)], criteria=crit))
+    assert zoned.warnings == (zoned.frame.warning,)
+
+
+def test_camera_metadata_from_exif(tmp_path):
+    """The camera's EXIF tags, the sub-IFD's too; blank text tags left out; a file without EXIF gives None."""
+    from PIL import Image
+
+    from glassdist.report.acceptance import camera_metadata
+
+    im = Image.fromarray(np.full((16, 16), 128, np.uint8))
+    exif = Image.Exif()
+    exif[0x010F] = "Canon"  # make
+    exif[0x0110] = " \x00 "  # model, blank
+    sub = exif.get_ifd(0x8769)
+    sub[0x920A] = 50.0  # focal length, mm
+    sub[0x8827] = 200  # ISO
+    im.save(tmp_path / "photo.jpg", exif=exif)
+    assert camera_metadata(tmp_path / "photo.jpg") == {"make": "Canon", "focal_length_mm": 50.0, "iso": 200.0}
+    im.save(tmp_path / "plain.png")
+    assert camera_metadata(tmp_path / "plain.png") is None
+
+
+def test_heatmap_axes_and_overlays_keep_the_frame_limits():
+    """Axes in the pane's mm when the frame is axis-aligned (backdrop mm without a pane), and the
+    overlays (zones, worst regions) leave the heatmap's limits where the extent put them."""
+    from matplotlib.figure import Figure
+
+    from glassdist.report.acceptance import assess, draw_overlays, heatmap_axes
+
+    res = _field_result()
+    crit = [{"channel": "phi_eff", "statistic": "max_abs", "max_mD": 50}]
+    spec = Spec(name="z", zones=[Zone(name="vision", inset_mm=50)], criteria=crit,
+                pane={"corners_px": [[20, 10], [220, 10], [220, 160], [20, 160]], "size_mm": [400, 300]})
+    acc = assess(res, spec)
+    extent, to_axes, label = heatmap_axes(acc.frame, res.mm_per_px, res.valid.shape)
+    assert acc.frame.units == "pane_mm" and label == "pane mm"
+    assert heatmap_axes(pane_frame_from_region(res.valid, res.mm_per_px), res.mm_per_px, res.valid.shape)[2] == "backdrop mm"
+    ax = Figure().add_subplot()
+    draw_overlays(ax, acc, "phi_eff", to_axes, extent)
+    assert ax.get_xlim() == pytest.approx(extent[:2]) and ax.get_ylim() == pytest.approx(extent[2:])

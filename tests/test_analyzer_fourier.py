@@ -105,3 +105,23 @@ def test_frequency_modulated_carrier_is_found_at_its_mean_frequency():
     c = F.find_carriers(F.compute_spectrum(img))
     found = sorted(abs(k.fx) + abs(k.fy) for k in (c.k1, c.k2))
     assert found == pytest.approx([0.125, 0.125], abs=0.25 / 640)  # a sideband would be 12 bins off
+
+
+def test_baseband_applies_the_rotated_gaussian_bandpass():
+    """A tone off the carrier by delta comes out at 0.5 A exp(-delta^T Sigma^-1 delta / 2) (closed form).
+
+    The bandpass covariance is anisotropic and rotated 30 deg, so its cross term decides the
+    answer: the covariance mirrored (cross term of the other sign) would give 2.4x the amplitude.
+    """
+    H = W = 256
+    y, x = np.mgrid[0:H, 0:W].astype(float)
+    f0, d = np.array([32 / W, 12 / H]), np.array([2 / W, -1 / H])  # carrier and offset, whole bins (x, y)
+    image = 0.5 + 0.4 * np.cos(2 * np.pi * ((f0[0] + d[0]) * x + (f0[1] + d[1]) * y))
+    t = np.radians(30.0)
+    R = np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
+    cov = R @ np.diag([0.012**2, 0.005**2]) @ R.T  # cycles^2/px^2, (x, y) order
+    b = F.baseband(F.compute_spectrum(image), F.Carrier(f0[0], f0[1]), cov, F.sampling_grid((H, W), [cov]))
+    expect = 0.2 * np.exp(-0.5 * d @ np.linalg.inv(cov) @ d)
+    mirrored = 0.2 * np.exp(-0.5 * d @ np.linalg.inv(cov * np.array([[1, -1], [-1, 1]])) @ d)
+    assert abs(mirrored / expect - 1) > 1.0
+    np.testing.assert_allclose(np.abs(b), expect, rtol=1e-3)

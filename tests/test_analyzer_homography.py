@@ -56,3 +56,15 @@ def test_inverse_and_its_jacobian():
 def test_too_few_points_is_a_clear_error():
     with pytest.raises(AnalysisError, match="grid points"):
         fit_homography(np.zeros((3, 2)), np.zeros((3, 2)), threshold_px=1.0)
+
+
+def test_inverse_jacobian_is_the_derivative_of_the_inverse_map():
+    """Under perspective (a projective row), both rows of d(U, V)/d(x, y) against centred differences of H^-1."""
+    H = np.array([[8.0, 0.5, 3.0], [-0.4, 7.5, 2.0], [2e-3, -1e-3, 1.0]])
+    x, y = np.meshgrid(np.linspace(0.0, 300.0, 7), np.linspace(0.0, 200.0, 5))
+    J = inverse_jacobian(H, x, y)
+    h = 1e-3
+    for b, (dx, dy) in enumerate(((h, 0.0), (0.0, h))):
+        plus, minus = np.array(apply_inverse(H, x + dx, y + dy)), np.array(apply_inverse(H, x - dx, y - dy))
+        for a in range(2):
+            np.testing.assert_allclose(J[..., a, b], (plus[a] - minus[a]) / (2 * h), rtol=1e-6, atol=1e-12)

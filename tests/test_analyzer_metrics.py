@@ -1,4 +1,9 @@
-"""A2-A3: closed-form strain fields, detrending, smoothing, conventions."""
+"""A2-A3: closed-form strain fields, detrending, smoothing, conventions.
+
+These tests check the shared evaluation stack itself (``evaluate_displacement`` and its
+parts), each against a closed form; the analyzer's accuracy tests compare it with the
+independent truth of ``tests/_truth.py`` instead.
+"""
 
 import numpy as np
 import pytest
@@ -114,6 +119,22 @@ def test_masked_gaussian_keeps_linear_fields_and_matches_sigma():
     out = masked_gaussian(s, np.ones(X.shape), 4.0**2 * np.eye(2))
     expect = np.exp(-2 * np.pi**2 * 16 / 1600)
     assert np.ptp(out[20:60, 20:60]) / 2 == pytest.approx(expect, rel=2e-3)
+
+
+@pytest.mark.parametrize("s", [30.0, 3.0])
+def test_masked_gaussian_with_a_singular_covariance_smooths_along_one_direction(s):
+    """A rank-one covariance (a kernel along (1, 1)) leaves a field constant along (1, 1) unchanged.
+
+    s = 30 px reaches beyond the 40 x 50 field (the kernel sampled in space, regularised when
+    singular); s = 3 px uses the continuous transfer. A kernel spread across (1, 1), or one
+    whose regularisation is lost, blurs the 10 px wave across its crests.
+    """
+    y, x = np.mgrid[0:40, 0:50].astype(float)
+    f = np.sin(2 * np.pi * (x - y) / 10.0)
+    cov = s**2 * np.array([[1.0, 1.0], [1.0, 1.0]])  # (x, y) order, det = 0
+    out = masked_gaussian(f, np.ones(f.shape), cov)[5:-5, 5:-5]  # (two corners see only themselves)
+    assert np.all(np.isfinite(out))
+    assert np.max(np.abs(out - f[5:-5, 5:-5])) < 1e-3  # measured 7e-16 (s = 30) and 7e-5 (s = 3)
 
 
 def test_statistics():

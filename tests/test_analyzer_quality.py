@@ -95,18 +95,25 @@ def test_margin_is_the_kernel_tail_for_the_stated_phase_error():
 
 def test_displacement_near_an_opaque_drop_within_the_stated_phase_error():
     # The analysed region reaches to the derived margin around a drop, and the displacement
-    # there stays within margin_phase_error_periods of the truth (Comparative Method).
-    cap = synthetic_capture((256, 256), pitch_mm=P, mm_per_px=1.0, displacement=wave_displacement(0.6, 90.0, 30.0),
+    # there stays within margin_phase_error_periods (0.1 period) of the truth (Comparative
+    # Method). The wave is strong enough (2 mm = 0.25 period, peak strain 0.10) that the
+    # true displacement near the drop is well above that tolerance (median 0.18 period), so
+    # a displacement read as zero, or a sign flipped, fails. Measured: p99 error 0.028
+    # period over the region, 0.079 at worst next to the drop.
+    cap = synthetic_capture((256, 256), pitch_mm=P, mm_per_px=1.0, displacement=wave_displacement(2.0, 120.0, 30.0),
                             noise_std=0.005, rng=3)
     yy, xx = np.mgrid[0:256, 0:256]
     r = np.hypot(yy - 120, xx - 130)
     img = np.where(r < 40, 0.1, cap.image)
     res = analyze(img, pitch_mm=P, distance_m=1.0, reference=cap.reference, params={"sigma_mm": 16.0})
+    tol = res.params.margin_phase_error_periods
     near = res.valid & (r < 40 + res.margin_px[0] + 6)
     assert near.sum() > 200
-    err = np.abs(res.displacement_mm - cap.displacement_mm).max(axis=-1)[res.valid] / P
-    assert np.percentile(err, 99) < res.params.margin_phase_error_periods
-    assert np.abs(res.displacement_mm - cap.displacement_mm).max(axis=-1)[near].max() / P < res.params.margin_phase_error_periods
+    truth = np.abs(cap.displacement_mm).max(axis=-1)
+    assert np.median(truth[near]) / P > 1.5 * tol  # the test can fail: zero is far from the truth here
+    err = np.abs(res.displacement_mm - cap.displacement_mm).max(axis=-1)
+    assert np.percentile(err[res.valid], 99) / P < tol
+    assert err[near].max() / P < tol
 
 
 @pytest.mark.parametrize("method,pattern,noise", [("comparative", "lines", 0.05), ("direct", "checkerboard", 0.03)])

@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import json
 import os
+import shutil
 
 import pytest
 
@@ -21,7 +22,13 @@ from glassdist.report.batch import (
 
 
 class FakeRunner:
-    """Stands in for ``glassdist analyze``: writes a summary.json; can fail or be interrupted on chosen panes."""
+    """Stands in for ``glassdist analyze``: replays a real run's output folder; can fail or be interrupted on chosen panes.
+
+    The folder is one of ``conftest.real_pane_outputs`` (a real analysis of a small lens, by
+    verdict), so the index reads a real summary; only the runner's scheduling is staged.
+    """
+
+    outputs: dict = {}
 
     def __init__(self, *, interrupt=(), errors=(), verdicts=None):
         self.calls, self.interrupt, self.errors, self.verdicts = [], set(interrupt), set(errors), verdicts or {}
@@ -34,10 +41,13 @@ class FakeRunner:
         if pane.id in self.errors:
             return PaneOutcome(2, "log", f"error: image file '{pane.image}' does not exist; check the path")
         verdict = self.verdicts.get(pane.id)
-        summary = {"method": "comparative", "verdict": {"result": verdict} if verdict else None,
-                   "a4": {"valid_percent": 90.0, "statistics": {"phi_eff": {"p95_abs": 12.5, "max_abs": 20.0}}}}
-        (out_dir / "summary.json").write_text(json.dumps(summary))
+        shutil.copytree(self.outputs[verdict or "none"], out_dir, dirs_exist_ok=True)
         return PaneOutcome(3 if verdict == "FAIL" else 0, "log")
+
+
+@pytest.fixture(autouse=True)
+def _real_outputs(real_pane_outputs):
+    FakeRunner.outputs = real_pane_outputs
 
 
 def _panes(tmp_path, ids=("a", "b", "c")):
@@ -74,7 +84,13 @@ def test_resume_after_interruption_keeps_finished_panes(tmp_path):
     assert (out / "panes" / "a" / "summary.json").read_bytes() == summary_a
     idx = _index(out)
     assert sorted(idx) == ["a", "b", "c"] and {r["status"] for r in idx.values()} == {"done"}
-    assert idx["a"]["phi_eff_p95_abs_mD"] == "12.5"
+    # the index's statistics are the real summary's
+    real = json.loads((FakeRunner.outputs["none"] / "summary.json").read_text())["a4"]
+    for ch in ("phi_eff", "phi_shear"):
+        for stat in ("mean_abs", "p95_abs", "max_abs"):
+            assert float(idx["a"][f"{ch}_{stat}_mD"]) == pytest.approx(real["statistics"][ch][stat], rel=1e-3)
+    assert float(idx["a"]["valid_percent"]) == pytest.approx(real["valid_percent"], rel=1e-3)
+    assert idx["a"]["method"] == "comparative" and float(idx["a"]["sigma_mm"]) > 0
     assert not [p for p in (out / "panes").iterdir() if p.name.startswith(".tmp")]
     html = (out / "index.html").read_text()
     assert all(f'id="pane-{i}"' in html for i in "abc")
@@ -225,34 +241,20 @@ def test_two_batches_cannot_share_a_folder(tmp_path):
     assert runner.calls == ["b"]
 
 
-class _HeatmapRunner(FakeRunner):
-    """FakeRunner that also writes the real heatmap PNGs (the index's thumbnails) and a report."""
-
-    def __call__(self, pane, out_dir, **kw):
-        from glassdist.report.figures import save_channel_heatmaps
-
-        try:
-            from test_report_figures import fake_result
-        except ImportError:  # tests collected as a package
-            from tests.test_report_figures import fake_result
-
-        outcome = super().__call__(pane, out_dir, **kw)
-        save_channel_heatmaps(fake_result(), out_dir)
-        (out_dir / "report.html").write_text("<html></html>")
-        return outcome
-
-
 def _index_out(tmp_path):
     out = tmp_path / "out"
     panes = _panes(tmp_path, ("factory_waves", "factory_ring", "insitu_waves_of_the_north_facade", "insitu_ring"))
-    runner = _HeatmapRunner(verdicts={"factory_waves": "FAIL", "factory_ring": "PASS"}, errors={"insitu_ring"})
+    runner = FakeRunner(verdicts={"factory_waves": "FAIL", "factory_ring": "PASS"}, errors={"insitu_ring"})
     _run(panes, out, runner)
     return out
 
 
 def test_index_columns_are_grouped_and_thumbnails_scale(tmp_path):
     html = (_index_out(tmp_path) / "index.html").read_text()
-    assert html.count('<img class="thumb"') == 3 and 'width="' not in html  # sized by the style sheet
+    # real result.npz files: thumbnails on one shared colour scale; a report link where a report was written
+    assert html.count('<img class="thumb shared"') == 3 and 'width="' not in html  # sized by the style sheet
+    assert _index(tmp_path / "out")["factory_waves"]["report"] == "panes/factory_waves/report.html"
+    assert (tmp_path / "out" / "thumbs" / "factory_waves.png").is_file()
     assert '<th colspan="3">|phi_eff| (mD)</th>' in html and '<th colspan="3">|phi_shear| (mD)</th>' in html
     assert "img.thumb{display:block;width:96px;max-width:100%" in html
 

@@ -64,3 +64,34 @@ def test_every_subpackage_declares_its_public_api(sub):
     tree = ast.parse((SRC / sub / "__init__.py").read_text())
     names = [t.id for n in tree.body if isinstance(n, ast.Assign) for t in n.targets if isinstance(t, ast.Name)]
     assert "__all__" in names
+
+
+#: Test helpers holding the truths the accuracy tests compare the analyzer with (docs/testing.md).
+TRUTH_HELPERS = [Path(__file__).parent / "_truth.py"]
+
+
+@pytest.mark.parametrize("path", TRUTH_HELPERS, ids=lambda p: p.name)
+def test_truth_helpers_import_nothing_from_glassdist(path):
+    """An independent truth cannot share code with what it checks: no import of glassdist at all."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and not node.level:
+            names = [node.module or ""]
+        elif isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.Call) and getattr(node.func, "attr", getattr(node.func, "id", "")) in (
+                "import_module", "__import__"):
+            names = [a.value for a in node.args if isinstance(a, ast.Constant) and isinstance(a.value, str)]
+        else:
+            continue
+        found += [n for n in names if n == "glassdist" or n.startswith("glassdist.")]
+    assert found == [], f"{path.name} imports {found}"
+
+
+def test_round_trip_truth_is_the_independent_helper():
+    """``conftest.truth_channels`` evaluates the truth with ``_truth``, not the analyzer's stack."""
+    tree = ast.parse((Path(__file__).parent / "conftest.py").read_text())
+    fn = next(n for n in tree.body if isinstance(n, ast.FunctionDef) and n.name == "truth_channels")
+    modules = {n.module for n in ast.walk(fn) if isinstance(n, ast.ImportFrom)}
+    modules |= {a.name for n in ast.walk(fn) if isinstance(n, ast.Import) for a in n.names}
+    assert modules == {"_truth"}, modules

@@ -1,7 +1,8 @@
 """Every ``Examples`` section of the package runs (doctest): the documented calls keep working.
 
 All modules of ``glassdist`` are collected; one whose import needs an optional extra that
-is not installed is skipped. The examples run with ``ELLIPSIS`` and ``NORMALIZE_WHITESPACE``.
+is not installed is skipped. Any other ImportError (a broken import inside glassdist, a
+missing core dependency) fails. The examples run with ``ELLIPSIS`` and ``NORMALIZE_WHITESPACE``.
 """
 
 from __future__ import annotations
@@ -9,6 +10,7 @@ from __future__ import annotations
 import doctest
 import importlib
 import pkgutil
+import sys
 
 import pytest
 
@@ -34,11 +36,27 @@ def _modules() -> list[str]:
     return ["glassdist"] + sorted(n for n in found if not n.endswith(".__main__"))
 
 
+#: Top-level modules of the optional extras (pyproject.toml: distributed, web, browser-tests).
+OPTIONAL = {"dask", "distributed", "fastapi", "uvicorn", "multipart", "python_multipart", "jinja2", "playwright"}
+
+
 def _import(name: str):
     try:
         return importlib.import_module(name)
-    except ImportError as exc:  # an optional extra (web, distributed, ...) not installed
-        pytest.skip(f"{name} needs what is not installed: {exc}")
+    except ModuleNotFoundError as exc:
+        if (exc.name or "").split(".")[0] in OPTIONAL:  # an optional extra not installed
+            pytest.skip(f"{name} needs what is not installed: {exc}")
+        raise
+
+
+def test_a_broken_import_inside_glassdist_is_not_a_skip(monkeypatch):
+    """A module of glassdist that fails to import fails the test, rather than skipping it."""
+    monkeypatch.setitem(sys.modules, "glassdist._broken_for_test", None)  # importing it raises ImportError
+    with pytest.raises(ImportError):
+        _import("glassdist._broken_for_test")
+    monkeypatch.setitem(sys.modules, "playwright", None)
+    with pytest.raises(pytest.skip.Exception):
+        _import("playwright")
 
 
 @pytest.mark.parametrize("name", _modules())

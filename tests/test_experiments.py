@@ -27,14 +27,19 @@ def _failed(record: dict, known=()) -> list[str]:
     return [f"{b['what']}: {b['value']:.4g}" for k, b in record["bounds"].items() if not b["met"] and k not in known]
 
 
-# Bounds the analyzer does not meet, with the measured reason (docs/experiments/README.md):
-# on the 96.9 mm grid (sigma = 100 mm, about one carrier period) the Comparative Method's
-# phi_shear within ~1.5 periods of the image edges is ~5 % low against the exact truth
-# (Direct ~1.5 %), so D vs C reaches 3.8-4.1 % on the common region; 1.9 % in the interior.
-#: Bounds not met, with the value they must stay within (a regression past it fails). The full-size
-#: run (docs/experiments/pitch.md) meets all eight; at half size (the reduced test) the 96.9 mm grid
-#: has under two periods per lens radius and the Direct phi_shear spread reads 2.4 % (bound 2 %).
-KNOWN_UNMET = {"pitch": {"spread_direct_phi_shear": 0.03}}
+#: What the reduced runs measured (docs/experiments/README.md, "Reduced versions"): the tests hold
+#: them at these figures. The exact tracer is seeded and deterministic; the margins (0.003 on
+#: ratios, 0.005 on Direct / truth, 0.02 deg) cover the platform's arithmetic, not a change of
+#: method (re-measure, then update the docs and these figures).
+PARITY_HALF = {"ratios": {"phi_eff": 0.9929, "phi_shear": 0.9915, "phi_total": 0.9923}, "scale": 0.9818,
+               "rotation_deg": 0.032}
+#: The one bound the half-size pitch run misses, a documented claim with its reason (not a regression
+#: allowance): on the 96.9 mm grid at half size the 160 mm lens spans under two carrier periods and
+#: the Direct phi_shear spread across pitches reads 2.37 % (bound 2 %; the full-size run meets it,
+#: 1.99 %). The test holds the figure to +-0.2 points: more is a regression, less a docs update.
+PITCH_HALF_SPREAD_SHEAR = 0.0237
+PITCH_HALF_DIRECT_VS_EXACT = {"phi_eff": {"coarse": 1.037, "medium": 1.014, "fine": 1.004},
+                              "phi_shear": {"coarse": 1.030, "medium": 1.007, "fine": 1.007}}
 
 
 @pytest.mark.slow
@@ -47,11 +52,14 @@ def test_parity_reduced_cli(tmp_path):
     rec = json.loads((tmp_path / "parity.json").read_text())
     assert rec["image_size"] == [512, 384] and rec["detrend_degree"] == 0
     assert not _failed(rec), _failed(rec)
-    for r in rec["direct"]["ratios_vs_model"].values():
-        assert abs(r - 1.0) <= 0.02
+    for name, r in rec["direct"]["ratios_vs_model"].items():
+        assert r == pytest.approx(PARITY_HALF["ratios"][name], abs=0.003), (name, r)
+    pro = rec["direct"]["procrustes_vs_model"]
+    assert pro["scale"] == pytest.approx(PARITY_HALF["scale"], abs=0.003)
+    assert pro["rotation_deg"] == pytest.approx(PARITY_HALF["rotation_deg"], abs=0.02)
     # ablation: the isotropic bandpass must not rotate the recovered frame on this scene
     iso = rec["ablation"]["isotropic_bandpass"]
-    assert abs(iso["procrustes_vs_model"]["rotation_deg"]) < 0.1
+    assert iso["procrustes_vs_model"]["rotation_deg"] == pytest.approx(PARITY_HALF["rotation_deg"], abs=0.02)
     assert "glassdist experiment parity" in rec["command"]
 
 
@@ -61,20 +69,20 @@ def test_pitch_reduced():
 
     Checked on the region common to all runs (each grid's own region differs, and the
     exact truth through the same stack moves by ~3 % with the region alone) and on the
-    interior region (common, at least 3 sigma inside its border), where the bounds are judged. Known exception:
-    ``KNOWN_UNMET``.
+    interior region (common, at least 3 sigma inside its border), where the bounds are judged. The
+    one bound missed at half size is a documented claim (``PITCH_HALF_SPREAD_SHEAR``).
     """
     res = run_pitch(**REDUCED)
     rec = res.record
-    assert not _failed(rec, KNOWN_UNMET["pitch"]), _failed(rec, KNOWN_UNMET["pitch"])
-    for key, ceiling in KNOWN_UNMET["pitch"].items():
-        assert rec["bounds"][key]["value"] <= ceiling, (key, rec["bounds"][key]["value"])
+    assert not _failed(rec, ("spread_direct_phi_shear",)), _failed(rec, ("spread_direct_phi_shear",))
+    assert rec["bounds"]["spread_direct_phi_shear"]["value"] == pytest.approx(PITCH_HALF_SPREAD_SHEAR, abs=0.002)
     inner = rec["summary"]["interior"]
     assert rec["interior_region_fraction"] > 0.1
     for ch in ("phi_eff", "phi_shear"):
         for n in ("coarse", "medium", "fine"):
-            # the analyzer follows the truth through the same stack (coarse grid: ~3 % high, see docs)
-            assert abs(inner["direct_vs_exact"][ch][n] - 1.0) <= 0.04, (ch, n, inner["direct_vs_exact"][ch])
+            # the analyzer against the exact truth (docs: the coarse grid reads ~3-4 % high at half size)
+            got = inner["direct_vs_exact"][ch][n]
+            assert got == pytest.approx(PITCH_HALF_DIRECT_VS_EXACT[ch][n], abs=0.005), (ch, n, got)
     for n in ("coarse", "medium", "fine"):  # one physical smoothing scale for every pitch
         assert rec["pitches"][n]["direct"]["sigma_mm"] == rec["sigma_mm"]
 
@@ -84,20 +92,22 @@ def test_rotation_reduced():
     """§3.3 at half size: mean |phi_eff| of aligned and rotated grids within 2 %."""
     res = run_rotation(**REDUCED)
     assert res.record["ratio"] >= 0.98, res.record["ratio"]
+    assert res.record["ratio"] == pytest.approx(0.9957, abs=0.003)  # measured at half size (docs/experiments)
     assert res.record["runs"]["rotated"]["grid_rotation_deg"] != res.record["runs"]["aligned"]["grid_rotation_deg"]
     assert res.passed
 
 
 @pytest.mark.parametrize("name", ["parity", "pitch", "rotation"])
 def test_committed_full_runs_meet_bounds(name):
-    """The full-size runs committed under docs/experiments/ meet every bound of issue 5."""
+    """The committed documents: the full-size runs under docs/experiments/ meet every bound of issue 5.
+
+    A check of the documents, not of the code (a full run takes minutes; the reduced runs above
+    recompute): it fails when a committed record is replaced by one that misses a bound.
+    """
     rec = json.loads((DOCS / f"{name}.json").read_text())
     assert rec["command"].startswith("glassdist experiment " + name)
     assert rec["image_size"] == [1024, 768] and rec["engine"] == "exact"
-    known = KNOWN_UNMET.get(name, {})
-    assert not _failed(rec, known), _failed(rec, known)
-    for key, ceiling in known.items():
-        assert rec["bounds"][key]["value"] <= ceiling, (key, rec["bounds"][key]["value"])
+    assert not _failed(rec), _failed(rec)
     assert (DOCS / f"{name}.md").is_file()
 
 

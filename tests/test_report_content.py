@@ -14,13 +14,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import write_lens_pair
 
+import glassdist
 from glassdist.report.outputs import EXIT_SPEC_FAIL, finish_analysis
-
-try:
-    from test_report_figures import fake_result
-except ImportError:  # tests collected as a package
-    from tests.test_report_figures import fake_result
 
 PASSING = {"name": "lenient", "criteria": [{"channel": "phi_eff", "statistic": "p95_abs", "max_mD": 1000}]}
 FAILING = {
@@ -59,28 +56,24 @@ class _Collector(HTMLParser):
 
 @pytest.fixture(scope="module")
 def analysed(tmp_path_factory):
-    """One fake analysis finished twice: with a failing spec + report + exports, and with a passing spec."""
-    import cv2
-
-    root = tmp_path_factory.mktemp("finish")
-    rng = np.random.default_rng(1)
-    image = root / "pane.png"
-    cv2.imwrite(str(image), (rng.random((96, 128)) * 255).astype(np.uint8))
-    ref = root / "ref.png"
-    cv2.imwrite(str(ref), (rng.random((96, 128)) * 255).astype(np.uint8))
+    """One real analysis (160 x 160 px lens, -100 mD at its centre, Comparative) finished twice: with a
+    failing spec + report + exports, and with a passing spec; and the same photo by the Direct Method."""
+    root = write_lens_pair(tmp_path_factory.mktemp("finish"))
+    image, ref = root / "pane.png", root / "reference.png"
+    result = glassdist.analyze(image, reference=ref, pitch_mm=2.0, distance_m=1.0)
     (root / "fail.json").write_text(json.dumps(FAILING))
     (root / "pass.json").write_text(json.dumps(PASSING))
     out_fail, out_pass = root / "out_fail", root / "out_pass"
     out_fail.mkdir()
     out_pass.mkdir()
-    (out_fail / "summary.json").write_text(json.dumps({"method": "comparative", "version": "0.1.0"}))
+    (out_fail / "summary.json").write_text(json.dumps({"method": "comparative", "version": glassdist.__version__}))
     lines = []
-    code_fail = finish_analysis(fake_result(), out_dir=out_fail, image_path=image, reference_path=ref,
+    code_fail = finish_analysis(result, out_dir=out_fail, image_path=image, reference_path=ref,
                                 spec_path=root / "fail.json", report=True, exports=True, echo=lines.append)
-    code_pass = finish_analysis(fake_result(), out_dir=out_pass, image_path=image, spec_path=root / "pass.json",
+    code_pass = finish_analysis(result, out_dir=out_pass, image_path=image, spec_path=root / "pass.json",
                                 echo=lambda s: None)
     return dict(root=root, image=image, ref=ref, out=out_fail, out_pass=out_pass, lines=lines,
-                code_fail=code_fail, code_pass=code_pass)
+                code_fail=code_fail, code_pass=code_pass, result=result)
 
 
 def test_exit_codes_and_printed_verdict(analysed):
@@ -107,7 +100,8 @@ def test_statistics_csv_and_a4_pngs(analysed):
     out = analysed["out"]
     rows = list(csv.DictReader((out / "statistics.csv").open()))
     assert [r["channel"] for r in rows] == ["phi_eff", "phi_shear", "phi_total"]
-    assert float(rows[0]["max_abs_mD"]) == pytest.approx(40.0)
+    trusted = analysed["result"].trusted
+    assert float(rows[0]["max_abs_mD"]) == pytest.approx(np.nanmax(np.abs(analysed["result"].phi_eff_mD[trusted])), rel=1e-4)
     assert "area_over_20_percent" in rows[0]
     for name in ("input_region.png", "histograms.png", "mask_phi_eff_20mD.png", "mask_phi_shear_5mD.png"):
         assert (out / name).read_bytes()[:4] == b"\x89PNG"
@@ -118,11 +112,11 @@ def test_exports_npz_and_float32_tiff(analysed):
     import tifffile
 
     out = analysed["out"]
-    ref = fake_result()
+    ref = analysed["result"]
     with np.load(out / "fields.npz") as z:
-        assert z["displacement_mm"].shape == (96, 128, 2) and z["phi_eff_mD"].dtype == np.float32
+        assert z["displacement_mm"].shape == (160, 160, 2) and z["phi_eff_mD"].dtype == np.float32
         np.testing.assert_allclose(z["phi_eff_mD"], ref.phi_eff_mD, rtol=1e-6)
-        assert str(z["version"]) == "0.1.0" and float(z["distance_m"]) == 1.5
+        assert str(z["version"]) == glassdist.__version__ and float(z["distance_m"]) == 1.0
     eff = tifffile.imread(out / "tiff" / "phi_eff_mD.tif")
     assert eff.dtype == np.float32
     np.testing.assert_allclose(eff, ref.phi_eff_mD, rtol=1e-6)
@@ -137,7 +131,7 @@ def test_report_is_self_contained_with_hash_version_verdict(analysed):
     p = _Collector()
     p.feed(html)
     assert p.ids["verdict"].strip() == "FAIL"
-    assert p.ids["version"] == "0.1.0"
+    assert p.ids["version"] == glassdist.__version__
     sha = hashlib.sha256(analysed["image"].read_bytes()).hexdigest()
     assert sha in html and hashlib.sha256(analysed["ref"].read_bytes()).hexdigest() in html
     assert not p.links  # nothing external: no stylesheet, script or link to fetch
@@ -148,8 +142,8 @@ def test_report_is_self_contained_with_hash_version_verdict(analysed):
         assert base64.b64decode(img["src"].split(",", 1)[1])[:4] == b"\x89PNG"
     data = json.loads(p.ids["glassdist-report-data"])
     assert data["inputs"]["image"]["sha256"] == sha
-    assert data["verdict"]["result"] == "FAIL" and data["glassdist_version"] == "0.1.0"
-    assert data["pitch_mm"] == 5.0 and data["distance_m"] == 1.5
+    assert data["verdict"]["result"] == "FAIL" and data["glassdist_version"] == glassdist.__version__
+    assert data["pitch_mm"] == 2.0 and data["distance_m"] == 1.0
     for words in ("Capture geometry", "Comparative method", "p95 |phi_shear| &lt;= 5 mD", "strict"):
         assert words in html
 
@@ -188,20 +182,28 @@ def test_report_parameters_show_the_smoothing_used(analysed):
     # the parameters leave sigma_mm at its default (None = 2 carrier periods); the report shows the value used
     html = (analysed["out"] / "report.html").read_text(encoding="utf-8")
     _, data = _report_data(html)
-    assert data["parameters"]["sigma_mm"] == data["sigma_mm"] == 2.0
-    assert '"sigma_mm": null' not in html and '&quot;sigma_mm&quot;: 2.0' in html
+    assert data["parameters"]["sigma_mm"] == data["sigma_mm"] == 4.0  # 2 carrier periods of the 2 mm grid
+    assert '"sigma_mm": null' not in html and '&quot;sigma_mm&quot;: 4.0' in html
 
 
-def test_direct_report_shows_the_homography_fit():
+def test_direct_report_shows_the_homography_fit(analysed):
     from glassdist.report.html import render_report
     from glassdist.report.stats import result_statistics
 
-    result = fake_result(method="direct")
-    inputs = {"image": {"name": "pane.png", "sha256": "0" * 64, "size": "128 x 96 px"}, "reference": None}
+    result = glassdist.analyze(analysed["image"], pitch_mm=2.0, distance_m=1.0)  # the Direct Method
+    fit = result.homography_fit
+    assert 0.3 < fit.inlier_fraction <= 1.0 and fit.n_points > 100
+    inputs = {"image": {"name": "pane.png", "sha256": "0" * 64, "size": "160 x 160 px"}, "reference": None}
     html = render_report(result, stats=result_statistics(result), figures=[], inputs=inputs)
     p, data = _report_data(html)
-    assert data["homography_fit"] == {"inlier_fraction": 0.875, "n_points": 400, "rms_inlier_px": 0.125}
-    assert p.ids["homography-fit"] == "inliers 87.5 % of 400 grid points, RMS inlier reprojection error 0.125 px"
+    assert data["homography_fit"]["n_points"] == fit.n_points
+    assert data["homography_fit"]["inlier_fraction"] == pytest.approx(fit.inlier_fraction)
+    assert data["homography_fit"]["rms_inlier_px"] == pytest.approx(fit.rms_inlier_px)
+    words = p.ids["homography-fit"].split()
+    assert words[0] == "inliers" and float(words[1]) == pytest.approx(100 * fit.inlier_fraction, abs=0.05)
+    assert f"of {fit.n_points} grid points, RMS inlier reprojection error" in p.ids["homography-fit"]
+    assert float(words[-2]) == pytest.approx(fit.rms_inlier_px, rel=0.01) and words[-1] == "px"
     # a Comparative report has no homography, hence no fit row
-    html = render_report(fake_result(), stats=result_statistics(fake_result()), figures=[], inputs=inputs)
+    comp = analysed["result"]
+    html = render_report(comp, stats=result_statistics(comp), figures=[], inputs=inputs)
     assert 'id="homography-fit"' not in html and _report_data(html)[1]["homography_fit"] is None

@@ -195,3 +195,30 @@ def test_uncertainty_criteria_fail_a_noisy_capture_and_pass_a_clean_one():
         sigmas[noise] = (acc.stats["phi_eff_sigma"]["p95_abs"], acc.verdict.passed)
     assert sigmas[0.0][1] and not sigmas[0.08][1], sigmas
     assert "phi_eff_sigma" not in assess(res).stats  # judged only when a criterion asks
+
+
+def test_pane_corners_must_be_a_convex_quadrilateral():
+    """Convex in either order is accepted; concave, self-crossing or with three corners on a line is refused."""
+    import pydantic
+
+    from glassdist.report.spec import Pane
+
+    square = [[0, 0], [100, 0], [100, 80], [0, 80]]
+    for corners in (square, square[::-1]):
+        assert Pane(corners_px=corners, size_mm=[500, 400])
+    dart = [[0, 0], [100, 0], [40, 30], [0, 80]]  # concave at the third corner
+    bow_tie = [[0, 0], [100, 80], [100, 0], [0, 80]]  # self-crossing
+    flat = [[0, 0], [50, 0], [100, 0], [100, 100]]  # three corners on a line
+    for corners in (dart, dart[::-1], bow_tie, flat, flat[::-1]):
+        with pytest.raises(pydantic.ValidationError, match="convex quadrilateral"):
+            Pane(corners_px=corners, size_mm=[500, 400])
+
+
+def test_protocol_sigma_in_carrier_periods_of_a_checkerboard():
+    """sigma_periods counts carrier periods: pitch for lines, pitch * sqrt(2) for a checkerboard."""
+    from glassdist.report.spec import Protocol, resolve_protocol
+
+    for pattern, period in (("lines", 5.0), ("checkerboard", 5.0 * np.sqrt(2.0))):
+        r = resolve_protocol(Protocol(sigma_periods=2, pattern=pattern), reference_given=True, pitch_mm=5.0,
+                             distance_m=1.0)
+        assert r.sigma_mm == pytest.approx(2 * period), pattern

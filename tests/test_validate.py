@@ -39,18 +39,70 @@ def _small_wavy(tmp_path):
 @pytest.mark.slow
 @pytest.mark.parametrize("method", ["direct", "comparative"])
 def test_validate_command_on_a_small_wavy_slab(tmp_path, method):
+    """The command's files, and the analyzer against the exact landing points evaluated independently.
+
+    320 x 240 px, 48.4 mm pitch, 4 spp. The truth is the tracer's exact displacement through
+    ``tests/_truth.py`` (not the evaluation stack the analyzer and the model share), on the
+    compared region. Measured (docs/virtual_pipeline.md): analyzer / truth 0.9915, 0.9918,
+    0.9924 (Direct) and 0.9957, 0.9980, 0.9981 (Comparative); the same-stack model ratios
+    0.9910-0.9919 and 0.9952-0.9976, rotation 0.070 and 0.073 deg. Margins: 0.004 on ratios
+    (the render is seeded, so what moves them is the platform's arithmetic and a change of
+    method), 0.02 deg on the rotation.
+    """
+    import _truth
+
+    from glassdist.render import landing_points
+    from glassdist.scene import landing_jacobian
+    from glassdist.virtual import validate_scene
+
+    path = _small_wavy(tmp_path)
     out = tmp_path / "out"
-    assert main(["validate", str(_small_wavy(tmp_path)), "--method", method, "--out", str(out), "--no-progress"]) == 0
+    assert main(["validate", str(path), "--method", method, "--out", str(out), "--no-progress"]) == 0
     rec = json.loads((out / "validation.json").read_text())
-    for name in ("phi_eff", "phi_shear", "phi_total"):
-        assert 0.95 < rec["ratios"][name] < 1.05
-        assert rec["correlations"][name] > 0.97
-        assert rec["model_vs_exact"][name] == pytest.approx(1.0, abs=0.01)
-    assert abs(rec["procrustes"]["rotation_deg"]) < 0.5
-    assert rec["procrustes"]["scale"] == pytest.approx(1.0, abs=0.05)
     assert rec["method"] == method
     for f in ("distorted.png", "reference.png", "validation.png"):
         assert (out / f).stat().st_size > 0
+    expect = {"direct": ((0.9915, 0.9918, 0.9924), (0.9910, 0.9913, 0.9919), 0.070),
+              "comparative": ((0.9957, 0.9980, 0.9981), (0.9952, 0.9975, 0.9976), 0.073)}[method]
+    names = ("phi_eff", "phi_shear", "phi_total")
+    for name, want in zip(names, expect[1]):
+        assert rec["ratios"][name] == pytest.approx(want, abs=0.004), (name, rec["ratios"][name])
+        assert rec["correlations"][name] > 0.99
+    assert rec["procrustes"]["rotation_deg"] == pytest.approx(expect[2], abs=0.02)
+    # against the exact landing points, evaluated independently of the analyzer's stack
+    scene = load_scene(path)
+    val, _ = validate_scene(scene, method=method)
+    res = val.analysis
+    exact = landing_points(scene).displacement_mm
+    region = res.valid & np.all(np.isfinite(exact), axis=-1)
+    truth = _truth.evaluate(np.nan_to_num(exact), region, distance_m=scene.backdrop.distance_m, mm_per_px=res.mm_per_px,
+                            detrend_degree=res.detrend_degree, sigma_mm=res.sigma_mm, jacobian=landing_jacobian(scene))
+    for name, want in zip(names, expect[0]):
+        a, b = getattr(res, name + "_mD")[val.valid], getattr(truth, name + "_mD")[val.valid]
+        assert np.mean(np.abs(a)) / np.mean(np.abs(b)) == pytest.approx(want, abs=0.004), name
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["direct", "comparative"])
+def test_paper_table_2_at_full_size(method):
+    """README Table 2 (exact engine), at the figures it states.
+
+    Wavy slab, 1024 x 768 px, 16 spp, analyzer / analytical: Direct 0.9960, 0.9962, 0.9962,
+    rotation +0.038 deg, scale 0.9988; Comparative 0.9998 (three channels), +0.0004 deg,
+    0.9995. The render is seeded and the exact tracer deterministic: the margins (0.002 on
+    ratios and scale, 0.01 deg) cover the rounding of the stated figures and the platform's
+    arithmetic, not a change of method (re-measure and update the table then).
+    """
+    from glassdist.virtual import validate_scene
+
+    val, _ = validate_scene(load_scene(EXAMPLES / "wavy_slab.yaml"), method=method)
+    m = val.metrics
+    ratios, rot, scale = {"direct": ((0.9960, 0.9962, 0.9962), 0.038, 0.9988),
+                          "comparative": ((0.9998, 0.9998, 0.9998), 0.0004, 0.9995)}[method]
+    for name, want in zip(("phi_eff", "phi_shear", "phi_total"), ratios):
+        assert m["ratios"][name] == pytest.approx(want, abs=0.002), (name, m["ratios"][name])
+    assert m["procrustes"]["rotation_deg"] == pytest.approx(rot, abs=0.01)
+    assert m["procrustes"]["scale"] == pytest.approx(scale, abs=0.002)
 
 
 def test_render_and_predict_commands(tmp_path):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import shutil
 import socket
+import sys
 import threading
 import time
 from pathlib import Path
@@ -92,9 +93,9 @@ def _chromium():
 
 
 def test_upload_result_and_report_in_headless_chromium(server, tmp_path):
+    exe = _chromium()  # skips without chromium or playwright: checked before anything is imported
     from playwright.sync_api import sync_playwright
 
-    exe = _chromium()
     url, _ = server
     spec = tmp_path / "spec.json"
     spec.write_text(json.dumps(STRICT))
@@ -245,6 +246,14 @@ def test_kept_jobs_have_a_disk_budget(tmp_path):
 
 
 @pytest.mark.filterwarnings("ignore:Using `httpx` with `starlette.testclient`")
+def test_the_browser_test_skips_without_playwright(monkeypatch, tmp_path):
+    """Without glassdist[browser-tests] the browser test is skipped, not failed (nothing else is touched)."""
+    for name in ("playwright", "playwright.sync_api"):
+        monkeypatch.setitem(sys.modules, name, None)  # importing it raises ImportError
+    with pytest.raises(pytest.skip.Exception):
+        test_upload_result_and_report_in_headless_chromium(None, tmp_path)
+
+
 def test_a_server_reachable_from_elsewhere_says_so(capsys, monkeypatch):
     from fastapi.testclient import TestClient
 

@@ -142,7 +142,7 @@ def colour_limits(result, spec=None, channels=("phi_eff", "phi_shear")):
     """Colour limit (mD) of each heatmap: the spec's choice (``figures.colour_limit``), else a shared p99.
 
     The shared p99 is taken where the heatmaps are drawn from: the trusted samples of the
-    analysis grid (a result without one: its trusted pixels).
+    analysis grid.
 
     Returns
     -------
@@ -151,11 +151,8 @@ def colour_limits(result, spec=None, channels=("phi_eff", "phi_shear")):
     """
     from .figures import CHANNELS, shared_limit
 
-    try:
-        maps = [result.grid_field(CHANNELS[c][0]) for c in channels]
-        valid = np.asarray(result.grid_valid, bool) & np.asarray(result.grid_trusted, bool)
-    except AttributeError:  # fields on the pixel grid only
-        valid, maps = measured_region(result), [getattr(result, CHANNELS[c][0]) for c in channels]
+    maps = [result.grid_field(CHANNELS[c][0]) for c in channels]
+    valid = np.asarray(result.grid_valid, bool) & np.asarray(result.grid_trusted, bool)
     shared = shared_limit(*maps, valid=valid)
     choice = spec.figures.colour_limit if spec is not None else "auto"
     if choice == "auto":

@@ -670,11 +670,7 @@ def _sigma_setting(protocol, values: dict, sources: dict, from_file: dict, param
 
 def px_per_period(result):
     """Shortest carrier period of the photo in px (the capture limit ``min_px_per_period`` is on it)."""
-    try:
-        return float(min(result.carriers.k1.period_px, result.carriers.k2.period_px))
-    except AttributeError:
-        period = getattr(result, "carrier_period_mm", None)
-        return float(period / result.mm_per_px) if period else float("nan")
+    return float(min(result.carriers.k1.period_px, result.carriers.k2.period_px))
 
 
 def check_lens_source(protocol, *, lens_photo: bool, camera_file: bool, spec_label="the specification") -> None:

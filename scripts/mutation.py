@@ -1,0 +1,216 @@
+"""Mutation testing of the core: do the tests notice when the code is changed a little?
+
+Each mutant changes one operator or constant of one function of a core module (Block F
+``analyzer/fourier.py``, the unwrapping ``analyzer/unwrap.py``, Block I
+``analyzer/homography.py``, Block A ``analyzer/metrics.py``, the acceptance checks
+``report/acceptance.py`` and ``report/spec.py``). It is written into a scratch copy of
+``src/`` and the module's targeted tests run against it (``PYTHONPATH``, first failure
+stops the run). A mutant is *killed* when a test fails (or the run exceeds the time
+limit), *survived* otherwise. The mutants are a seeded random sample of every possible
+one (``--per-module``; all of them with ``--per-module 0``).
+
+Operators: ``+`` <-> ``-``, ``*`` <-> ``/``, ``**`` -> ``*``, ``//`` -> ``/``, comparisons
+(``<`` <-> ``<=``, ``>`` <-> ``>=``, ``==`` <-> ``!=``), ``and`` <-> ``or``, unary minus
+and ``not`` removed, numeric constants (0 -> 1, 1 -> 2, other ints n -> n + 1, floats
+x -> 1.5 x, 0.0 -> 1.0), ``True`` <-> ``False``. Docstrings, annotations, log and error
+messages are not mutated.
+
+Usage::
+
+    python scripts/mutation.py [--per-module 25] [--seed 0] [--modules metrics,acceptance:10]
+                               [--out mutation.json] [--python PYTHON]
+
+Writes a JSON record (every mutant: module, line, the changed source line, the outcome)
+and prints the kill rate per module and each surviving mutant. It need not run in CI:
+a full sample takes about 40 minutes on two cores (docs/testing.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import copy
+import json
+import os
+import random
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+#: module (under src/glassdist) -> the tests that target it (fast: about 10-20 s each run)
+MODULES = {
+    "fourier": ("analyzer/fourier.py", ["tests/test_analyzer_fourier.py", "tests/test_accuracy_truth.py",
+                                       "tests/test_adversarial_limits.py::test_a_grid_finer_than_3_px_is_refused"]),
+    "unwrap": ("analyzer/unwrap.py", ["tests/test_analyzer_unwrap.py", "tests/test_accuracy_truth.py"]),
+    "homography": ("analyzer/homography.py", ["tests/test_analyzer_homography.py", "tests/test_homography_refit.py",
+                                             "tests/test_accuracy_truth.py"]),
+    "metrics": ("analyzer/metrics.py", ["tests/test_analyzer_metrics.py", "tests/test_streamed_statistics.py",
+                                       "tests/test_accuracy_truth.py"]),
+    "acceptance": ("report/acceptance.py", ["tests/test_acceptance.py"]),
+    "spec": ("report/spec.py", ["tests/test_spec.py"]),
+}
+
+_SWAP = {ast.Add: ast.Sub, ast.Sub: ast.Add, ast.Mult: ast.Div, ast.Div: ast.Mult, ast.Pow: ast.Mult,
+         ast.FloorDiv: ast.Div, ast.Lt: ast.LtE, ast.LtE: ast.Lt, ast.Gt: ast.GtE, ast.GtE: ast.Gt,
+         ast.Eq: ast.NotEq, ast.NotEq: ast.Eq, ast.And: ast.Or, ast.Or: ast.And}
+_QUIET_CALLS = {"warn", "warning", "debug", "info", "error", "append", "InputError", "AnalysisError", "ValueError",
+                "TypeError", "RuntimeError"}
+
+
+def _skipped_nodes(tree: ast.AST) -> set[int]:
+    """ids of nodes never mutated: docstrings, annotations, messages (f-strings and what they format)."""
+    skip = set()
+    for node in ast.walk(tree):
+        body = getattr(node, "body", None)
+        if isinstance(body, list) and body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant):
+            skip.update(id(n) for n in ast.walk(body[0]))
+        for ann in (getattr(node, "annotation", None), getattr(node, "returns", None)):
+            if ann is not None:
+                skip.update(id(n) for n in ast.walk(ann))
+        if isinstance(node, ast.JoinedStr):
+            skip.update(id(n) for n in ast.walk(node))
+        if isinstance(node, ast.Call):
+            name = getattr(node.func, "attr", getattr(node.func, "id", ""))
+            if name in _QUIET_CALLS:
+                skip.update(id(n) for a in node.args for n in ast.walk(a))
+        if isinstance(node, ast.Assign) and any(getattr(t, "id", "") == "__all__" for t in node.targets):
+            skip.update(id(n) for n in ast.walk(node))
+    return skip
+
+
+def _points(tree: ast.AST) -> list[tuple[int, str]]:
+    """Every mutation point: (index of the node in ast.walk order, kind)."""
+    skip = _skipped_nodes(tree)
+    out = []
+    inside_function = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            inside_function.update(id(n) for stmt in node.body for n in ast.walk(stmt))
+    for i, node in enumerate(ast.walk(tree)):
+        if id(node) in skip or id(node) not in inside_function:
+            continue
+        if isinstance(node, (ast.BinOp, ast.AugAssign)) and type(node.op) in _SWAP:
+            out.append((i, "binop"))
+        elif isinstance(node, ast.Compare) and type(node.ops[0]) in _SWAP:
+            out.append((i, "compare"))
+        elif isinstance(node, ast.BoolOp):
+            out.append((i, "boolop"))
+        elif isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.Not)):
+            out.append((i, "unary"))
+        elif isinstance(node, ast.Constant) and type(node.value) in (int, float, bool):
+            out.append((i, "constant"))
+    return out
+
+
+def _mutate(tree: ast.AST, index: int) -> tuple[ast.AST, int]:
+    """A copy of ``tree`` with the ``index``-th node (ast.walk order) mutated; and its line."""
+    new = copy.deepcopy(tree)
+    node = list(ast.walk(new))[index]
+    line = node.lineno
+    if isinstance(node, (ast.BinOp, ast.AugAssign)):
+        node.op = _SWAP[type(node.op)]()
+    elif isinstance(node, ast.Compare):
+        node.ops[0] = _SWAP[type(node.ops[0])]()
+    elif isinstance(node, ast.BoolOp):
+        node.op = _SWAP[type(node.op)]()
+    elif isinstance(node, ast.UnaryOp):
+        parent = next(p for p in ast.walk(new) for f, v in ast.iter_fields(p)
+                      if v is node or (isinstance(v, list) and any(x is node for x in v)))
+        for f, v in ast.iter_fields(parent):
+            if v is node:
+                setattr(parent, f, node.operand)
+            elif isinstance(v, list):
+                v[:] = [node.operand if x is node else x for x in v]
+    elif isinstance(node, ast.Constant):
+        v = node.value
+        if isinstance(v, bool):
+            node.value = not v
+        elif isinstance(v, int):
+            node.value = v + 1
+        else:
+            node.value = 1.0 if v == 0 else v * 1.5
+    return ast.fix_missing_locations(new), line
+
+
+def _run_tests(python: str, src: Path, tests: list[str], timeout_s: float) -> tuple[str, float]:
+    env = dict(os.environ, PYTHONPATH=str(src), PYTHONDONTWRITEBYTECODE="1", MPLBACKEND="Agg")
+    t0 = time.monotonic()
+    try:
+        r = subprocess.run([python, "-m", "pytest", "-q", "-x", "-p", "no:cacheprovider", *tests], cwd=REPO, env=env,
+                           capture_output=True, text=True, timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        return "killed (timeout)", time.monotonic() - t0
+    dt = time.monotonic() - t0
+    if r.returncode == 0:
+        return "survived", dt
+    if r.returncode == 1:
+        return "killed", dt
+    return f"killed (pytest exit {r.returncode})", dt  # e.g. an import error of the mutant
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--per-module", type=int, default=25, help="mutants sampled per module (0: all)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--modules", default=",".join(MODULES),
+                    help="comma-separated subset of " + ", ".join(MODULES) + "; NAME:N samples N mutants of that one")
+    ap.add_argument("--out", type=Path, default=Path("mutation.json"))
+    ap.add_argument("--python", default=sys.executable)
+    ap.add_argument("--timeout-factor", type=float, default=3.0,
+                    help="a mutant whose tests run longer than this many times the unchanged run is killed (timeout)")
+    args = ap.parse_args(argv)
+    rng = random.Random(args.seed)
+    record = {"seed": args.seed, "per_module": args.per_module, "modules": {}}
+    with tempfile.TemporaryDirectory(prefix="glassdist-mutation-") as tmp:
+        src = Path(tmp) / "src"
+        shutil.copytree(REPO / "src", src, ignore=shutil.ignore_patterns("__pycache__"))
+        for item in args.modules.split(","):
+            name, _, count = item.partition(":")
+            per_module = int(count) if count else args.per_module
+            rel, tests = MODULES[name]
+            path = src / "glassdist" / rel
+            original = path.read_text()
+            base, base_s = _run_tests(args.python, src, tests, 1200)
+            if base != "survived":
+                raise SystemExit(f"{name}: the targeted tests fail on the unchanged code ({base})")
+            tree = ast.parse(original)
+            points = _points(tree)
+            chosen = sorted(rng.sample(points, min(len(points), per_module)) if per_module else points)
+            lines = original.splitlines()
+            results = []
+            print(f"## {name}: {len(chosen)} of {len(points)} mutants, tests {base_s:.0f} s unchanged", flush=True)
+            for index, kind in chosen:
+                mutant, line = _mutate(tree, index)
+                path.write_text(ast.unparse(mutant))
+                outcome, dt = _run_tests(args.python, src, tests, max(60.0, args.timeout_factor * base_s))
+                after = ast.unparse(mutant).splitlines()
+                results.append({"line": line, "kind": kind, "source": lines[line - 1].strip(), "outcome": outcome,
+                                "seconds": round(dt, 1), "mutant_context": _changed(ast.unparse(tree), after)})
+                print(f"  {outcome:<22} {rel}:{line} [{kind}] {lines[line - 1].strip()[:90]}", flush=True)
+                args.out.write_text(json.dumps(record | {"modules": record["modules"] | {name: results}}, indent=1))
+            path.write_text(original)
+            killed = sum(r["outcome"].startswith("killed") for r in results)
+            record["modules"][name] = results
+            print(f"   {name}: {killed} of {len(results)} killed", flush=True)
+    args.out.write_text(json.dumps(record, indent=1))
+    total = sum(len(v) for v in record["modules"].values())
+    killed = sum(r["outcome"].startswith("killed") for v in record["modules"].values() for r in v)
+    print(f"killed {killed} of {total} ({100 * killed / max(total, 1):.1f} %)")
+    return 0
+
+
+def _changed(before: str, after: list[str]) -> str:
+    """The first line of the unparsed module that the mutation changed (what the mutant reads)."""
+    for a, b in zip(before.splitlines(), after):
+        if a != b:
+            return b.strip()
+    return ""
+
+
+if __name__ == "__main__":
+    sys.exit(main())

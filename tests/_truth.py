@@ -1,0 +1,158 @@
+"""An independent evaluation of a known displacement field: the truth the accuracy tests compare with.
+
+The analyzer's own evaluation stack (``glassdist.analyzer.metrics``) is what these tests
+check, so the truth is written out here from the definitions in the README ("Conventions",
+"A2", "A3") and imports nothing from ``glassdist`` (``tests/test_truth_layout.py`` pins
+that rule):
+
+* A2 detrend: the least-squares polynomial of total degree N (monomials x^i y^j,
+  i + j <= N) fitted to each component over the region, subtracted
+  (``numpy.linalg.lstsq`` on the region's samples).
+* Reporting smoothing: Gaussian of standard deviation sigma_px = sigma_mm / mm_per_px,
+  normalised by the region (normalised convolution, Knutsson & Westin 1993): order 0
+  divides the filtered field by the filtered mask; order 1 fits a plane per sample with
+  Gaussian weights (what the README states: "linear trends survive at region borders").
+  Built on ``scipy.ndimage.gaussian_filter`` in the spatial domain (the analyzer filters
+  in the Fourier domain).
+* A3: centred differences (``numpy.gradient``) in pixels, turned into gradients with
+  respect to backdrop mm through the inverse of the Jacobian dX/dr (or 1 / mm_per_px),
+  eps = sym(grad delta), and the channels
+
+  phi_eff = tr(eps) / L,  phi_shear = (2 / L) sqrt(((exx - eyy) / 2)^2 + exy^2),
+  phi_total = ||eps||_F / L  (x 1000 for mD, L in m),
+
+  axis = direction of largest stretch of the traceless part of eps, degrees in (-90, 90]
+  from +x towards +y.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+__all__ = ["TruthChannels", "detrend", "smooth", "gradient_mm", "channels", "evaluate", "truth_for",
+           "axis_difference_deg"]
+
+
+@dataclass(frozen=True)
+class TruthChannels:
+    """The truth's fields on the pixel grid of the displacement (NaN outside the region)."""
+
+    phi_eff_mD: np.ndarray
+    phi_shear_mD: np.ndarray
+    phi_total_mD: np.ndarray
+    axis_deg: np.ndarray
+    displacement_detrended_mm: np.ndarray
+    strain: np.ndarray
+
+
+def detrend(field: np.ndarray, mask: np.ndarray, degree: int) -> np.ndarray:
+    """Subtract from ``field`` (h, w) the least-squares polynomial of total degree ``degree`` over ``mask``."""
+    rows, cols = np.nonzero(mask)
+    # pixel coordinates scaled to about [-1, 1] for a well-conditioned fit
+    x = (cols - cols.mean()) / max(np.ptp(cols), 1) * 2.0
+    y = (rows - rows.mean()) / max(np.ptp(rows), 1) * 2.0
+    basis = np.column_stack([x**i * y**(n - i) for n in range(degree + 1) for i in range(n + 1)])
+    coef = np.linalg.lstsq(basis, field[mask], rcond=None)[0]
+    out = np.full(field.shape, np.nan)
+    out[mask] = field[mask] - basis @ coef
+    return out
+
+
+def smooth(field: np.ndarray, mask: np.ndarray, sigma_px: float, order: int = 1) -> np.ndarray:
+    """Gaussian smoothing of ``field`` restricted to ``mask`` (normalised convolution of order 0 or 1).
+
+    Order 1 solves, at every sample, the Gaussian-weighted least-squares plane
+    a + b (x' - x) + c (y' - y) over the masked samples x' and returns a.
+    """
+    w = mask.astype(float)
+    f = np.where(mask, field, 0.0)
+
+    def g(a):
+        return ndimage.gaussian_filter(a, sigma_px, mode="constant", cval=0.0, truncate=4.0)
+
+    m0, mf = g(w), g(w * f)
+    if order == 0:
+        return np.where(mask, mf / np.where(mask, m0, 1.0), np.nan)
+    rows, cols = np.indices(field.shape, dtype=float)
+    x, y = cols - cols.mean(), rows - rows.mean()  # centred: moments stay small
+    mx, my = g(w * x), g(w * y)
+    mxx, mxy, myy = g(w * x * x), g(w * x * y), g(w * y * y)
+    mxf, myf = g(w * x * f), g(w * y * f)
+    # moments about each sample (x, y): sum w (x'-x)^k (y'-y)^l
+    sx, sy = mx - x * m0, my - y * m0
+    sxx = mxx - 2 * x * mx + x * x * m0
+    syy = myy - 2 * y * my + y * y * m0
+    sxy = mxy - x * my - y * mx + x * y * m0
+    sxf, syf = mxf - x * mf, myf - y * mf
+    A = np.stack([np.stack([m0, sx, sy], -1), np.stack([sx, sxx, sxy], -1), np.stack([sy, sxy, syy], -1)], -2)
+    b = np.stack([mf, sxf, syf], -1)
+    out = np.full(field.shape, np.nan)
+    out[mask] = np.linalg.solve(A[mask], b[mask][..., None])[..., 0, 0]
+    return out
+
+
+def gradient_mm(field: np.ndarray, *, mm_per_px: float | None = None, jacobian: np.ndarray | None = None) -> np.ndarray:
+    """grad field (h, w, 2, 2): ``[..., c, k] = d field_c / d X_k`` with X in backdrop mm (centred differences)."""
+    G = np.empty(field.shape[:2] + (2, 2))
+    for c in range(2):
+        d_row, d_col = np.gradient(field[..., c])  # per pixel along rows (y) and columns (x)
+        G[..., c, 0], G[..., c, 1] = d_col, d_row
+    if jacobian is None:
+        return G / mm_per_px
+    return G @ np.linalg.inv(jacobian)  # d/dX = d/dr . (dX/dr)^-1
+
+
+def channels(eps: np.ndarray, distance_m: float):
+    """(phi_eff, phi_shear, phi_total) in mD and the axis in degrees, from eps (h, w, 2, 2)."""
+    exx, eyy, exy = eps[..., 0, 0], eps[..., 1, 1], eps[..., 0, 1]
+    k = 1000.0 / distance_m
+    phi_eff = (exx + eyy) * k
+    phi_shear = 2.0 * np.sqrt(((exx - eyy) / 2.0) ** 2 + exy**2) * k
+    phi_total = np.sqrt(np.sum(eps**2, axis=(-2, -1))) * k
+    # major eigenvector of the traceless part [[a, b], [b, -a]], a = (exx - eyy)/2, b = exy
+    a, b = (exx - eyy) / 2.0, exy
+    lam = np.sqrt(a * a + b * b)
+    vx, vy = b, lam - a  # (A - lam I) v = 0 -> v = (b, lam - a), unless that vanishes
+    flip = np.hypot(vx, vy) < 1e-12 * np.maximum(lam, 1e-300)
+    vx, vy = np.where(flip, lam + a, vx), np.where(flip, b, vy)
+    axis = np.degrees(np.arctan2(vy, vx))
+    axis = np.where(axis > 90.0, axis - 180.0, axis)
+    axis = np.where(axis <= -90.0, axis + 180.0, axis)
+    return phi_eff, phi_shear, phi_total, axis
+
+
+def evaluate(displacement_mm: np.ndarray, mask: np.ndarray, *, distance_m: float, mm_per_px: float,
+             detrend_degree: int, sigma_mm: float, jacobian: np.ndarray | None = None,
+             order: int = 1) -> TruthChannels:
+    """The truth's detrend, smoothing and channels of ``displacement_mm`` (h, w, 2) over ``mask``."""
+    mask = np.asarray(mask, bool)
+    sigma_px = sigma_mm / mm_per_px
+    sm = np.stack([smooth(detrend(displacement_mm[..., c], mask, detrend_degree), mask, sigma_px, order)
+                   for c in range(2)], -1)
+    grad = gradient_mm(sm, mm_per_px=mm_per_px, jacobian=jacobian)
+    eps = 0.5 * (grad + np.swapaxes(grad, -1, -2))
+    eff, shear, total, axis = channels(eps, distance_m)
+    out = [eff, shear, total, axis, sm, eps]
+    for a in out:
+        a[~mask] = np.nan
+    return TruthChannels(*out)
+
+
+def truth_for(cap, res, *, mask=None) -> TruthChannels:
+    """The truth of a synthetic capture ``cap`` evaluated as the result ``res`` documents it.
+
+    Same region (``res.valid``), detrend degree, smoothing scale, distance and scale as
+    the result, and the capture's own Jacobian (perspective).
+    """
+    return evaluate(cap.displacement_mm, res.valid if mask is None else mask, distance_m=res.distance_m,
+                    mm_per_px=res.mm_per_px, detrend_degree=res.detrend_degree, sigma_mm=res.sigma_mm,
+                    jacobian=cap.jacobian)
+
+
+def axis_difference_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """|a - b| for axes (modulo 180 degrees), in [0, 90]."""
+    d = np.abs((np.asarray(a) - np.asarray(b)) % 180.0)
+    return np.minimum(d, 180.0 - d)
