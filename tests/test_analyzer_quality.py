@@ -178,7 +178,7 @@ def test_reference_photo_warnings_reach_the_result():
 
 
 def test_strong_distortion_advice_fits_the_method():
-    cap = synthetic_capture((400, 520), pitch_mm=P, mm_per_px=1.0, displacement=wave_displacement(12.0, 160.0, 0.0))
+    cap = synthetic_capture((400, 520), pitch_mm=P, mm_per_px=1.0, displacement=wave_displacement(20.0, 160.0, 0.0))
     comp = analyze(cap.image, pitch_mm=P, distance_m=10.0, reference=cap.reference)
     direct = analyze(cap.image, pitch_mm=P, distance_m=10.0)
     strong = [w for w in comp.warnings if w.startswith("strong distortion")]
