@@ -34,8 +34,8 @@ from .metrics import evaluate_displacement, inverse_2x2, polynomial_detrend
 from .transfer import InstrumentTransfer
 from .params import AnalyzerParams, load_params
 from .region import (
-    BEYOND_RANGE, LOW_MODULATION, Region, beyond_range_warning, contamination_px, guard_band, local_contrast, trim_edges,
-    valid_region, within,
+    ANALYSED, BEYOND_RANGE, LOW_MODULATION, Region, beyond_range_warning, contamination_px, downsample_mask, guard_band,
+    local_contrast, trim_edges, valid_region, within,
 )
 from .resample import image_grid_valid
 from .result import AnalysisResult
@@ -941,7 +941,25 @@ def _evaluate(meas: _Measurement, ag: _AnalysisGrid, warn: list[str]):
     fields = _result_fields(delta_cam, ch)
     fields.update(_uncertainty(ag, meas.phase_noise, ch, a1, meas.sigma_mm / meas.mm_per_px, meas.distance_m))
     valid_full, idx = _reported_region(fields, ag, meas.inputs.mask, meas.margin_px[1], warn)
+    _warn_few_trusted(meas.quality, meas.label_grid, meas.inputs.mask, warn)
     return ag, fields, valid_full, idx
+
+
+# Share of the requested region below which the trusted pixels (quality label 0) are called few.
+_FEW_TRUSTED = 0.01
+
+
+def _warn_few_trusted(quality: np.ndarray, grid: F.SamplingGrid, mask, warn: list[str]) -> None:
+    """Warn when no or few samples are trusted: the statistics are then null or cover little."""
+    in_mask = np.ones(grid.shape, bool) if mask is None else downsample_mask(mask, grid)
+    share = float(np.count_nonzero((quality == ANALYSED) & in_mask)) / max(int(np.count_nonzero(in_mask)), 1)
+    if share == 0.0:
+        warn.append(
+            "no pixel is trusted (quality label 0): every measured pixel lies within the guard band of an excluded area "
+            "or the image edge, so the statistics are null and a specification cannot pass; the maps are still written"
+        )
+    elif share < _FEW_TRUSTED:
+        warn.append(f"only {100 * share:.2f}% of the region is trusted (quality label 0): the statistics cover few pixels")
 
 
 def _result(meas: _Measurement, evaluated, warn: list[str], *, extra_fields: dict | None = None,
