@@ -990,5 +990,6 @@ def _result(meas: _Measurement, evaluated, warn: list[str], *, extra_fields: dic
         guard_px=meas.guard_px,
         noise_std=meas.noise_std,
         _deferred={"fields": {**fields, "quality": meas.quality, **(extra_fields or {})}, "idx": idx, "grid": ag.grid,
+                   "fit_valid": np.ascontiguousarray(ag.valid),
                    "label_grid": meas.label_grid, "mask": meas.inputs.mask},
     )
