@@ -72,9 +72,12 @@ def warped_reference(phase: np.ndarray, grid: F.SamplingGrid, carriers: F.Carrie
 
     ``sum_i cos(2 pi f_i . r + phase_i(r))`` with ``phase`` (h, w, 2) on ``grid`` (rad,
     continuous: the predictor's phase plus the reference's own), brought to the pixels by
-    ``cv2.resize`` (bilinear; it maps the grid's sample positions exactly). Demodulated by the
-    same filters as the photo, it carries the same local frequencies, so the heterodyne of
-    the two is the residual alone (the filters' non-linear effects cancel).
+    ``cv2.resize`` (bilinear: it maps the grid's sample positions exactly; its transfer,
+    ``sinc^2`` per axis, is applied to the predictor's share of the result, see
+    :func:`smoothing_correction`). Demodulated by the same
+    filters as the photo, it carries the same local frequencies and the same cross-talk
+    between the two carriers, so the heterodyne of the two is the residual alone (the
+    filters' non-linear effects cancel).
     """
     import cv2
 
@@ -90,11 +93,12 @@ def warped_reference(phase: np.ndarray, grid: F.SamplingGrid, carriers: F.Carrie
     return out
 
 
-def blur_cov(a: np.ndarray, cov_px2: np.ndarray, grid: F.SamplingGrid) -> np.ndarray:
+def blur_cov(a: np.ndarray, cov_px2: np.ndarray, grid: F.SamplingGrid, *, bilinear: bool = False) -> np.ndarray:
     """Gaussian of covariance ``cov_px2`` (px^2, (x, y) order) applied to ``a`` (h, w) on ``grid``.
 
     Spectral product ``exp(-2 pi^2 k^T C k)`` on the field extended by odd reflection
-    (a linear field is left exactly as it is, the edges included).
+    (a linear field is left exactly as it is, the edges included). ``bilinear``: times the
+    transfer of a bilinear interpolation from the grid, ``sinc^2(k_x s_x) sinc^2(k_y s_y)``.
     """
     sy, sx = grid.step
     sd = float(np.sqrt(np.max(np.linalg.eigvalsh(cov_px2))))
@@ -105,12 +109,19 @@ def blur_cov(a: np.ndarray, cov_px2: np.ndarray, grid: F.SamplingGrid) -> np.nda
     ky = sfft.fftfreq(ext.shape[0], d=sy)[:, None]
     kx = sfft.rfftfreq(ext.shape[1], d=sx)[None, :]
     q = cov_px2[0, 0] * kx**2 + 2 * cov_px2[0, 1] * kx * ky + cov_px2[1, 1] * ky**2
-    out = sfft.irfft2(sfft.rfft2(ext) * np.exp(-2 * np.pi**2 * q), s=ext.shape)
+    gain = np.exp(-2 * np.pi**2 * q)
+    if bilinear:
+        gain = gain * np.sinc(kx * sx) ** 2 * np.sinc(ky * sy) ** 2
+    out = sfft.irfft2(sfft.rfft2(ext) * gain, s=ext.shape)
     return out[py : py + h, px : px + w].astype(np.float32)
 
 
 def smoothing_correction(phase: np.ndarray, cov_px2: np.ndarray, grid: F.SamplingGrid) -> np.ndarray:
     """``G * P - P`` for the continuous phase ``P`` (rad, (h, w)) that ``phase`` wraps to; 0 near its cuts.
+
+    ``G``: the Gaussian of ``cov_px2`` times the bilinear interpolation's transfer by which
+    :func:`warped_reference` brings the predictor to the pixels (the warped reference carries
+    ``G * P`` through the filters' linear part, so the predictor's share of the phase is that).
 
     ``P`` is ``phase`` unwrapped over the whole grid. Around a phase singularity (a grid
     dislocation) any unwrapping leaves a cut of 2 pi, and ``G * P`` is meaningless within the
@@ -121,7 +132,7 @@ def smoothing_correction(phase: np.ndarray, cov_px2: np.ndarray, grid: F.Samplin
 
     every = np.ones(phase.shape, bool)
     P = unwrap(np.angle(np.exp(1j * phase)), every, every.astype(np.int32), 1)
-    corr = blur_cov(P, cov_px2, grid) - P
+    corr = blur_cov(P, cov_px2, grid, bilinear=True) - P
     cut = np.zeros(phase.shape, bool)
     jy = np.abs(np.diff(P, axis=0)) > np.pi
     jx = np.abs(np.diff(P, axis=1)) > np.pi

@@ -407,8 +407,8 @@ def _follow_local_grid(img, refm: ReferenceModel | None, demod: _Demodulation, r
         ph = np.angle(z) + pred[..., i] + D.smoothing_correction(pred[..., i], blur[i], grid)
         total.append((np.abs(z) * np.exp(1j * ph)).astype(np.complex64))
     # The bandpass's gain at the local frequency, read off the warped reference (a uniform grid
-    # of amplitude 1/2 per carrier): the photo's modulation is judged against it (a faint grid
-    # where the gain explains it is not occluded), and where the gain is below its value at
+    # of amplitude 1/2 per carrier): the photo's modulation is judged against it (a faint grid where the gain
+    # explains it is not occluded), and where the gain is below its value at
     # deformation_max_deviation off the carrier the signal is beyond reach.
     gain = [_modulation(r, c.period_px, grid, p) / np.float32(0.5) for r, c in zip(bb_ref, (ks.k1, ks.k2))]
     floor = float(np.exp(-0.5 * (p.deformation_max_deviation / p.bandpass_sigma_along) ** 2))
