@@ -887,7 +887,13 @@ def _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn
     _warn_sampling(carriers, warn)
     margins = _margins(carriers, demod.covariances, p, direct=demod.method == "direct")
     first: list[str] = []
-    contrast = local_contrast(inp.image, max(carriers.k1.period_px, carriers.k2.period_px), demod.grid)
+    held: list = []
+
+    def contrast():  # the photo's local contrast, computed once and only when an exclusion needs its cause
+        if not held:
+            held.append(local_contrast(inp.image, max(carriers.k1.period_px, carriers.k2.period_px), demod.grid))
+        return held[0]
+
     region = _region(demod, p, inp.mask, first, margins, contrast=contrast)
     _check_region(region, demod.mods, first)
     phases = _unwrapped_phases(demod, region, p)  # F4

@@ -226,8 +226,9 @@ def valid_region(
     beyond : ndarray of bool (h, w), optional
         Samples whose local frequency is beyond the bandpass's reach (F5: its gain there,
         read off the warped reference); labelled :data:`BEYOND_RANGE` with the local-frequency test's.
-    contrast : ndarray (h, w), optional
-        The photo's local contrast (:func:`local_contrast`): an excluded sample where the photo
+    contrast : callable returning ndarray (h, w), optional
+        The photo's local contrast (:func:`local_contrast`, computed only when some carrier lost
+        its modulation somewhere): an excluded sample where the photo
         keeps its contrast but its own carriers lost their modulation shows the grid at a
         frequency the bandpass does not pass (:data:`BEYOND_RANGE`), not an occlusion.
     """
@@ -328,7 +329,7 @@ def local_contrast(image: np.ndarray, period_px: float, grid: F.SamplingGrid) ->
     return np.sqrt(np.maximum(var, 0.0))
 
 
-def _grid_out_of_band(contrast: np.ndarray, mods, ok: np.ndarray, p, period: float, grid: F.SamplingGrid) -> np.ndarray:
+def _grid_out_of_band(contrast, mods, ok: np.ndarray, p, period: float, grid: F.SamplingGrid) -> np.ndarray:
     """Samples where the photo's own carriers lost their modulation but the photo kept half its typical detail.
 
     Within a period of a flat patch (a quarter of the typical detail or less: an occluder,
@@ -336,10 +337,13 @@ def _grid_out_of_band(contrast: np.ndarray, mods, ok: np.ndarray, p, period: flo
     """
     if not ok.any():
         return np.zeros(ok.shape, bool)
-    typical = float(np.median(contrast[ok]))
     weak = np.zeros(ok.shape, bool)
     for m in mods:
         weak |= m < p.modulation_threshold * np.percentile(m[::2, ::2], 75)
+    if not weak.any():
+        return weak
+    contrast = contrast()
+    typical = float(np.median(contrast[ok]))
     flat = contrast < 0.25 * typical
     if flat.any():
         flat = ndimage.distance_transform_edt(~flat, sampling=grid.step) <= period
