@@ -898,15 +898,21 @@ def _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn
     _check_region(region, demod.mods, first)
     phases = _unwrapped_phases(demod, region, p)  # F4
     followed = _follow_local_grid(inp.image, inp.reference, demod, region, phases, p)  # F5
+    if followed is not None:
+        f5_warn: list[str] = []
+        f5_demod, residual, region_mods, beyond = followed
+        f5_region = within(_region(f5_demod, p, inp.mask, f5_warn, margins, residual, region_mods, beyond, contrast),
+                           region, p)
+        if f5_region.n == 0:  # nothing F5 could measure: the one pass stands
+            followed = None
     if followed is None:
         warn.extend(first)
     else:
-        demod, residual, region_mods, beyond = followed
-        first = region
-        region = within(_region(demod, p, inp.mask, warn, margins, residual, region_mods, beyond, contrast), first, p)
         # Where the one-pass local frequency was already beyond the bandpass, F5 had no predictor
         # to follow: what it still cannot measure there is beyond reach, not occluded.
-        region.quality[(region.quality == LOW_MODULATION) & (first.quality == BEYOND_RANGE)] = BEYOND_RANGE
+        f5_region.quality[(f5_region.quality == LOW_MODULATION) & (region.quality == BEYOND_RANGE)] = BEYOND_RANGE
+        demod, region = f5_demod, f5_region
+        warn.extend(f5_warn)
         _check_region(region, demod.mods, warn)
         phases = _unwrapped_phases(demod, region, p)
     w_beyond = beyond_range_warning(region.quality, inp.mask, demod.grid, p)
