@@ -1,32 +1,29 @@
-"""Block F, stage F5: iterative image deformation (the demodulation follows the local grid).
+"""Block F, stage F5: iterative deformation of the reference (the demodulation follows the local grid).
 
 Block F's bandpass and complex smoothing are centred on the global carrier. Where the
 glass moves the local grid frequency away from it (a strong low-order displacement, or
 short waves), the demodulation is no longer linear: the bandpass attenuates and clips the
-sidebands and the phase reads low. Iterative image deformation (Scarano 2002; Huang et al.
-1993 in fringe analysis) removes the cause:
+sidebands, and the carriers leak into each other. Iterative deformation (Scarano 2002 in
+PIV; Huang et al. 1993 in fringe analysis) removes the cause:
 
-1. demodulate (F1-F4) and convert the phases to the displacement ``u`` (px, image frame),
-   ``img(r) = ref(r - u(r))``;
-2. warp the photo by the current estimate, ``img_w(r) = img(r + v(r))`` with ``v`` the
-   fixed point ``v(r) = u(r + v(r))``, so that ``img_w`` is close to the reference (the
-   flat carrier in the Direct Method): its local frequencies sit at the carrier;
-3. demodulate ``img_w`` (same carriers, same filters): its residual phase ``phi'`` is small
-   and measured linearly; ``v += u'`` (``u' = -F^{-1} phi' / 2 pi``);
-4. repeat until the update is below ``deformation_tolerance_periods``.
+1. demodulate (F1-F4): the one-pass phases ``phi_i`` predict the field;
+2. synthesise the reference warped by the prediction, ``sum_i cos(2 pi f_i . r + pred_i + own_i)``
+   (``own_i``: the reference photo's own phase; zero in the Direct Method), at full
+   resolution (:func:`warped_reference`);
+3. demodulate it with the same filters and heterodyne the photo against it: the photo and
+   the warped reference share their local frequencies, so the filters' non-linear response
+   cancels and the heterodyne is the residual ``phi - pred``, small and measured linearly;
+4. ``pred += residual``; repeat until the RMS update is below ``deformation_tolerance_periods``.
 
-The phase on the regular grid ``s`` follows from ``s = r + v(r)``:
-``phi_i(s) = phi'_i(r) - 2 pi f_i . v(r)`` (the reference's own phase change over ``v`` is
-neglected: it is the reference's distortion, second order). The predictor part is passed
-through the same Gaussian as Block F applies (:func:`blur_cov`), so the result is
-``G * phi`` exactly, ``G`` Block F's linear low-pass (:mod:`~glassdist.analyzer.transfer`),
-whatever the local frequency: the transfer function of the output is unchanged, its
-non-linear losses are gone.
+The phase handed on is ``G * pred + residual`` (:func:`smoothing_correction`), with ``G``
+Block F's linear transfer (the Gaussian of :mod:`~glassdist.analyzer.transfer`) times the
+bilinear interpolation by which the warped reference receives the prediction: the output's
+transfer function is exactly the one-pass linear one, without its non-linear losses.
 
 References
 ----------
 Scarano (2002), Meas. Sci. Technol. 13, R1: iterative image deformation methods in PIV.
-Huang, Fang & Seah (1993) and Wildeman (2018) for fringe/checkerboard demodulation.
+Huang, Fang & Seah (1993); Wildeman (2018), Exp. Fluids 59, 97 (checkerboard demodulation).
 """
 
 from __future__ import annotations
