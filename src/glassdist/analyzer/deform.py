@@ -64,17 +64,18 @@ def fill_nearest(a: np.ndarray, valid: np.ndarray) -> np.ndarray:
     return a[idx[0], idx[1]]
 
 
-def warped_reference(phase: np.ndarray, grid: F.SamplingGrid, carriers: F.CarrierPair) -> np.ndarray:
+def warped_reference(pred: np.ndarray, own: np.ndarray | None, grid: F.SamplingGrid, carriers: F.CarrierPair) -> np.ndarray:
     """The reference grid warped by the current displacement, as its two carriers (float32, full resolution).
 
-    ``sum_i cos(2 pi f_i . r + phase_i(r))`` with ``phase`` (h, w, 2) on ``grid`` (rad,
-    continuous: the predictor's phase plus the reference's own), brought to the pixels by
-    ``cv2.resize`` (bilinear: it maps the grid's sample positions exactly; its transfer,
-    ``sinc^2`` per axis, is applied to the predictor's share of the result, see
-    :func:`smoothing_correction`). Demodulated by the same
-    filters as the photo, it carries the same local frequencies and the same cross-talk
-    between the two carriers, so the heterodyne of the two is the residual alone (the
-    filters' non-linear effects cancel).
+    ``sum_i cos(2 pi f_i . r + pred_i(r) + own_i(r))``: ``pred`` (h, w, 2) on ``grid`` (rad,
+    continuous: the prediction) and ``own`` (h, w, 2) complex, the reference photo's own
+    baseband ``exp(i own_i)`` (None: the flat carrier of the Direct Method), both brought to
+    the pixels by ``cv2.resize`` (bilinear: it maps the grid's sample positions exactly; its
+    transfer, ``sinc^2`` per axis, is applied to the prediction's share of the result, see
+    :func:`smoothing_correction`; the reference's phase is interpolated as a phasor, so its
+    wraps do no harm). Demodulated by the same filters as the photo, it carries the same local
+    frequencies and the same cross-talk between the two carriers, so the heterodyne of the two
+    is the residual alone (the filters' non-linear effects cancel).
     """
     import cv2
 
@@ -82,11 +83,22 @@ def warped_reference(phase: np.ndarray, grid: F.SamplingGrid, carriers: F.Carrie
     y = np.arange(H, dtype=np.float32)[:, None]
     x = np.arange(W, dtype=np.float32)[None, :]
     out = np.zeros((H, W), np.float32)
+
+    def up(a):
+        return cv2.resize(np.ascontiguousarray(a, np.float32), (W, H), interpolation=cv2.INTER_LINEAR)
+
     for i, c in enumerate((carriers.k1, carriers.k2)):
-        ph = cv2.resize(np.ascontiguousarray(phase[..., i], np.float32), (W, H), interpolation=cv2.INTER_LINEAR)
+        ph = up(pred[..., i])
         ph += np.float32(2 * np.pi * c.fx) * x
         ph += np.float32(2 * np.pi * c.fy) * y
-        out += np.cos(ph)
+        if own is None:
+            out += np.cos(ph)
+            continue
+        u = own[..., i] / np.maximum(np.abs(own[..., i]), 1e-30)
+        re, im = up(u.real), up(u.imag)
+        norm = np.sqrt(re * re + im * im)
+        np.maximum(norm, np.float32(1e-6), out=norm)
+        out += (np.cos(ph) * re - np.sin(ph) * im) / norm
     return out
 
 

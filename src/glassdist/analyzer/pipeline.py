@@ -382,12 +382,11 @@ def _follow_local_grid(img, refm: ReferenceModel | None, demod: _Demodulation, r
         return None
     grid, covs = demod.grid, demod.covariances
     period = max(ks.k1.period_px, ks.k2.period_px)
-    own = np.zeros(grid.shape + (2,), np.float32) if refm is None else np.stack(
-        [np.angle(b) for b in refm.baseband], axis=-1)  # the reference's own phase (its lens, its print)
+    own = None if refm is None else np.stack(refm.baseband, axis=-1)  # the reference's own phase (its lens, its print)
     bb_img = _basebands(F.compute_spectrum(img), ks, covs, grid)
     pred = D.fill_nearest(np.nan_to_num(phases), region.valid)
     for k in range(p.deformation_passes):
-        ref_w = D.warped_reference(pred + own, grid, ks)
+        ref_w = D.warped_reference(pred, own, grid, ks)
         bb_ref = _basebands(F.compute_spectrum(ref_w), ks, covs, grid)
         del ref_w
         zs, cohs = _smooth_with_coherence(tuple(b * np.conj(r) for b, r in zip(bb_img, bb_ref)), (ks.k1, ks.k2), grid, p)
