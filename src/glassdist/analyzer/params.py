@@ -105,7 +105,7 @@ class AnalyzerParams(BaseModel):
         "its residual demodulated, so the bandpass sees the local grid at the carrier); 0 = one-pass demodulation",
     )
     deformation_min_deviation: float = Field(
-        0.15, ge=0, le=1.0,
+        0.2, ge=0, le=1.0,
         description="F5: the passes run only where the one-pass local grid frequency departs from the carrier by more "
         "than this fraction of |f| (99th percentile; below it the one-pass demodulation is linear)",
     )
