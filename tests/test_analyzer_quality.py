@@ -6,6 +6,7 @@ user mask, a grid dislocation (a phase residue at its core) and a too-strong loc
 
 import numpy as np
 import pytest
+from scipy import ndimage
 from scipy.special import ndtri
 
 from glassdist import analyze
@@ -185,7 +186,7 @@ def test_reference_photo_warnings_reach_the_result():
 
 
 def test_strong_distortion_advice_fits_the_method():
-    cap = synthetic_capture((400, 520), pitch_mm=P, mm_per_px=1.0, displacement=wave_displacement(12.0, 160.0, 0.0))
+    cap = synthetic_capture((400, 520), pitch_mm=P, mm_per_px=1.0, displacement=wave_displacement(20.0, 160.0, 0.0))
     comp = analyze(cap.image, pitch_mm=P, distance_m=10.0, reference=cap.reference)
     direct = analyze(cap.image, pitch_mm=P, distance_m=10.0)
     strong = [w for w in comp.warnings if w.startswith("strong distortion")]
@@ -221,3 +222,25 @@ def test_weak_homography_fit_is_reported():
     res = analyze(cap.image, pitch_mm=P, distance_m=10.0)
     assert 0.1 <= res.homography_fit.inlier_fraction < 0.25
     assert any(w.startswith("Direct Method: only") and "homography" in w for w in res.warnings), res.warnings
+
+
+def test_blurred_and_faint_patches_are_low_modulation_not_beyond_range():
+    # The grid washed out by blur, or printed at a tenth of its contrast: the carriers lose their
+    # modulation as where the local frequency leaves the bandpass, but the photo has lost its
+    # fine detail too: the cause is low modulation (label 2), not beyond range (label 3).
+    cap = synthetic_capture((256, 320), pitch_mm=P, mm_per_px=1.0, displacement=wave_displacement(0.5, 120.0, 0.0),
+                            noise_std=0.005, rng=4)
+    yy, xx = np.mgrid[0:256, 0:320]
+    img = cap.image.copy()
+    blurred = ndimage.gaussian_filter(cap.image, 6.0)
+    blur_patch = np.hypot(yy - 90, xx - 90) < 35
+    faint_patch = np.hypot(yy - 160, xx - 230) < 35
+    img[blur_patch] = blurred[blur_patch]
+    img[faint_patch] = 0.5 + 0.1 * (cap.image[faint_patch] - 0.5)
+    res = analyze(img, pitch_mm=P, distance_m=1.0, reference=cap.reference, params={"sigma_mm": 16.0})
+    q = res.quality
+    for centre in ((90, 90), (160, 230)):
+        core = q[_near(yy, xx, centre, 20)]
+        assert (core == LOW_MODULATION).all(), np.unique(core, return_counts=True)
+    assert not (q == BEYOND_RANGE).any()
+    assert not any(w.startswith("strong distortion") for w in res.warnings)

@@ -318,10 +318,14 @@ def _echo_run(result, folder, lines) -> None:
     s = json.loads((folder.path / "summary.json").read_text(encoding="utf-8"))["statistics"]
     optics = "" if result.optics is None else (
         f"reflection (D {result.optics['board_distance_m']:g} m, incidence {result.optics['incidence_deg']:g} deg), ")
+
+    def mD(v) -> str:  # null when no pixel is trusted
+        return "n/a" if v is None else f"{v:.3g} mD"
+
     print(
         f"{optics}{result.method} method: valid {100 * result.valid_fraction:.1f}% of the image, "
-        f"mean |phi_eff| {s['phi_eff_mD']['mean_abs']:.3g} mD, p95 |phi_eff| {s['phi_eff_mD']['p95_abs']:.3g} mD, "
-        f"mean phi_shear {s['phi_shear_mD']['mean_abs']:.3g} mD"
+        f"mean |phi_eff| {mD(s['phi_eff_mD']['mean_abs'])}, p95 |phi_eff| {mD(s['phi_eff_mD']['p95_abs'])}, "
+        f"mean phi_shear {mD(s['phi_shear_mD']['mean_abs'])}"
     )
     if folder.removed:
         print(f"removed from {folder.path}, left by the previous run: {', '.join(folder.removed)}")

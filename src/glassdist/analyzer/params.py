@@ -105,6 +105,25 @@ class AnalyzerParams(BaseModel):
         "(beyond it the bandpass attenuates or loses the signal: 'beyond measurable distortion'; at 0.5 the "
         "along-carrier bandpass passes a quarter of the amplitude)",
     )
+    deformation_passes: int = Field(
+        3, ge=0, le=8,
+        description="F5: largest number of image-deformation passes (the photo warped by the current displacement and "
+        "its residual demodulated, so the bandpass sees the local grid at the carrier); 0 = one-pass demodulation",
+    )
+    deformation_min_deviation: float = Field(
+        0.2, ge=0, le=1.0,
+        description="F5: the passes run only where the one-pass local grid frequency departs from the carrier by more "
+        "than this fraction of |f| (99th percentile; below it the one-pass demodulation is linear)",
+    )
+    deformation_max_deviation: float = Field(
+        0.75, gt=0, le=1.5,
+        description="F5: reach after image deformation, fraction of |f|: where the bandpass's gain at the local grid "
+        "frequency is below its value this far off the carrier the sample is 'beyond measurable distortion'",
+    )
+    deformation_tolerance_periods: float = Field(
+        0.002, gt=0, le=0.5,
+        description="F5: the passes stop when the RMS update of the displacement is below this, carrier periods",
+    )
     min_region_fraction: float = Field(0.01, ge=0, lt=1, description="valid region: drop connected regions smaller than this fraction of the image")
     ransac_threshold_periods: float = Field(0.1, gt=0, le=10, description="I2: RANSAC inlier threshold, carrier periods")
     ransac_max_trials: int = Field(2000, ge=10, le=1_000_000)

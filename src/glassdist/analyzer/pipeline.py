@@ -27,6 +27,7 @@ from scipy import ndimage
 
 from ..errors import AnalysisError, InputError
 from ..validation import DISTANCE_M, PITCH_MM, check_number
+from . import deform as D
 from . import fourier as F
 from .bulk import DIRECT_BULK_REASON, BulkChannel, bulk_channel
 from .homography import HomographyFit, fit_grid_homography
@@ -35,7 +36,10 @@ from .metrics import evaluate_displacement, inverse_2x2, polynomial_detrend
 from .transfer import InstrumentTransfer
 from .params import AnalyzerParams, load_params
 from .pattern import settle_pattern
-from .region import Region, contamination_px, guard_band, trim_edges, valid_region
+from .region import (
+    ANALYSED, BEYOND_RANGE, LOW_MODULATION, Region, beyond_range_warning, contamination_px, downsample_mask, guard_band,
+    local_contrast, trim_edges, valid_region, within,
+)
 from .resample import image_grid_valid
 from .result import AnalysisResult
 from .uncertainty import channel_uncertainty, displacement_sigma, gradient_covariance, noise_std, phase_variance
@@ -315,19 +319,26 @@ def _checked_inputs(image, pitch_mm, distance_m, reference, params, mask, patter
     return _Inputs(img, mask, refm, p, _carrier_period_mm(float(pitch_mm), p.pattern))
 
 
-def _demodulate(img: np.ndarray, refm: ReferenceModel | None, p: AnalyzerParams) -> _Demodulation:
-    """F1-F3: one FFT of the photo, the carriers (its own, or the reference's), heterodyne, F3."""
+def _demodulate(img: np.ndarray, refm: ReferenceModel | None, p: AnalyzerParams,
+                like: _Demodulation | None = None) -> _Demodulation:
+    """F1-F3: one FFT of the photo, the carriers (its own, or the reference's), heterodyne, F3.
+
+    ``like``: an earlier demodulation whose carriers, filters and grid are reused (F5's passes).
+    """
     spec = F.compute_spectrum(img)
-    if refm is None:
+    if like is not None and refm is None:
+        carriers, covs, grid = like.carriers, like.covariances, like.grid
+    elif refm is None:
         carriers = F.find_carriers(spec, min_period_px=p.min_period_px)
         F.check_image_size(img.shape, max(carriers.k1.period_px, carriers.k2.period_px))
         covs = _covariances(carriers, p)
         grid = F.sampling_grid(img.shape, list(covs), p.decimation)
     else:
         carriers, covs, grid = refm.carriers, refm.covariances, refm.grid
-        F.find_carriers(spec, min_period_px=p.min_period_px)  # raises if the photo shows no grid
+        if like is None:
+            F.find_carriers(spec, min_period_px=p.min_period_px)  # raises if the photo shows no grid
     ks = (carriers.k1, carriers.k2)
-    noise = noise_std(spec, carriers)
+    noise = like.noise_std if like is not None else noise_std(spec, carriers)
     if refm is None:
         # Direct: F3 applied in the spectral patch; coherence against the modulation G*|b|.
         pairs = [F.baseband(spec, c, cov, grid, smooth_sigma_px=p.smoothing_periods * c.period_px) for c, cov in zip(ks, covs)]
@@ -343,6 +354,71 @@ def _demodulate(img: np.ndarray, refm: ReferenceModel | None, p: AnalyzerParams)
     mods += list(refm.modulation)
     zs, cohs = _smooth_with_coherence(zs, ks, grid, p)  # F3
     return _Demodulation("comparative", carriers, covs, grid, zs, cohs, mods, noise)
+
+
+def _region(demod: _Demodulation, p: AnalyzerParams, mask, warn: list[str], margins, residual=None, mods=None,
+            beyond=None, contrast=None) -> Region:
+    """F4's valid region of a demodulation.
+
+    After F5: ``residual`` (its residual phases, for the local-frequency test), ``mods`` (the
+    modulations over the bandpass's gain at the local frequency) and ``beyond`` (where that
+    gain is out of reach). ``contrast``: the photo's local contrast, for the cause of an exclusion.
+    """
+    wrapped = [np.angle(z) for z in demod.signals]
+    return valid_region(wrapped, demod.coherences, demod.mods if mods is None else mods, demod.carriers, demod.grid, p,
+                        mask, warn, margin_px=margins[0], edge_margin_px=margins[1], deviation_phases=residual,
+                        beyond=beyond, contrast=contrast)
+
+
+def _follow_local_grid(img, refm: ReferenceModel | None, demod: _Demodulation, region: Region, phases: np.ndarray,
+                       p: AnalyzerParams):
+    """F5: iterative deformation of the reference (:mod:`~glassdist.analyzer.deform`).
+
+    Returns None when no pass is needed (``deformation_passes`` 0, or the one-pass local
+    frequency within ``deformation_min_deviation`` of the carrier), else the demodulation
+    whose phase is ``G * (predictor) + residual`` and the residual phases (wrapped, rad),
+    whose local frequency is what the bandpass was left with.
+    """
+    ks = demod.carriers
+    if p.deformation_passes == 0 or img is None or region.n == 0:
+        return None
+    if _frequency_deviation(phases, region.valid, (ks.k1, ks.k2), demod.grid.step) <= p.deformation_min_deviation:
+        return None
+    grid, covs = demod.grid, demod.covariances
+    period = max(ks.k1.period_px, ks.k2.period_px)
+    own = None if refm is None else np.stack(refm.baseband, axis=-1)  # the reference's own phase (its lens, its print)
+    bb_img = _basebands(F.compute_spectrum(img), ks, covs, grid)
+    pred = D.fill_nearest(np.nan_to_num(phases), region.valid)
+    for k in range(p.deformation_passes):
+        ref_w = D.warped_reference(pred, own, grid, ks)
+        bb_ref = _basebands(F.compute_spectrum(ref_w), ks, covs, grid)
+        del ref_w
+        zs, cohs = _smooth_with_coherence(tuple(b * np.conj(r) for b, r in zip(bb_img, bb_ref)), (ks.k1, ks.k2), grid, p)
+        res = np.stack([np.angle(z) for z in zs], axis=-1)
+        ok = np.all([c_ > p.coherence_threshold for c_ in cohs], axis=0) & region.valid
+        step = float(np.sqrt(np.mean(np.sum(D.phase_to_displacement_px(res[ok], ks) ** 2, axis=-1)))) / period if ok.any() else 0.0
+        log.debug("F5 pass %d: RMS update %.4f period", k + 1, step)
+        if step < p.deformation_tolerance_periods or k == p.deformation_passes - 1:
+            break
+        pred = pred + D.fill_nearest(np.where(ok[..., None], res, 0.0), ok)
+    # The last residual was measured against the reference warped by pred: phi = G * pred + residual.
+    # Regions unwrapped apart leave 2 pi steps in pred across the gaps: the warped reference does
+    # not see them, and G applies to pred unwrapped over the whole grid (G * P - P is smooth).
+    blur = _demodulation_blur_px2(ks, covs, p)
+    total = []
+    for i, z in enumerate(zs):
+        ph = np.angle(z) + pred[..., i] + D.smoothing_correction(pred[..., i], blur[i], grid)
+        total.append((np.abs(z) * np.exp(1j * ph)).astype(np.complex64))
+    # The bandpass's gain at the local frequency, read off the warped reference (a uniform grid
+    # of amplitude 1/2 per carrier): the photo's modulation is judged against it (a faint grid where the gain
+    # explains it is not occluded), and where the gain is below its value at
+    # deformation_max_deviation off the carrier the signal is beyond reach.
+    gain = [_modulation(r, c.period_px, grid, p) / np.float32(0.5) for r, c in zip(bb_ref, (ks.k1, ks.k2))]
+    floor = float(np.exp(-0.5 * (p.deformation_max_deviation / p.bandpass_sigma_along) ** 2))
+    beyond = np.any([g_ < floor for g_ in gain], axis=0)
+    region_mods = [m_ / np.maximum(g_, floor) for m_, g_ in zip(demod.mods[:2], gain)] + list(demod.mods[2:])
+    out = _Demodulation(demod.method, ks, covs, grid, tuple(total), cohs, demod.mods, demod.noise_std)
+    return out, list(res.transpose(2, 0, 1)), region_mods, beyond
 
 
 def _warn_sampling(carriers: F.CarrierPair, warn: list[str]) -> None:
@@ -494,13 +570,14 @@ def _direct_pass2(ag: _AnalysisGrid, carriers: F.CarrierPair, fit: HomographyFit
     )
 
 
-def _warn_deviation(ag: _AnalysisGrid, ks, method: str, warn: list[str]) -> None:
+def _warn_deviation(ag: _AnalysisGrid, ks, method: str, p: AnalyzerParams, warn: list[str]) -> None:
     deviation = _frequency_deviation(ag.phases, ag.valid, ks, ag.grid.step)
-    if deviation > _DEVIATION_WARN and not any(w.startswith("strong distortion") for w in warn):
+    limit = p.deformation_max_deviation if p.deformation_passes > 0 else _DEVIATION_WARN
+    if deviation > limit and not any(w.startswith("strong distortion") for w in warn):
         advice = "use a finer grid or a shorter distance L" + (" or the Comparative Method" if method == "direct" else "")
         warn.append(
             f"strong distortion: the local grid frequency departs from the carrier by up to {100 * deviation:.0f}% "
-            f"(results were reliable up to about {100 * _DEVIATION_WARN:.0f}% in tests); the result may be attenuated or wrong - "
+            f"(results were reliable up to about {100 * limit:.0f}% in tests); the result may be attenuated or wrong - "
             f"{advice}"
         )
 
@@ -822,13 +899,39 @@ def _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn
     demod = _demodulate(inp.image, inp.reference, p)
     carriers = demod.carriers
     _warn_sampling(carriers, warn)
-    wrapped = [np.angle(z) for z in demod.signals]
     margins = _margins(carriers, demod.covariances, p, direct=demod.method == "direct")
-    region = valid_region(wrapped, demod.coherences, demod.mods, carriers, demod.grid, p, inp.mask, warn,
-                          margin_px=margins[0], edge_margin_px=margins[1])
-    del wrapped
-    _check_region(region, demod.mods, warn)
+    first: list[str] = []
+    held: list = []
+
+    def contrast():  # the photo's local contrast, computed once and only when an exclusion needs its cause
+        if not held:
+            held.append(local_contrast(inp.image, max(carriers.k1.period_px, carriers.k2.period_px), demod.grid))
+        return held[0]
+
+    region = _region(demod, p, inp.mask, first, margins, contrast=contrast)
+    _check_region(region, demod.mods, first)
     phases = _unwrapped_phases(demod, region, p)  # F4
+    followed = _follow_local_grid(inp.image, inp.reference, demod, region, phases, p)  # F5
+    if followed is not None:
+        f5_warn: list[str] = []
+        f5_demod, residual, region_mods, beyond = followed
+        f5_region = within(_region(f5_demod, p, inp.mask, f5_warn, margins, residual, region_mods, beyond, contrast),
+                           region, p)
+        if f5_region.n == 0:  # nothing F5 could measure: the one pass stands
+            followed = None
+    if followed is None:
+        warn.extend(first)
+    else:
+        # Where the one-pass local frequency was already beyond the bandpass, F5 had no predictor
+        # to follow: what it still cannot measure there is beyond reach, not occluded.
+        f5_region.quality[(f5_region.quality == LOW_MODULATION) & (region.quality == BEYOND_RANGE)] = BEYOND_RANGE
+        demod, region = f5_demod, f5_region
+        warn.extend(f5_warn)
+        _check_region(region, demod.mods, warn)
+        phases = _unwrapped_phases(demod, region, p)
+    w_beyond = beyond_range_warning(region.quality, inp.mask, demod.grid, p)
+    if w_beyond:
+        warn.append(w_beyond)
     fit = _direct_baseline(phases, demod, region, p, warn, lens) if demod.method == "direct" else None
     H_jac = fit.matrix if fit is not None else inp.reference.homography.matrix
     phases[~region.valid] = np.nan
@@ -857,7 +960,7 @@ def _evaluate(meas: _Measurement, ag: _AnalysisGrid, warn: list[str]):
     """
     p, p_c, carriers = meas.inputs.params, meas.inputs.carrier_period_mm, meas.carriers
     ks = (carriers.k1, carriers.k2)
-    _warn_deviation(ag, ks, "direct" if meas.fit is not None else "comparative", warn)
+    _warn_deviation(ag, ks, "direct" if meas.fit is not None else "comparative", p, warn)
     delta_cam, ch, a1 = _channels(ag, ks, meas.baseline, p, p_c, meas.mm_per_px, meas.sigma_mm, meas.distance_m,
                                   lens=None if meas.fit is None else meas.fit.lens_model)
     if meas.fit is not None:
@@ -865,6 +968,7 @@ def _evaluate(meas: _Measurement, ag: _AnalysisGrid, warn: list[str]):
     fields = _result_fields(delta_cam, ch)
     fields.update(_uncertainty(ag, meas.phase_noise, ch, a1, meas.sigma_mm / meas.mm_per_px, meas.distance_m))
     valid_full, idx = _reported_region(fields, ag, meas.inputs.mask, meas.margin_px[1], warn)
+    _warn_few_trusted(meas.quality, meas.label_grid, meas.inputs.mask, warn)
     return ag, fields, valid_full, idx
 
 
@@ -884,6 +988,23 @@ def _bulk(meas: _Measurement, ag: _AnalysisGrid, fields: dict) -> BulkChannel:
         J, R = np.broadcast_to(meas.mm_per_px * np.eye(2), xx.shape + (2, 2)), None
     return bulk_channel(delta, ag.valid, ag.labels, degree=p.detrend_degree, step_px=ag.grid.step, jacobian=J,
                         frame_rotation=R, distance_m=meas.distance_m, sigma_px=meas.sigma_mm / meas.mm_per_px, xx=xx, yy=yy)
+
+
+# Share of the requested region below which the trusted pixels (quality label 0) are called few.
+_FEW_TRUSTED = 0.01
+
+
+def _warn_few_trusted(quality: np.ndarray, grid: F.SamplingGrid, mask, warn: list[str]) -> None:
+    """Warn when no or few samples are trusted: the statistics are then null or cover little."""
+    in_mask = np.ones(grid.shape, bool) if mask is None else downsample_mask(mask, grid)
+    share = float(np.count_nonzero((quality == ANALYSED) & in_mask)) / max(int(np.count_nonzero(in_mask)), 1)
+    if share == 0.0:
+        warn.append(
+            "no pixel is trusted (quality label 0): every measured pixel lies within the guard band of an excluded area "
+            "or the image edge, so the statistics are null and a specification cannot pass; the maps are still written"
+        )
+    elif share < _FEW_TRUSTED:
+        warn.append(f"only {100 * share:.2f}% of the region is trusted (quality label 0): the statistics cover few pixels")
 
 
 def _result(meas: _Measurement, evaluated, warn: list[str], *, extra_fields: dict | None = None,
@@ -915,5 +1036,6 @@ def _result(meas: _Measurement, evaluated, warn: list[str], *, extra_fields: dic
         noise_std=meas.noise_std,
         bulk=_bulk(meas, ag, fields),
         _deferred={"fields": {**fields, "quality": meas.quality, **(extra_fields or {})}, "idx": idx, "grid": ag.grid,
+                   "fit_valid": np.ascontiguousarray(ag.valid),
                    "label_grid": meas.label_grid, "mask": meas.inputs.mask},
     )

@@ -71,9 +71,12 @@ __all__ = [
     "Region",
     "valid_region",
     "contamination_px",
+    "local_contrast",
+    "beyond_range_warning",
     "local_frequency_deviation",
     "erode",
     "guard_band",
+    "within",
     "pixel_quality",
     "trim_edges",
     "trusted_on",
@@ -200,7 +203,7 @@ def erode(valid: np.ndarray, margin_px: float, grid: F.SamplingGrid, edge_margin
 
 def valid_region(
     phases, coherences, mods, carriers: F.CarrierPair, grid: F.SamplingGrid, p, user_mask, warn: list[str],
-    *, margin_px: float, edge_margin_px: float,
+    *, margin_px: float, edge_margin_px: float, deviation_phases=None, beyond=None, contrast=None,
 ) -> Region:
     """Labels of the demodulation grid from the modulation, coherence, local frequency, residues and the user mask.
 
@@ -217,17 +220,34 @@ def valid_region(
         Warnings are appended here.
     margin_px, edge_margin_px : float
         Contamination margins at excluded areas and at the image edges, px.
+    deviation_phases : sequence of ndarray (h, w), optional
+        Wrapped phases whose local frequency the bandpass saw (F5's residual phases after
+        image deformation); default ``phases``.
+    beyond : ndarray of bool (h, w), optional
+        Samples whose local frequency is beyond the bandpass's reach (F5: its gain there,
+        read off the warped reference); labelled :data:`BEYOND_RANGE` with the local-frequency test's.
+    contrast : callable returning ndarray (h, w), optional
+        The photo's local contrast (:func:`local_contrast`, computed only when some carrier lost
+        its modulation somewhere): an excluded sample where the photo
+        keeps its contrast but its own carriers lost their modulation shows the grid at a
+        frequency the bandpass does not pass (:data:`BEYOND_RANGE`), not an occlusion.
     """
     period = max(carriers.k1.period_px, carriers.k2.period_px)
-    modulated, half, fast, ok = _signal_tests(phases, coherences, mods, carriers, grid, p, period)
+    dev_phases = phases if deviation_phases is None else deviation_phases
+    modulated, half, fast, ok = _signal_tests(dev_phases, coherences, mods, carriers, grid, p, period)
+    if beyond is not None:
+        fast |= beyond
+        ok &= ~beyond
+    if contrast is not None:
+        fast = fast | _grid_out_of_band(contrast, mods[:2], ok, p, period, grid)
     labels = _excluded_causes(ok, fast, period, grid)
     in_mask = np.ones(grid.shape, bool)
     if user_mask is not None:
         in_mask = downsample_mask(user_mask, grid)
     # The user mask excludes no phase: it is applied after the erosion (no margin around it).
     kept = _kept_beyond_margins(labels, ok, modulated, half, grid, margin_px, edge_margin_px)
-    _warn_beyond_range(labels, in_mask, p, warn)
-    valid = _without_residues(phases, kept & in_mask, labels, warn)
+    valid = _without_residues(list(phases) + ([] if deviation_phases is None else list(deviation_phases)), kept & in_mask,
+                              labels, warn)
     min_size = int(p.min_region_fraction * valid.size)
     regions, n = label_regions(valid, max(min_size, 16))
     labels[valid & (regions == 0)] = FRAGMENT
@@ -288,6 +308,51 @@ def _signal_tests(phases, coherences, mods, carriers: F.CarrierPair, grid: F.Sam
     fast = modulated & (dev > p.max_frequency_deviation)
     ok = modulated & coherent & ~fast
     return modulated, half, fast, ok
+
+
+def local_contrast(image: np.ndarray, period_px: float, grid: F.SamplingGrid) -> np.ndarray:
+    """RMS of the photo's detail finer than a carrier period, over a Gaussian window of half a period, on ``grid``.
+
+    ``sqrt(G * (I - G * I)^2)`` with ``G`` of standard deviation ``period_px / 2``, on ``k x k``
+    block means of the photo (``k = period_px // 4``: the grid keeps 4 px per period). Whatever the
+    grid's local frequency, a seen grid keeps it; an opaque object, a blank or blurred patch
+    does not (their edges do, over about a period).
+    """
+    import cv2
+
+    img = np.ascontiguousarray(image, np.float32)
+    k = max(1, int(period_px // 4))  # block means keep the grid (at least 4 px per period) at 1/k^2 of the cost
+    if k > 1:
+        H, W = img.shape
+        img = cv2.resize(img[: H // k * k, : W // k * k], (W // k, H // k), interpolation=cv2.INTER_AREA)
+    s = 0.5 * period_px / k
+    hp = img - F.gaussian_blur(img, (s, s))
+    var = F.gaussian_blur(hp * hp, (s, s))
+    h, w = grid.shape
+    if var.shape != (h, w):
+        var = cv2.resize(var, (w, h), interpolation=cv2.INTER_AREA)
+    return np.sqrt(np.maximum(var, 0.0))
+
+
+def _grid_out_of_band(contrast, mods, ok: np.ndarray, p, period: float, grid: F.SamplingGrid) -> np.ndarray:
+    """Samples where the photo's own carriers lost their modulation but the photo kept half its typical detail.
+
+    Within a period of a flat patch (a quarter of the typical detail or less: an occluder,
+    blank or blurred) the detail is its edge's, not a grid's: not counted.
+    """
+    if not ok.any():
+        return np.zeros(ok.shape, bool)
+    weak = np.zeros(ok.shape, bool)
+    for m in mods:
+        weak |= m < p.modulation_threshold * np.percentile(m[::2, ::2], 75)
+    if not weak.any():
+        return weak
+    contrast = contrast()
+    typical = float(np.median(contrast[ok]))
+    flat = contrast < 0.25 * typical
+    if flat.any():
+        flat = ndimage.distance_transform_edt(~flat, sampling=grid.step) <= period
+    return weak & (contrast > 0.5 * typical) & ~flat
 
 
 def _excluded_causes(ok: np.ndarray, fast: np.ndarray, period: float, grid: F.SamplingGrid) -> np.ndarray:
@@ -355,15 +420,35 @@ def _kept_beyond_margins(labels: np.ndarray, ok, modulated, half, grid: F.Sampli
     return kept
 
 
-def _warn_beyond_range(labels: np.ndarray, in_mask: np.ndarray, p, warn: list[str]) -> None:
-    """Append a warning to ``warn`` when over 1% of the user's region is labelled :data:`BEYOND_RANGE`."""
-    beyond = float(np.count_nonzero((labels == BEYOND_RANGE) & in_mask)) / max(int(np.count_nonzero(in_mask)), 1)
-    if beyond > 0.01:
-        warn.append(
-            f"strong distortion: over {100 * beyond:.1f}% of the region the local grid frequency departs from the carrier by "
-            f"more than {100 * p.max_frequency_deviation:.0f}% (beyond the bandpass) and was excluded (quality label "
-            f"{BEYOND_RANGE}); use a finer grid or a shorter distance L"
-        )
+def beyond_range_warning(labels: np.ndarray, user_mask, grid: F.SamplingGrid, p) -> str | None:
+    """The warning of a region of which over 1% is :data:`BEYOND_RANGE`, stating every excluded share.
+
+    Parameters
+    ----------
+    labels : ndarray of uint8 (h, w)
+        Final quality labels of the demodulation grid (before the guard band).
+    user_mask : ndarray of bool (H, W) or None
+    grid : SamplingGrid
+    p : AnalyzerParams
+
+    Returns
+    -------
+    str or None
+        Shares are of the samples inside the user's region.
+    """
+    in_mask = np.ones(grid.shape, bool) if user_mask is None else downsample_mask(user_mask, grid)
+    n = max(int(np.count_nonzero(in_mask)), 1)
+    share = {k: np.count_nonzero((labels == k) & in_mask) / n for k in EXCLUDED}
+    if share[BEYOND_RANGE] <= 0.01:
+        return None
+    reach = p.deformation_max_deviation if p.deformation_passes > 0 else p.max_frequency_deviation
+    others = ", ".join(f"{100 * share[k]:.1f}% {LABELS[k]}" for k in EXCLUDED if k != BEYOND_RANGE and share[k] > 0.0005)
+    return (
+        f"strong distortion: {100 * share[BEYOND_RANGE]:.1f}% of the region is beyond measurable distortion (the local "
+        f"grid frequency departs from the carrier beyond the bandpass's reach, about {100 * reach:.0f}%; quality label "
+        f"{BEYOND_RANGE}); {100 * sum(share.values()):.1f}% of the region is excluded in all"
+        + (f" ({others})" if others else "") + "; use a finer grid or a shorter distance L"
+    )
 
 
 def _without_residues(phases, valid: np.ndarray, labels: np.ndarray, warn: list[str]) -> np.ndarray:
@@ -395,6 +480,23 @@ def _without_residues(phases, valid: np.ndarray, labels: np.ndarray, warn: list[
         labels[res & valid] = PHASE_RESIDUE
         valid &= ~res
     return valid
+
+
+def within(region: Region, first: Region, p) -> Region:
+    """``region`` restricted to ``first``'s measured samples (F5's region, within the one-pass region).
+
+    F5 measures the residual against a reference warped by the one-pass phase; where the one
+    pass had no phase (beyond reach, a gap between regions) the predictor is a guess whose
+    whole periods nothing can check, so those samples stay excluded, with the one pass's
+    label. Connected parts are labelled anew (:func:`~glassdist.analyzer.unwrap.label_regions`).
+    """
+    valid = region.valid & first.valid
+    quality = region.quality.copy()
+    dropped = region.valid & ~first.valid
+    quality[dropped] = first.quality[dropped]
+    regions, n = label_regions(valid, max(int(p.min_region_fraction * valid.size), 16))
+    quality[valid & (regions == 0)] = FRAGMENT
+    return Region(regions > 0, regions, n, quality)
 
 
 def guard_band(labels: np.ndarray, grid: F.SamplingGrid, guard_px: float) -> np.ndarray:

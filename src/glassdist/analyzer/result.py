@@ -119,6 +119,12 @@ class AnalysisResult:
         residue, 5 user mask, 6 guard band (reported, left out of statistics), 7 isolated fragment.
     trusted : ndarray (H, W) bool
         Label 0: the pixels statistics and specifications use.
+    detrend_region : ndarray (H, W) bool
+        The pixels of the whole analysis-grid blocks the A2 detrend is fitted on. The regions,
+        one inside the next: ``trusted`` (statistics) within ``detrend_region`` (A2 fit)
+        within ``valid`` (reported); ``valid`` adds the ring of partial blocks along every
+        border, at most one analysis block wide (``block_px``), where the fitted polynomial
+        is extrapolated.
     displacement_sigma_mm : ndarray (H, W, 2) float32
         Standard uncertainty of each displacement component (x, y) from the image noise, mm.
     phi_eff_sigma_mD, phi_shear_sigma_mD : ndarray (H, W) float32
@@ -254,6 +260,23 @@ class AnalysisResult:
         d = self._deferred
         q = d["fields"].get("quality") if d else None
         return np.ones(self.analysis_grid.shape, bool) if q is None else trusted_on(q, self.analysis_grid.shape)
+
+    @cached_property
+    def detrend_region(self) -> np.ndarray:
+        """Pixels of the whole blocks the A2 detrend is fitted on (see the class notes), bool (H, W)."""
+        d = self._deferred
+        fit = d.get("fit_valid") if d else None
+        if fit is None:
+            return self.valid
+        import cv2
+
+        H, W = self.valid.shape
+        return self.valid & cv2.resize(fit.view(np.uint8), (W, H), interpolation=cv2.INTER_NEAREST).view(bool)
+
+    @property
+    def block_px(self) -> float:
+        """Width of one analysis-grid block (its larger step), px: the ring ``valid`` adds to ``detrend_region``."""
+        return float(max(self.sampling_step_px))
 
     @cached_property
     def trusted(self) -> np.ndarray:

@@ -181,8 +181,9 @@ def _ripple_rows(pair, n: float, sigma_periods) -> list[dict]:
             res = vals[0].analysis
             s_px = sp * p_c / res.mm_per_px
             region = vals[0].valid & vals[1].valid & fin  # compared: the trusted pixels
-            # detrended and smoothed over the region the Analyzer detrends over (its reported region)
-            ind = independent_phi_eff(half, vals[0].analysis.valid & vals[1].analysis.valid & fin, jacobian=J,
+            # detrended and smoothed over the region the Analyzer detrends over (its detrend region)
+            fit = vals[0].analysis.detrend_region & vals[1].analysis.detrend_region & fin
+            ind = independent_phi_eff(half, fit, jacobian=J,
                                       sigma_px=s_px, degree=2, distance_m=scene.backdrop.distance_m)
             an = (vals[0].analysis.phi_eff_mD - vals[1].analysis.phi_eff_mD) / 2
             ex = (vals[0].exact.phi_eff_mD - vals[1].exact.phi_eff_mD) / 2
@@ -216,9 +217,9 @@ def _lens_rows(scene, opts: RunOptions) -> list[dict]:
         ex, an = val.exact.phi_eff_mD, res.phi_eff_mD
         s_px = params.sigma_mm / res.mm_per_px
         region = val.valid & fin  # compared: the trusted pixels
-        # detrended over the region the Analyzer detrends over (its reported region): with N = 1 on a lens
+        # detrended over the region the Analyzer detrends over (its detrend region): with N = 1 on a lens
         # the fitted plane, hence a uniform power, depends on the region (the trusted one reads 2.7 % apart)
-        ind = independent_phi_eff(np.nan_to_num(inputs.truth.displacement_mm), res.valid & fin,
+        ind = independent_phi_eff(np.nan_to_num(inputs.truth.displacement_mm), res.detrend_region & fin,
                                   jacobian=landing_jacobian(scene), sigma_px=s_px, degree=params.detrend_degree,
                                   distance_m=scene.backdrop.distance_m)
         m = val.valid & np.isfinite(ex) & np.isfinite(an)

@@ -167,12 +167,14 @@ def compare_with_scene(result, scene: Scene, *, model: Prediction, truth: Predic
     Validation
         :func:`compare` on the model's region within the analyzer's trusted pixels; the
         stack runs with the analyzer's ``sigma_mm``, ``detrend_degree``, ``mm_per_px``,
-        valid region and A1 mode.
+        A1 mode and region: the truth is detrended on the analyzer's detrend region
+        (``result.detrend_region``, the whole blocks its A2 fit sees; ``valid`` adds a ring
+        of partial blocks the fit never saw).
     """
     board = 1.0 if result.optics is None else result.optics["magnification"]  # reflection: the board's mm per px
     settings = dict(
         sigma_mm=result.sigma_mm, detrend_degree=result.detrend_degree, mm_per_px=result.mm_per_px * board,
-        valid=result.valid, projective=result.params.a1_mode == "projective",
+        valid=result.detrend_region, projective=result.params.a1_mode == "projective",
     )
     _, analytical, region = predict_channels(scene, prediction=model, **settings)
     exact = None if truth is None else predict_channels(scene, prediction=truth, **settings)[1]

@@ -1,0 +1,195 @@
+"""glassdist against two independent peers on the bundled waves photo (Comparative Method).
+
+Peers, each given the reference and the distorted photo:
+
+* FCD, a compact fast checkerboard demodulation (``benchmarks/_fcd.py``, Wildeman 2018);
+* OpenCV Farneback optical flow without a pyramid (``levels=1``: the photo's own scale only;
+  a pyramid locks onto the wrong period of a checkerboard).
+
+Every field is written as ``u`` (px) with ``img(r) = ref(r - u(r))`` (glassdist:
+``u = -displacement_mm / mm_per_px``). Scores:
+
+* **explains the photo**: the reference warped by the field, ``ref(r - u(r))``
+  (``cv2.remap``), correlated (Pearson) with the distorted photo over glassdist's
+  valid region (the same pixels for every method);
+* **amplitude**: regression slope of glassdist's field on FCD's at matched smoothing (the
+  peer's field passed through the documented transfer of glassdist's displacement output,
+  Block F's Gaussian per carrier, then both smoothed by one carrier period, NaN-aware), means
+  removed, over the pixels where both are valid; 1 = the same amplitude. Every score is
+  also given for the peers at matched smoothing ("matched");
+* **agreement area**: pixels where FCD and Farneback agree within 0.1 carrier period
+  (largest component); **coverage** = share of it inside glassdist's ``valid``;
+  **inside** = share of glassdist's ``valid`` within it; **accuracy** = share of
+  ``valid`` where glassdist agrees with FCD within 0.1 period.
+
+Usage::
+
+    python benchmarks/bench_waves_peers.py [--params JSON] [--image PATH] [--out FILE.md]
+
+``--out docs/waves_peers.md`` is the table the docs show (the command is written in it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path.insert(0, str(HERE))
+
+from _fcd import fcd_displacement  # noqa: E402
+
+TOL_PERIODS = 0.1
+
+
+def farneback(ref: np.ndarray, img: np.ndarray, winsize: int) -> np.ndarray:
+    """No-pyramid Farneback flow ref -> img as ``u`` (px) with ``img(r) = ref(r - u)``."""
+    import cv2
+
+    a = np.clip(ref * 255, 0, 255).astype(np.uint8)
+    b = np.clip(img * 255, 0, 255).astype(np.uint8)
+    # ref(r) = img(r + flow(r)); to first order u = flow.
+    flow = cv2.calcOpticalFlowFarneback(a, b, None, 0.5, 1, winsize, 10, 7, 1.5, cv2.OPTFLOW_FARNEBACK_GAUSSIAN)
+    return flow.astype(float)
+
+
+def warp_reference(ref: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """``ref(r - u(r))`` by bilinear interpolation; NaN where u is NaN."""
+    import cv2
+
+    H, W = ref.shape
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
+    uu = np.nan_to_num(u).astype(np.float32)
+    out = cv2.remap(ref.astype(np.float32), xx - uu[..., 0], yy - uu[..., 1], cv2.INTER_LINEAR,
+                    borderMode=cv2.BORDER_REFLECT)
+    out[~np.all(np.isfinite(u), axis=-1)] = np.nan
+    return out
+
+
+def correlation(a: np.ndarray, b: np.ndarray, where: np.ndarray) -> float:
+    sel = where & np.isfinite(a) & np.isfinite(b)
+    return float(np.corrcoef(a[sel], b[sel])[0, 1])
+
+
+def smooth_nan(u: np.ndarray, sigma_px: float) -> np.ndarray:
+    """Gaussian smoothing of each component over its finite samples (normalised convolution)."""
+    from scipy import ndimage
+
+    ok = np.all(np.isfinite(u), axis=-1)
+    w = ndimage.gaussian_filter(ok.astype(float), sigma_px)
+    out = np.stack([ndimage.gaussian_filter(np.where(ok, u[..., c], 0.0), sigma_px) for c in range(2)], -1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out /= w[..., None]
+    out[~ok] = np.nan
+    return out
+
+
+def slope(a: np.ndarray, b: np.ndarray, where: np.ndarray) -> float:
+    """Least-squares slope of ``a`` on ``b`` (both components pooled, means removed)."""
+    sel = where & np.all(np.isfinite(a), -1) & np.all(np.isfinite(b), -1)
+    x = b[sel] - b[sel].mean(axis=0)
+    y = a[sel] - a[sel].mean(axis=0)
+    return float((x * y).sum() / (x * x).sum())
+
+
+def matched(u: np.ndarray, res) -> np.ndarray:
+    """A peer's field ``u`` (px) through the transfer of glassdist's displacement output: Block F's Gaussian per carrier."""
+    from glassdist.analyzer import deform as D, fourier as F
+    from glassdist.analyzer.pipeline import _covariances, _demodulation_blur_px2
+
+    ks = res.carriers
+    blur = _demodulation_blur_px2(ks, _covariances(ks, res.params), res.params)
+    grid = F.SamplingGrid(u.shape[:2], u.shape[:2])
+    ph = D.displacement_to_phase(u, ks)
+    ph = np.stack([D.blur_cov(ph[..., i], blur[i], grid) for i in range(2)], axis=-1)
+    return D.phase_to_displacement_px(ph, ks)
+
+
+def run(image: Path, reference: Path, params: dict) -> dict:
+    from glassdist import analyze
+    from glassdist.io import read_image
+
+    ref = read_image(reference)
+    img = read_image(image)
+    t0 = time.perf_counter()
+    res = analyze(img, reference=ref, pattern="checkerboard", pitch_mm=5.0, distance_m=0.5, detrend_degree=3,
+                  params=params or None)
+    valid = res.valid
+    t_gd = time.perf_counter() - t0
+    period = max(res.carriers.k1.period_px, res.carriers.k2.period_px)
+    fields = {"glassdist": -res.displacement_mm / res.mm_per_px, "FCD": fcd_displacement(ref, img),
+              "Farneback": farneback(ref, img, int(2 * round(period)) + 1)}
+    fields["glassdist"][~valid] = np.nan
+
+    def close(a, b):
+        with np.errstate(invalid="ignore"):
+            return np.max(np.abs(a - b), axis=-1) < TOL_PERIODS * period
+
+    agree = close(fields["FCD"], fields["Farneback"])
+    for k in ("FCD", "Farneback"):
+        fields[f"{k} matched"] = matched(fields[k], res)
+    sm = {k: smooth_nan(v, period) for k, v in fields.items()}
+    rows = {}
+    for k, u in fields.items():
+        rows[k] = {
+            "correlation": correlation(warp_reference(ref, u), img, valid),
+            "amplitude_vs_fcd": slope(sm[k], sm["FCD matched"], valid),
+        }
+    cov = float((valid & agree).sum() / max(agree.sum(), 1))
+    inside = float((valid & agree).sum() / max(valid.sum(), 1))
+    acc = float((valid & close(fields["glassdist"], fields["FCD"])).sum() / max(valid.sum(), 1))
+    from scipy import ndimage
+
+    from glassdist.analyzer.region import LABELS
+
+    _, n_parts = ndimage.label(valid)
+    dropped = agree & ~valid
+    q = np.asarray(res.quality)[dropped]
+    dropped_by = {LABELS[int(k)]: float(c / max(dropped.sum(), 1)) for k, c in zip(*np.unique(q, return_counts=True))}
+    return {"period_px": period, "analysed": float(valid.mean()), "agree_area": float(agree.mean()), "coverage": cov,
+            "inside": inside, "accuracy": acc, "parts": int(n_parts), "dropped_by_label": dropped_by, "glassdist_s": t_gd, "methods": rows,
+            "warnings": list(res.warnings), "quality_counts": res.quality_counts()}
+
+
+def table(rec: dict) -> str:
+    lines = ["| method | correlation with the photo (ref warped by the field) | amplitude / FCD matched (+1 period smoothing) |",
+             "|---|---|---|"]
+    for k, r in rec["methods"].items():
+        lines.append(f"| {k} | {r['correlation']:.4f} | {r['amplitude_vs_fcd']:.3f} |")
+    drop = ", ".join(f"{k} {100 * v:.0f} %" for k, v in sorted(rec["dropped_by_label"].items(), key=lambda kv: -kv[1]))
+    lines += ["", f"Labels of the agreement area glassdist leaves out: {drop}."]
+    lines += ["", "| carrier period | analysed | peers agree (0.1 period) | coverage of it | valid inside it | "
+              "valid agreeing with FCD | connected parts |", "|---|---|---|---|---|---|---|",
+              f"| {rec['period_px']:.2f} px | {100 * rec['analysed']:.1f} % | {100 * rec['agree_area']:.1f} % | "
+              f"{100 * rec['coverage']:.1f} % | {100 * rec['inside']:.1f} % | {100 * rec['accuracy']:.1f} % | "
+              f"{rec['parts']} |"]
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--image", type=Path, default=ROOT / "examples" / "data" / "distorted_waves.bmp")
+    ap.add_argument("--reference", type=Path, default=ROOT / "examples" / "data" / "reference.png")
+    ap.add_argument("--params", default="{}", help="analyzer parameter overrides, JSON")
+    ap.add_argument("--out", type=Path, help="write the table (markdown) and the record (FILE.json beside it)")
+    a = ap.parse_args(argv)
+    rec = run(a.image, a.reference, json.loads(a.params))
+    text = table(rec)
+    print(text)
+    print("warnings:", *rec["warnings"], sep="\n  ")
+    if a.out:
+        cmd = "python benchmarks/bench_waves_peers.py " + shlex.join(argv if argv is not None else sys.argv[1:])
+        a.out.write_text(f"<!-- {cmd.strip()} -->\n{text}\n")
+        a.out.with_suffix(".json").write_text(json.dumps({"command": cmd.strip(), **rec}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
