@@ -39,12 +39,12 @@ def test_comparative_and_direct_agree_on_waves(real_data):
     assert (c.valid & d.valid).mean() > 0.6
     v = c.trusted & d.trusted  # compared where statistics are taken (outside the guard band)
     assert v.mean() > 0.4
-    # README ("Accuracy"): correlation 0.998 (measured 0.9979 / 0.9987), mean |phi| within 1.7 % on
-    # phi_eff (measured 1.0172) and 0.04 % on phi_shear (1.0004). Both runs are deterministic on
-    # the same photo; the margins (0.3 and 0.5 points) allow for platform differences of the FFT
-    # and the unwrapper, not for a change of method (a < 1 % shift from a demodulation change
-    # is to be re-measured and the README updated with it).
-    for ch, tol in (("phi_eff_mD", 0.02), ("phi_shear_mD", 0.005)):
+    # README ("Accuracy"): correlation 0.997 / 0.998 (measured 0.9972 / 0.9978); mean |phi| of the
+    # Direct Method 3.6 % above the Comparative on phi_eff (measured 1.0364) and 2.8 % on phi_shear
+    # (1.0285), with F5 and Block I's lens fit (1.7 % / 0.04 % before them). Both runs are
+    # deterministic on the same photo; the margins (0.3 points) allow for platform differences of
+    # the FFT and the unwrapper, not for a change of method (re-measure and update the README).
+    for ch, ratio in (("phi_eff_mD", 1.0364), ("phi_shear_mD", 1.0285)):
         a, b = getattr(c, ch)[v], getattr(d, ch)[v]
-        assert np.corrcoef(a, b)[0, 1] > 0.997, ch
-        assert np.mean(np.abs(b)) / np.mean(np.abs(a)) == pytest.approx(1.0, abs=tol), ch
+        assert np.corrcoef(a, b)[0, 1] > 0.996, ch
+        assert np.mean(np.abs(b)) / np.mean(np.abs(a)) == pytest.approx(ratio, abs=0.003), ch
