@@ -370,7 +370,8 @@ def histogram_range(max_abs_mD, *, signed=True, limits_mD=()) -> tuple[float, fl
     the trusted pixels (the statistics' ``max_abs``), or 1.1 times the largest limit when
     that is larger (so that its line is drawn); 1 mD when nothing is known.
     """
-    top = max([float(max_abs_mD or 0.0)] + [1.1 * float(x) for x in limits_mD]) or 1.0
+    known = max_abs_mD is not None and np.isfinite(max_abs_mD)  # NaN / None: no pixel is trusted
+    top = max([float(max_abs_mD) if known else 0.0] + [1.1 * float(x) for x in limits_mD]) or 1.0
     return (-top if signed else 0.0), top
 
 
