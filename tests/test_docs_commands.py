@@ -31,6 +31,7 @@ NOT_RUN = [
     (r"cycles-setup|--engine cycles|install_cycles", "installs or runs Blender Cycles (minutes, network)"),
     (r"glassdist experiment ", "re-runs a paper experiment (minutes) and rewrites docs/"),
     (r"glassdist serve", "starts a server that runs until stopped"),
+    (r"scripts/check_known_bugs|scripts/mutation", "re-runs parts of the test suite on mutated copies (minutes)"),
     (r"\bPANE\.png|\bMANIFEST\.csv|\bFOLDER\b|\bDIR\b|\[--|photos/", "a synopsis with placeholders, not a command"),
 ]
 

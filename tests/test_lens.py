@@ -69,7 +69,7 @@ def _render(name, flat=False):
 def _direct(sc, N=2):
     img = render_scene(sc)
     return glassdist.analyze(img, pitch_mm=sc.backdrop.pitch_mm, distance_m=sc.backdrop.distance_m,
-                             params={"detrend_degree": N, "pattern": sc.backdrop.pattern})
+                             params={"detrend_degree": N, "pattern": sc.backdrop.pattern, "lens_model": "radial"})
 
 
 def _truth(sc, res, N):
@@ -274,7 +274,7 @@ def test_full_view_ripple_at_n1():
     sc = load_scene(SCENES / "full_view_ripple.yaml")
     img = render_scene(sc)
     res = glassdist.analyze(img, pitch_mm=sc.backdrop.pitch_mm, distance_m=sc.backdrop.distance_m,
-                            params={"detrend_degree": 1, "sigma_mm": 48.4})
+                            params={"detrend_degree": 1, "sigma_mm": 48.4, "lens_model": "radial"})
     truth = _truth(sc, res, 1)
     ok = res.trusted & np.isfinite(truth)
     m, t = res.phi_eff_mD[ok], truth[ok]
