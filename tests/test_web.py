@@ -8,6 +8,7 @@ import socket
 import sys
 import threading
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -92,102 +93,100 @@ def _chromium():
     return exe
 
 
-def test_upload_result_and_report_in_headless_chromium(server, tmp_path):
-    exe = _chromium()  # skips without chromium or playwright: checked before anything is imported
+@contextmanager
+def _browser(exe):
+    """Headless Chromium at ``exe`` (from :func:`_chromium`), closed on leaving."""
     from playwright.sync_api import sync_playwright
 
-    url, _ = server
-    spec = tmp_path / "spec.json"
-    spec.write_text(json.dumps(STRICT))
     with sync_playwright() as p:
         browser = p.chromium.launch(executable_path=exe, args=["--headless", "--no-sandbox", "--disable-gpu",
                                                                "--disable-background-networking"])
         try:
-            page = browser.new_page(accept_downloads=True, viewport={"width": 1280, "height": 1000})
-            page.goto(url)
-            page.set_input_files("#image", str(DATA / "distorted_waves.bmp"))
-            page.set_input_files("#reference", str(DATA / "reference.png"))
-            page.set_input_files("#spec", str(spec))
-            page.fill("#pitch_mm", "5")
-            page.fill("#distance_m", "0.5")
-            page.select_option("#pattern", "checkerboard")
-            page.fill("#detrend_degree", "3")
-            page.fill("#pane_id", "north facade W12")
-            page.check("#report")
-            page.click("#submit")
-            page.wait_for_selector("#progress, #verdict")  # the job page, polling its status
-            page.wait_for_selector("#verdict", timeout=240_000)
-            assert page.inner_text("#verdict") == "FAIL"
-            assert "p95 |phi_eff| <= 40 mD" in page.inner_text("#checks")
-            summary = page.request.get(page.url + "/files/summary.json").json()
-            assert summary["warnings"] and all(w in page.inner_text("#warnings") for w in summary["warnings"])
-            assert page.locator(".zoom img").count() >= 4
-            assert page.evaluate("document.querySelector('.zoom img').naturalWidth") > 100  # the heatmap loaded
-            with page.expect_download() as info:
-                page.click("text=HTML report")
-            report = Path(info.value.path()).read_text(encoding="utf-8")
-            assert info.value.suggested_filename == "report.html"
-            assert "FAIL" in report and "image.bmp" in report  # the upload's name in its job folder
-            assert "north facade W12" in report
-            page.goto(url)
-            assert "distorted_waves.bmp" in page.inner_text("#jobs")  # recent jobs
-
-            page.set_input_files("#image", files=[{"name": "notes.txt", "mimeType": "text/plain",
-                                                   "buffer": b"pitch 5 mm, distance 0.5 m"}])
-            page.fill("#pitch_mm", "5")
-            page.fill("#distance_m", "0.5")
-            page.click("#submit")
-            page.wait_for_selector("#error", timeout=120_000)
-            error = page.inner_text("#error")
-            assert "\n" not in error.strip() and "'notes.txt' has an unsupported extension '.txt'" in error
+            yield browser
         finally:
             browser.close()
+
+
+def test_upload_result_and_report_in_headless_chromium(server, tmp_path):
+    exe = _chromium()  # skips without chromium or playwright: checked before anything is imported
+    url, _ = server
+    spec = tmp_path / "spec.json"
+    spec.write_text(json.dumps(STRICT))
+    with _browser(exe) as browser:
+        page = browser.new_page(accept_downloads=True, viewport={"width": 1280, "height": 1000})
+        page.goto(url)
+        page.set_input_files("#image", str(DATA / "distorted_waves.bmp"))
+        page.set_input_files("#reference", str(DATA / "reference.png"))
+        page.set_input_files("#spec", str(spec))
+        page.fill("#pitch_mm", "5")
+        page.fill("#distance_m", "0.5")
+        page.select_option("#pattern", "checkerboard")
+        page.fill("#detrend_degree", "3")
+        page.fill("#pane_id", "north facade W12")
+        page.check("#report")
+        page.click("#submit")
+        page.wait_for_selector("#progress, #verdict")  # the job page, polling its status
+        page.wait_for_selector("#verdict", timeout=240_000)
+        assert page.inner_text("#verdict") == "FAIL"
+        assert "p95 |phi_eff| <= 40 mD" in page.inner_text("#checks")
+        summary = page.request.get(page.url + "/files/summary.json").json()
+        assert summary["warnings"] and all(w in page.inner_text("#warnings") for w in summary["warnings"])
+        assert page.locator(".zoom img").count() >= 4
+        assert page.evaluate("document.querySelector('.zoom img').naturalWidth") > 100  # the heatmap loaded
+        with page.expect_download() as info:
+            page.click("text=HTML report")
+        report = Path(info.value.path()).read_text(encoding="utf-8")
+        assert info.value.suggested_filename == "report.html"
+        assert "FAIL" in report and "image.bmp" in report  # the upload's name in its job folder
+        assert "north facade W12" in report
+        page.goto(url)
+        assert "distorted_waves.bmp" in page.inner_text("#jobs")  # recent jobs
+
+        page.set_input_files("#image", files=[{"name": "notes.txt", "mimeType": "text/plain",
+                                               "buffer": b"pitch 5 mm, distance 0.5 m"}])
+        page.fill("#pitch_mm", "5")
+        page.fill("#distance_m", "0.5")
+        page.click("#submit")
+        page.wait_for_selector("#error", timeout=120_000)
+        error = page.inner_text("#error")
+        assert "\n" not in error.strip() and "'notes.txt' has an unsupported extension '.txt'" in error
 
 
 def test_contract_spec_with_the_form_as_it_loads_in_headless_chromium(server):
     """The in-situ contract specification and the bundled photo, nothing else touched: the pinned fields are
     shown as pinned and not sent, the empty ones not sent either, and the verdict page comes back."""
-    from playwright.sync_api import sync_playwright
-
     exe = _chromium()
     url, app = server
     spec = Path(__file__).resolve().parents[1] / "examples" / "insitu" / "contract_spec.json"
     protocol = json.loads(spec.read_text())["protocol"]
-    with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=exe, args=["--headless", "--no-sandbox", "--disable-gpu",
-                                                               "--disable-background-networking"])
-        try:
-            page = browser.new_page(viewport={"width": 1280, "height": 1000})
-            page.goto(url)
-            # report and export opt-in, their cost stated; the kept jobs' budget stated
-            assert not page.is_checked("#report") and not page.is_checked("#export")
-            assert "1.9 GB" in page.inner_text("#job-form") and "2048 MB" in page.inner_text("#kept")
-            page.set_input_files("#image", str(DATA / "distorted_waves.bmp"))
-            page.set_input_files("#spec", str(spec))
-            page.wait_for_function("document.getElementById('pitch_mm').disabled")
-            for key in ("pitch_mm", "distance_m", "pattern", "detrend_degree"):
-                assert page.is_disabled(f"#{key}")
-                value = protocol[key]
-                shown = f"{value:g}" if isinstance(value, float) else str(value)
-                assert f"pinned by the specification: {shown}" in page.inner_text(f"#pin-{key}")
-            assert page.is_disabled("#sigma_mm") and "carrier periods" in page.inner_text("#pin-sigma_mm")
-            page.click("#submit")
-            page.wait_for_selector("#verdict", timeout=240_000)
-            assert page.inner_text("#verdict") == "FAIL"
-            job = app.state.store.get(page.url.rsplit("/", 1)[1])
-            # only the photo, the specification and the output folder: no field, no report, no export
-            assert [a for a in job.args if not a.startswith("--record-as=")] == [
-                "analyze", "--spec", "spec.json", "--out", "out", "--", "image.bmp"]
-            assert not any(n.startswith(("report", "fields", "tiff")) for n in job.outputs())
-        finally:
-            browser.close()
+    with _browser(exe) as browser:
+        page = browser.new_page(viewport={"width": 1280, "height": 1000})
+        page.goto(url)
+        # report and export opt-in, their cost stated; the kept jobs' budget stated
+        assert not page.is_checked("#report") and not page.is_checked("#export")
+        assert "1.9 GB" in page.inner_text("#job-form") and "2048 MB" in page.inner_text("#kept")
+        page.set_input_files("#image", str(DATA / "distorted_waves.bmp"))
+        page.set_input_files("#spec", str(spec))
+        page.wait_for_function("document.getElementById('pitch_mm').disabled")
+        for key in ("pitch_mm", "distance_m", "pattern", "detrend_degree"):
+            assert page.is_disabled(f"#{key}")
+            value = protocol[key]
+            shown = f"{value:g}" if isinstance(value, float) else str(value)
+            assert f"pinned by the specification: {shown}" in page.inner_text(f"#pin-{key}")
+        assert page.is_disabled("#sigma_mm") and "carrier periods" in page.inner_text("#pin-sigma_mm")
+        page.click("#submit")
+        page.wait_for_selector("#verdict", timeout=240_000)
+        assert page.inner_text("#verdict") == "FAIL"
+        job = app.state.store.get(page.url.rsplit("/", 1)[1])
+        # only the photo, the specification and the output folder: no field, no report, no export
+        assert [a for a in job.args if not a.startswith("--record-as=")] == [
+            "analyze", "--spec", "spec.json", "--out", "out", "--", "image.bmp"]
+        assert not any(n.startswith(("report", "fields", "tiff")) for n in job.outputs())
 
 
 def test_reflection_in_headless_chromium(server, tmp_path):
     """The form's optics field: a concave mirror (R = 20 m, board at 1.997 m, camera in the board plane) rendered
     in reflection reads -4000/R = -200 mD, and the job page names the reflection geometry."""
-    from playwright.sync_api import sync_playwright
-
     from glassdist.io import write_png16
     from glassdist.render import render_scene
     from glassdist.scene import scene_from_dict
@@ -203,26 +202,21 @@ def test_reflection_in_headless_chromium(server, tmp_path):
     write_png16(tmp_path / "pane.png", render_scene(scene))
     write_png16(tmp_path / "flat.png", render_scene(scene, reference=True))
     url, _ = server
-    with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=exe, args=["--headless", "--no-sandbox", "--disable-gpu",
-                                                               "--disable-background-networking"])
-        try:
-            page = browser.new_page()
-            page.goto(url)
-            page.set_input_files("#image", str(tmp_path / "pane.png"))
-            page.set_input_files("#reference", str(tmp_path / "flat.png"))
-            page.fill("#pitch_mm", "12")
-            page.fill("#distance_m", "1.997")
-            page.fill("#detrend_degree", "0")
-            page.select_option("#optics", "reflection")
-            page.click("#submit")
-            page.wait_for_selector("#verdict", timeout=240_000)
-            assert "reflective power on the pane" in page.inner_text("#optics")
-            summary = page.request.get(page.url + "/files/summary.json").json()
-            assert summary["optics"]["optics"] == "reflection"
-            assert summary["statistics"]["phi_eff_mD"]["mean"] == pytest.approx(-200.0, rel=0.02)
-        finally:
-            browser.close()
+    with _browser(exe) as browser:
+        page = browser.new_page()
+        page.goto(url)
+        page.set_input_files("#image", str(tmp_path / "pane.png"))
+        page.set_input_files("#reference", str(tmp_path / "flat.png"))
+        page.fill("#pitch_mm", "12")
+        page.fill("#distance_m", "1.997")
+        page.fill("#detrend_degree", "0")
+        page.select_option("#optics", "reflection")
+        page.click("#submit")
+        page.wait_for_selector("#verdict", timeout=240_000)
+        assert "reflective power on the pane" in page.inner_text("#optics")
+        summary = page.request.get(page.url + "/files/summary.json").json()
+        assert summary["optics"]["optics"] == "reflection"
+        assert summary["statistics"]["phi_eff_mD"]["mean"] == pytest.approx(-200.0, rel=0.02)
 
 
 def test_kept_jobs_have_a_disk_budget(tmp_path):
@@ -273,8 +267,6 @@ def test_a_server_reachable_from_elsewhere_says_so(capsys, monkeypatch):
 
 def test_history_page_filters_by_lot_shows_the_chart_and_links_kept_jobs(server, tmp_path, monkeypatch):
     """Runs recorded before (lots A and B) and a job run from the page (lot A): the page filtered by lot A."""
-    from playwright.sync_api import sync_playwright
-
     from conftest import write_lens_pair
     from glassdist.history import open_store
     from glassdist.history.store import insert_runs, run_rows
@@ -288,36 +280,31 @@ def test_history_page_filters_by_lot_shows_the_chart_and_links_kept_jobs(server,
                                       "a4": {"statistics": {"phi_eff": {"p95_abs": v}}}}, exit_code=0, out_dir=tmp_path)
                             for lot, vs in values.items() for i, v in enumerate(vs)])
     pane = write_lens_pair(tmp_path)
-    with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=exe, args=["--headless", "--no-sandbox", "--disable-gpu",
-                                                               "--disable-background-networking"])
-        try:
-            page = browser.new_page(viewport={"width": 1280, "height": 1000})
-            page.goto(url)
-            page.set_input_files("#image", str(pane / "pane.png"))
-            page.set_input_files("#reference", str(pane / "reference.png"))
-            page.fill("#pitch_mm", "2")
-            page.fill("#distance_m", "1")
-            page.fill("#pane_id", "W-1")
-            page.fill("#lot", "A")
-            page.click("#submit")
-            page.wait_for_selector("#verdict", timeout=240_000)
-            job_url = page.url
-            page.click("#nav-history")
-            assert "9 run(s)" in page.inner_text("#history-count")
-            page.fill("#f-lot", "A")
-            page.click("#filter")
-            page.wait_for_selector("#trend-chart")
-            assert "7 run(s)" in page.inner_text("#history-count")
-            lots = page.eval_on_selector_all("#history tr td:nth-child(4)", "tds => tds.map(t => t.textContent)")
-            assert lots == ["A"] * 7
-            assert page.evaluate("document.querySelector('#trend-chart').naturalWidth") > 300  # the chart loaded
-            chart = page.request.get(url + page.locator("#trend-chart").get_attribute("src"))
-            assert chart.ok and chart.headers["content-type"] == "image/png"
-            link = page.locator("#history a[href^='/jobs/']")
-            assert link.count() == 1  # the web job, kept by the server: its page
-            link.click()
-            page.wait_for_selector("#verdict")
-            assert page.url == job_url
-        finally:
-            browser.close()
+    with _browser(exe) as browser:
+        page = browser.new_page(viewport={"width": 1280, "height": 1000})
+        page.goto(url)
+        page.set_input_files("#image", str(pane / "pane.png"))
+        page.set_input_files("#reference", str(pane / "reference.png"))
+        page.fill("#pitch_mm", "2")
+        page.fill("#distance_m", "1")
+        page.fill("#pane_id", "W-1")
+        page.fill("#lot", "A")
+        page.click("#submit")
+        page.wait_for_selector("#verdict", timeout=240_000)
+        job_url = page.url
+        page.click("#nav-history")
+        assert "9 run(s)" in page.inner_text("#history-count")
+        page.fill("#f-lot", "A")
+        page.click("#filter")
+        page.wait_for_selector("#trend-chart")
+        assert "7 run(s)" in page.inner_text("#history-count")
+        lots = page.eval_on_selector_all("#history tr td:nth-child(4)", "tds => tds.map(t => t.textContent)")
+        assert lots == ["A"] * 7
+        assert page.evaluate("document.querySelector('#trend-chart').naturalWidth") > 300  # the chart loaded
+        chart = page.request.get(url + page.locator("#trend-chart").get_attribute("src"))
+        assert chart.ok and chart.headers["content-type"] == "image/png"
+        link = page.locator("#history a[href^='/jobs/']")
+        assert link.count() == 1  # the web job, kept by the server: its page
+        link.click()
+        page.wait_for_selector("#verdict")
+        assert page.url == job_url
