@@ -109,8 +109,9 @@ class AnalyzerParams(BaseModel):
     )
     deformation_passes: int = Field(
         3, ge=0, le=8,
-        description="F5: largest number of image-deformation passes (the photo warped by the current displacement and "
-        "its residual demodulated, so the bandpass sees the local grid at the carrier); 0 = one-pass demodulation",
+        description="F5: largest number of image-deformation passes (a reference warped by the current displacement is "
+        "synthesised and the photo's residual against it demodulated, so the bandpass sees the local grid at the "
+        "carrier); 0 = one-pass demodulation",
     )
     deformation_min_deviation: float = Field(
         0.2, ge=0, le=1.0,
