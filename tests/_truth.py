@@ -23,6 +23,11 @@ that rule):
 
   axis = direction of largest stretch of the traceless part of eps, degrees in (-90, 90]
   from +x towards +y.
+* Reflection (docs/reflection.md "Definitions"): the reflective power of a height field
+  Z(u, v) on the pane, Coddington's equations for a mirror written out,
+  P = 2 [[Z_tt / cos theta, Z_ts], [Z_ts, Z_ss cos theta]], with the Hessian by centred
+  differences of the analytic surface, t along the in-plane vector from the camera's foot
+  to the point and tan theta = |v| / C.
 """
 
 from __future__ import annotations
@@ -33,7 +38,7 @@ import numpy as np
 from scipy import ndimage
 
 __all__ = ["TruthChannels", "detrend", "smooth", "gradient_mm", "channels", "evaluate", "truth_for",
-           "axis_difference_deg"]
+           "axis_difference_deg", "reflective_power", "reflected_channels"]
 
 
 @dataclass(frozen=True)
@@ -156,3 +161,54 @@ def axis_difference_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """|a - b| for axes (modulo 180 degrees), in [0, 90]."""
     d = np.abs((np.asarray(a) - np.asarray(b)) % 180.0)
     return np.minimum(d, 180.0 - d)
+
+
+def reflective_power(height, u_mm: np.ndarray, v_mm: np.ndarray, *, foot_mm: tuple[float, float],
+                     camera_distance_mm: float, step_mm: float = 0.5) -> np.ndarray:
+    """Coddington's reflective power P (1/mm, (u, v) frame, (..., 2, 2)) of the surface ``height(u, v)`` (mm).
+
+    ``u_mm, v_mm``: the points on the pane; ``foot_mm``: the camera's foot on the pane (the
+    foot of the perpendicular from the camera), ``camera_distance_mm``: C. Hessian by centred
+    differences of ``height`` at ``step_mm``; t = (u - foot) / |u - foot| ((1, 0) at the foot),
+    s = t turned by +90 deg, cos theta = C / sqrt(C^2 + |u - foot|^2);
+    P_tt = 2 Z_tt / cos theta, P_ss = 2 Z_ss cos theta, P_ts = 2 Z_ts.
+    """
+    h = step_mm
+    u, v = np.asarray(u_mm, float), np.asarray(v_mm, float)
+    z0 = height(u, v)
+    zuu = (height(u + h, v) - 2 * z0 + height(u - h, v)) / h**2
+    zvv = (height(u, v + h) - 2 * z0 + height(u, v - h)) / h**2
+    zuv = (height(u + h, v + h) - height(u + h, v - h) - height(u - h, v + h) + height(u - h, v - h)) / (4 * h * h)
+    vx, vy = u - foot_mm[0], v - foot_mm[1]
+    r = np.hypot(vx, vy)
+    tu = np.where(r > 0, vx / np.where(r > 0, r, 1.0), 1.0)
+    tv = np.where(r > 0, vy / np.where(r > 0, r, 1.0), 0.0)
+    su, sv = -tv, tu
+    cos_t = camera_distance_mm / np.sqrt(camera_distance_mm**2 + r * r)
+    ztt = tu * tu * zuu + 2 * tu * tv * zuv + tv * tv * zvv
+    zss = su * su * zuu + 2 * su * sv * zuv + sv * sv * zvv
+    zts = tu * su * zuu + (tu * sv + tv * su) * zuv + tv * sv * zvv
+    ptt, pss, pts = 2 * ztt / cos_t, 2 * zss * cos_t, 2 * zts
+    # back to (u, v): P = Q^T [[ptt, pts], [pts, pss]] Q, Q rows t and s
+    puu = tu * tu * ptt + 2 * tu * su * pts + su * su * pss
+    pvv = tv * tv * ptt + 2 * tv * sv * pts + sv * sv * pss
+    puv = tu * tv * ptt + (tu * sv + tv * su) * pts + su * sv * pss
+    return np.stack([np.stack([puu, puv], -1), np.stack([puv, pvv], -1)], -2)
+
+
+def reflected_channels(P: np.ndarray, mask: np.ndarray, sigma_px: float):
+    """(phi_eff, phi_shear, phi_total) in mD and the axis of the power ``P`` (1/mm) smoothed over ``mask``.
+
+    Each component is smoothed by :func:`smooth` (first-order normalised Gaussian of
+    ``sigma_px`` on the pixel grid, over ``mask``); then the channels of :func:`channels`
+    (P in 1/mm x 1000 is 1/m: ``channels(P * 1000, 1.0)`` gives mD). NaN outside ``mask``.
+    """
+    mask = np.asarray(mask, bool)
+    S = np.empty(P.shape)
+    for i, j in ((0, 0), (1, 1), (0, 1)):
+        S[..., i, j] = smooth(P[..., i, j], mask, sigma_px, 1)
+    S[..., 1, 0] = S[..., 0, 1]
+    out = channels(np.nan_to_num(S) * 1000.0, 1.0)
+    for a in out:
+        a[~mask] = np.nan
+    return out

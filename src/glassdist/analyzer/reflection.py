@@ -92,6 +92,7 @@ __all__ = [
     "ReflectionGeometry",
     "coddington_power",
     "power_from_strain",
+    "slope_strain",
     "power_channels",
     "strain_from_channels",
     "reflect_result",
@@ -167,12 +168,20 @@ class ReflectionGeometry:
             to the point is ``v = C tan(theta_0) t_0 + (dx, dy)``: ``tan(theta) = |v| / C``,
             the plane of incidence along ``v``.
         """
-        C = 1000.0 * (self.distance_m if self.camera_distance_m is None else self.camera_distance_m)
-        r0 = C * math.tan(math.radians(self.incidence_deg))
+        vx, vy = self.foot_offset_mm(dx_mm, dy_mm)
+        return np.degrees(np.arctan(np.hypot(vx, vy) / self.camera_distance_mm)), np.degrees(np.arctan2(vy, vx))
+
+    @property
+    def camera_distance_mm(self) -> float:
+        """The camera-to-pane distance C, mm (D with the camera in the board plane)."""
+        return 1000.0 * (self.distance_m if self.camera_distance_m is None else self.camera_distance_m)
+
+    def foot_offset_mm(self, dx_mm, dy_mm):
+        """In-plane vector ``v`` (pane mm) from the camera's foot on the pane to the points offset by ``(dx, dy)``
+        from the one seen at the view's centre: ``v = C tan(theta_0) t_0 + (dx, dy)``."""
+        r0 = self.camera_distance_mm * math.tan(math.radians(self.incidence_deg))
         a0 = math.radians(self.plane_deg)
-        vx = r0 * math.cos(a0) + np.asarray(dx_mm, float)
-        vy = r0 * math.sin(a0) + np.asarray(dy_mm, float)
-        return np.degrees(np.arctan(np.hypot(vx, vy) / C)), np.degrees(np.arctan2(vy, vx))
+        return r0 * math.cos(a0) + np.asarray(dx_mm, float), r0 * math.sin(a0) + np.asarray(dy_mm, float)
 
     def to_dict(self) -> dict:
         """The record ``summary.json`` keeps under ``optics``."""
@@ -260,6 +269,58 @@ def power_from_strain(strain: np.ndarray, incidence_deg, plane_deg) -> np.ndarra
     return _tensor_in_frame(tu, tv, c * ett, c * ess, c * (2 * c / (1 + c * c)) * ets)
 
 
+def slope_strain(strain: np.ndarray, displacement_mm: np.ndarray, vx_mm, vy_mm, geometry: ReflectionGeometry):
+    """The board strain of the slope field alone: the strain less the terms of the landing factor's variation.
+
+    Parameters
+    ----------
+    strain : ndarray (..., 2, 2)
+        ``eps = sym grad_X delta`` (X in board mm), dimensionless, image frame.
+    displacement_mm : ndarray (..., 2)
+        The board displacement ``delta`` it comes from, board mm, image frame.
+    vx_mm, vy_mm : ndarray (...)
+        In-plane vector from the camera's foot to each sample on the pane, pane mm
+        (:meth:`ReflectionGeometry.foot_offset_mm`).
+    geometry : ReflectionGeometry
+
+    Returns
+    -------
+    ndarray (..., 2, 2)
+        ``eps - sym((2 / C) v g^T) - (2 D / (m C^2)) (v . g) I`` with ``g = M^{-1} delta``.
+
+    Notes
+    -----
+    The landing shift of a pane with slopes ``g = grad Z`` and heights ``Z`` is, to first
+    order, ``delta = M(v) g + (2 Z / C) v`` with ``M(v) = 2 D (I + v v^T / C^2)`` (``2 D / cos^2
+    theta`` along the plane of incidence ``t = v / |v|``, ``2 D`` across it: ``tan(theta) =
+    |v| / C``) and ``2 Z tan(theta)`` the mirror image of the camera moving with the surface.
+    The factor varies over the pane, so the gradient of ``delta`` with respect to pane mm
+    ``x = X / m`` is not ``M Hess Z`` alone:
+
+    .. math::
+
+       \\nabla_x \\delta = M\\,\\mathrm{Hess}\\,Z + \\frac{2 m}{C}\\, v\\, g^T
+           + \\frac{2 D}{C^2} (v \\cdot g)\\, I + \\frac{2 Z}{C} I .
+
+    The two slope terms are removed here with ``g = M^{-1} delta`` (``M^{-1} = (I - v v^T /
+    (C^2 + |v|^2)) / 2 D``); relative to the curvature term they are about
+    ``2 tan(theta) cos^2(theta) (1 + m/2) / (D k)`` for a wave of wavenumber ``k`` (4 % at
+    20 deg, D = 2 m, 400 mm), and off the axis at normal incidence they grow with the distance
+    from the camera's foot. The height term, ``Z / (D C k^2 Z)`` relative (0.1 % for the
+    same wave), is left out: it needs ``Z`` itself.
+    """
+    C, D, m = geometry.camera_distance_mm, 1000.0 * geometry.distance_m, geometry.magnification
+    vx, vy = np.asarray(vx_mm, float), np.asarray(vy_mm, float)
+    dx, dy = displacement_mm[..., 0], displacement_mm[..., 1]
+    vd = (vx * dx + vy * dy) / (C * C + vx * vx + vy * vy)
+    gx, gy = (dx - vx * vd) / (2 * D), (dy - vy * vd) / (2 * D)
+    k = 2.0 / C
+    iso = 2 * D / (m * C * C) * (vx * gx + vy * gy)
+    cxx, cyy, cxy = k * vx * gx + iso, k * vy * gy + iso, 0.5 * k * (vx * gy + vy * gx)
+    corr = np.stack([np.stack([cxx, cxy], -1), np.stack([cxy, cyy], -1)], -2)
+    return np.asarray(strain, float) - corr
+
+
 def power_channels(P: np.ndarray):
     """``(phi_eff, phi_shear, phi_total, axis_deg)`` of a power tensor (in its unit): trace,
     difference of the principal powers, Frobenius norm, axis of the larger principal power."""
@@ -304,8 +365,12 @@ def reflect_result(result, geometry: ReflectionGeometry):
     yy, xx = result.analysis_grid.coords()
     H, W = result.valid.shape
     pane_mm_per_px = result.mm_per_px / m
-    theta, plane = geometry.incidence((xx - W / 2) * pane_mm_per_px, (yy - H / 2) * pane_mm_per_px)
-    eps = strain_from_channels(fields["phi_eff_mD"], fields["phi_shear_mD"], fields["axis_deg"])
+    dx_mm, dy_mm = (xx - W / 2) * pane_mm_per_px, (yy - H / 2) * pane_mm_per_px
+    theta, plane = geometry.incidence(dx_mm, dy_mm)
+    scale = 1000.0 / geometry.effective_distance_m  # the channels are eps x 1000 / L, L = D / m in m
+    eps = strain_from_channels(fields["phi_eff_mD"], fields["phi_shear_mD"], fields["axis_deg"]) / scale
+    eps = scale * slope_strain(eps, np.nan_to_num(fields["displacement_mm"].astype(float)),
+                               *geometry.foot_offset_mm(dx_mm, dy_mm), geometry)
     eff, shear, total, axis = power_channels(power_from_strain(eps, theta, plane))
     finite = np.isfinite(fields["phi_eff_mD"])
     c = np.cos(np.radians(theta))

@@ -461,7 +461,10 @@ def render_intensity(
         dx, dy, dz = dirs[:, 0].copy(), dirs[:, 1].copy(), dirs[:, 2].copy()
         del dirs
         if scene.reflection:
-            I = _reflected_intensity(scene, dx, dy, dz, reference, (hx[..., None], hy[..., None]), cs.shape)
+            centres = pixel_directions(scene.camera, (col[..., None] + ox + 0.5 / sx).ravel(),
+                                       (row[..., None] + oy + 0.5 / sy).ravel())
+            I = _reflected_intensity(scene, dx, dy, dz, reference, (hx[..., None], hy[..., None]), cs.shape,
+                                     centres)
             out[r0:r1] = I.mean(axis=-1)
             if progress is not None:
                 progress(r1 * W * samples_per_pixel, H * W * samples_per_pixel)
@@ -483,8 +486,20 @@ def render_intensity(
     return out
 
 
-def _reflected_intensity(scene: Scene, dx, dy, dz, reference: bool, half_width, shape) -> np.ndarray:
+def _reflected_intensity(scene: Scene, dx, dy, dz, reference: bool, half_width, shape, centres) -> np.ndarray:
     """Board radiance seen in the pane along rays ``(dx, dy, dz)`` (reflection), reshaped to ``shape``.
+
+    Each ray stands for its stratum (:func:`render_intensity`): the board is box-filtered
+    over the stratum's glass-less footprint, centred where the stratum's centre
+    (``centres``, unit directions) lands without the glass, moved by the ray's own
+    displacement ``delta = X(ray) - X_0(ray)`` (traced minus glass-less landing at the
+    jittered point). The boxes of a pixel's strata then tile its footprint, so the
+    reference (``delta = 0``) is the exact pixel-area integral of the board, and the pane's
+    image differs from an exact area integral only by the variation of ``delta`` within a
+    stratum (its strain times the stratum's size): the jitter samples the distortion, not
+    the grid's lines, whose edges would otherwise add a sampling noise of several percent
+    of the contrast at a few samples per pixel (a camera integrates its pixel area without
+    such noise; sensor noise is :mod:`glassdist.render.imaging`'s).
 
     The reference is the board in the flat reference surface (the front face's nominal
     plane); the pane's image is the front-face reflection, or with ``viewing.back_face``
@@ -493,16 +508,17 @@ def _reflected_intensity(scene: Scene, dx, dy, dz, reference: bool, half_width, 
     """
     pane = scene.pane
     frame_I = pane.frame.intensity if pane.frame is not None else 0.0
+    Lc = straight_landing(scene, centres)
     if reference:
-        dirs = np.stack([dx, dy, dz], axis=-1)
-        L = straight_landing(scene, dirs)
-        return pattern_intensity(scene.backdrop, L[:, 0].reshape(shape), L[:, 1].reshape(shape), half_width)
+        return pattern_intensity(scene.backdrop, Lc[:, 0].reshape(shape), Lc[:, 1].reshape(shape), half_width)
+    L0 = straight_landing(scene, np.stack([dx, dy, dz], axis=-1))
+    shift_x, shift_y = (Lc[:, 0] - L0[:, 0]).reshape(shape), (Lc[:, 1] - L0[:, 1]).reshape(shape)
     X, Y, status, ghost = _reflection_components(scene, dx, dy, dz)
     X, Y, status = (a.reshape(shape) for a in (X, Y, status))
-    I = pattern_intensity(scene.backdrop, np.nan_to_num(X), np.nan_to_num(Y), half_width)
+    I = pattern_intensity(scene.backdrop, np.nan_to_num(X) + shift_x, np.nan_to_num(Y) + shift_y, half_width)
     if ghost is not None:
         X2, Y2, w1, w2 = (a.reshape(shape) for a in ghost)
-        I2 = pattern_intensity(scene.backdrop, np.nan_to_num(X2), np.nan_to_num(Y2), half_width)
+        I2 = pattern_intensity(scene.backdrop, np.nan_to_num(X2) + shift_x, np.nan_to_num(Y2) + shift_y, half_width)
         w2 = np.nan_to_num(w2)
         I = (w1 * I + w2 * I2) / np.where(w1 + w2 > 0, w1 + w2, 1.0)
     return np.where(status == GLASS, I, frame_I)

@@ -111,8 +111,9 @@ def predict_channels(
     prediction : Prediction
     channels : glassdist.analyzer.Channels
         In reflection the channels are the reflective power on the pane
-        (:func:`glassdist.analyzer.reflection.power_from_strain` of the board strain at the
-        scene's :func:`reflection_geometry`); ``strain`` stays the board's.
+        (:func:`glassdist.analyzer.reflection.power_from_strain` of the slope field's board
+        strain, :func:`~glassdist.analyzer.reflection.slope_strain`, at the scene's
+        :func:`reflection_geometry` and each pixel's own incidence); ``strain`` stays the board's.
     valid : ndarray of bool (H, W)
     """
     from ..analyzer.metrics import evaluate_displacement
@@ -141,9 +142,13 @@ def predict_channels(
     if geom is not None:
         from dataclasses import replace
 
-        from ..analyzer.reflection import power_channels, power_from_strain
+        from ..analyzer.reflection import power_channels, power_from_strain, slope_strain
 
-        P = power_from_strain(ch.strain * (1000.0 / geom.effective_distance_m), *_incidence(scene))
+        theta, plane = _incidence(scene)
+        r = geom.camera_distance_mm * np.tan(np.radians(theta))  # |v|: the camera's foot to the hit point
+        v = (r * np.cos(np.radians(plane)), r * np.sin(np.radians(plane)))
+        eps = slope_strain(ch.strain, np.nan_to_num(pred.displacement_mm), *v, geom)
+        P = power_from_strain(eps * (1000.0 / geom.effective_distance_m), theta, plane)
         eff, shear, total, axis = power_channels(P)
         ch = replace(ch, phi_eff_mD=eff, phi_shear_mD=shear, phi_total_mD=total, axis_deg=axis)
     return pred, ch, region
