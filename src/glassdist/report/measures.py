@@ -55,6 +55,7 @@ __all__ = [
     "equivalent_power",
     "standard_measures",
     "reflected_roll_wave",
+    "REFLECTION_MEANING",
     "measures_rows",
     "ARCMIN_PER_RAD",
     "EQUIVALENT_POWER_CONVENTION",
@@ -778,8 +779,21 @@ class StandardMeasures:
             "angular_deviation": self.angular_deviation.statistics(),
             "grid_line_slope": self.grid_line_slope.statistics(),
             "equivalent_power": self.equivalent_power.to_dict(),
-            **({"reflected_roll_wave": self.reflection} if self.reflection is not None else {}),
+            **({"reflected_roll_wave": self.reflection, "reflection_meaning": REFLECTION_MEANING}
+               if self.reflection is not None else {}),
         }
+
+
+#: What the standard measures mean in reflection (``summary.json["measures"]["reflection_meaning"]``).
+REFLECTION_MEANING = {
+    "roll_wave": "the board displacement's wave (amplitude_mm and displacement_pv_mm are board mm, not the "
+                 "surface's height): read reflected_roll_wave for the pane",
+    "angular_deviation": "deviation of the reflected ray (twice the change of the surface slope, L = D / cos "
+                         "theta), its change over the gauge length on the pane",
+    "grid_line_slope": "slope of the board's grid lines seen in the pane (derivatives along board mm)",
+    "equivalent_power": "-phi_eff / 2 of the reflective power: the pane's mean principal power as a mirror "
+                        "(a concave, converging pane reads P > 0)",
+}
 
 
 def reflected_roll_wave(rw: RollWave, optics: dict) -> dict:
@@ -841,8 +855,9 @@ def standard_measures(result, *, gauge_mm: float = 4.0, directions_deg=(0.0, 90.
     step = (sy * result.mm_per_px, sx * result.mm_per_px)
     L = result.distance_m
     optics = getattr(result, "optics", None)
-    rw_step = step
-    if optics is not None:  # reflection: D / cos(theta) turns the board displacement into reflective power
+    rw_step = gl_step = step
+    if optics is not None:
+        gl_step = (step[0] * optics["magnification"], step[1] * optics["magnification"])  # board mm per sample  # reflection: D / cos(theta) turns the board displacement into reflective power
         cos_t = float(np.cos(np.radians(optics["incidence_deg"])))
         L = optics["board_distance_m"] / cos_t
         # a camera aimed at the view's centre sees the pane foreshortened by cos(theta) along the plane of
@@ -857,7 +872,7 @@ def standard_measures(result, *, gauge_mm: float = 4.0, directions_deg=(0.0, 90.
     return StandardMeasures(
         roll_wave=rw,
         angular_deviation=angular_deviation(d, step_mm=step, distance_m=L, gauge_mm=gauge_mm),
-        grid_line_slope=grid_line_slope(d, step_mm=step, directions_deg=directions_deg),
+        grid_line_slope=grid_line_slope(d, step_mm=gl_step, directions_deg=directions_deg),
         equivalent_power=equivalent_power(phi),
         step_mm=step,
         field=(
@@ -887,6 +902,19 @@ def measures_rows(measures: dict) -> list[tuple[str, str]]:
     rw, ad = measures["roll_wave"], measures["angular_deviation"]
     gl, ep = measures["grid_line_slope"], measures["equivalent_power"]
     slopes = ", ".join(f"1 in {_g(n)} (lines at {_g(d, '°')})" for d, n in zip(gl["directions_deg"], gl["one_in_n"]))
+    if "reflected_roll_wave" in measures:  # reflection: the pane's roll wave, and what the others mean there
+        r, mean = measures["reflected_roll_wave"], measures["reflection_meaning"]
+        return [
+            ("reflected roll wave", f"period {_g(r['period_mm'], ' mm', 4)} along {_direction(r['direction_deg'])}; "
+             f"reflective power amplitude {_g(r['power_amplitude_mD'], ' mD')} (peak-to-valley {_g(r['power_pv_mD'], ' mD')}); "
+             f"surface peak-to-valley {_g(r['surface_pv_mm'], ' mm')} ({r['assumptions']})"),
+            ("deviation of the reflected ray", f"max {_g(ad['angle_max_arcmin'], ' arcmin')}, p95 {_g(ad['angle_p95_arcmin'], ' arcmin')}; "
+             f"change over {_g(ad['gauge_mm'], ' mm')}: p95 {_g(ad['rate_p95_arcmin'], ' arcmin')} ({mean['angular_deviation']})"),
+            ("grid-line slope of the reflected board", slopes),
+            ("sphere-equivalent power of the pane as a mirror P = −φ_eff/2",
+             f"mean {_g(ep['mean_mD'], ' mD')}, p95 |P| {_g(ep['p95_abs_mD'], ' mD')} ({mean['equivalent_power']})"),
+            ("field measured", str(measures["field"])),
+        ]
     return [
         ("roll wave (ASTM C1651 quantities)",
          f"period {_g(rw['period_mm'], ' mm', 4)} along {_direction(rw['direction_deg'])}; amplitude {_g(rw['amplitude_mm'], ' mm')} "
