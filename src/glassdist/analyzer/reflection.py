@@ -424,9 +424,10 @@ def analyze_reflection(image, *, pitch_mm: float, geometry: ReflectionGeometry, 
     >>> from glassdist.analyzer.reflection import ReflectionGeometry, analyze_reflection
     >>> from glassdist.synthetic import synthetic_capture
     >>> g = ReflectionGeometry(distance_m=2.0)
-    >>> def sphere(X, Y):  # board mm -> board displacement: 2 D grad Z at the pane point X / m
-    ...     k = -2 * 2000.0 / g.magnification / 20000.0
-    ...     return k * X, k * Y
+    >>> def sphere(X, Y):  # board mm -> board displacement 2 D (I + v v^T / C^2) grad Z at the pane point v = X / m
+    ...     x, y = X / g.magnification, Y / g.magnification
+    ...     k = -2 * 2000.0 / 20000.0 * (1 + (x * x + y * y) / 2000.0**2)
+    ...     return k * x, k * y
     >>> cap = synthetic_capture((192, 256), pitch_mm=10.0, mm_per_px=1.25, displacement=sphere)
     >>> res = analyze_reflection(cap.image, pitch_mm=10.0, geometry=g, reference=cap.reference, detrend_degree=0)
     >>> round(float(np.nanmedian(res.phi_eff_mD)))  # -4000 / R
