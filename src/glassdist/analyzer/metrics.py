@@ -598,7 +598,7 @@ def _smoothed_components(det: np.ndarray, labels: np.ndarray, sigma_px: float, s
     for c in range(2):
         if transfer is not None:
             cov = transfer.residual_cov_px2(c, sigma_px)
-            base = transfer.correction
+            base = transfer.component_correction(c)
         else:
             cov = sigma_px**2 * np.eye(2)
             if component_blur_px2 is not None:

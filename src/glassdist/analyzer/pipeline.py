@@ -267,6 +267,7 @@ class _Demodulation:
     coherences: tuple[np.ndarray, np.ndarray]
     mods: list
     noise_std: float = float("nan")
+    passes: int = 1  # demodulations the phase sums (F5's iterative deformation; 1: one pass)
 
 
 @dataclass(frozen=True)
@@ -285,6 +286,7 @@ class _AnalysisGrid:
     report: np.ndarray
     fine_valid: np.ndarray | None
     transfer: InstrumentTransfer | None
+    passes: int = 1  # demodulations the phases sum (F5)
 
 
 # --------------------------------------------------------------------------- stages
@@ -378,8 +380,9 @@ def _follow_local_grid(img, refm: ReferenceModel | None, demod: _Demodulation, r
 
     Returns None when no pass is needed (``deformation_passes`` 0, or the one-pass local
     frequency within ``deformation_min_deviation`` of the carrier), else the demodulation
-    whose phase is ``G * (predictor) + residual`` and the residual phases (wrapped, rad),
-    whose local frequency is what the bandpass was left with.
+    whose phase is ``predictor + residual`` (its ``passes``: the demodulations summed, the
+    one-pass one included; transfer in :mod:`~glassdist.analyzer.transfer`) and the residual
+    phases (wrapped, rad), whose local frequency is what the bandpass was left with.
     """
     ks = demod.carriers
     if p.deformation_passes == 0 or img is None or region.n == 0:
@@ -403,14 +406,10 @@ def _follow_local_grid(img, refm: ReferenceModel | None, demod: _Demodulation, r
         if step < p.deformation_tolerance_periods or k == p.deformation_passes - 1:
             break
         pred = pred + D.fill_nearest(np.where(ok[..., None], res, 0.0), ok)
-    # The last residual was measured against the reference warped by pred: phi = G * pred + residual.
-    # Regions unwrapped apart leave 2 pi steps in pred across the gaps: the warped reference does
-    # not see them, and G applies to pred unwrapped over the whole grid (G * P - P is smooth).
-    blur = _demodulation_blur_px2(ks, covs, p)
-    total = []
-    for i, z in enumerate(zs):
-        ph = np.angle(z) + pred[..., i] + D.smoothing_correction(pred[..., i], blur[i], grid)
-        total.append((np.abs(z) * np.exp(1j * ph)).astype(np.complex64))
+    # The last residual was measured against the reference warped by pred: phi = pred + residual,
+    # the converged field (the filters' Gaussian acts on the residual only; after n demodulations
+    # the linear transfer is (1 - (1 - G B)^n) / B, transfer.InstrumentTransfer).
+    total = [(np.abs(z) * np.exp(1j * (np.angle(z) + pred[..., i]))).astype(np.complex64) for i, z in enumerate(zs)]
     # The bandpass's gain at the local frequency, read off the warped reference (a uniform grid
     # of amplitude 1/2 per carrier): the photo's modulation is judged against it (a faint grid where the gain
     # explains it is not occluded), and where the gain is below its value at
@@ -419,7 +418,7 @@ def _follow_local_grid(img, refm: ReferenceModel | None, demod: _Demodulation, r
     floor = float(np.exp(-0.5 * (p.deformation_max_deviation / p.bandpass_sigma_along) ** 2))
     beyond = np.any([g_ < floor for g_ in gain], axis=0)
     region_mods = [m_ / np.maximum(g_, floor) for m_, g_ in zip(demod.mods[:2], gain)] + list(demod.mods[2:])
-    out = _Demodulation(demod.method, ks, covs, grid, tuple(total), cohs, demod.mods, demod.noise_std)
+    out = _Demodulation(demod.method, ks, covs, grid, tuple(total), cohs, demod.mods, demod.noise_std, passes=k + 2)
     return out, list(res.transpose(2, 0, 1)), region_mods, beyond
 
 
@@ -564,7 +563,8 @@ def _smoothing_mm(demod: _Demodulation, p: AnalyzerParams, p_c: float, mm_per_px
     return float(sigma_mm), blur
 
 
-def _to_analysis_grid(phases, region: Region, grid: F.SamplingGrid, sigma_px: float, blur, p: AnalyzerParams) -> _AnalysisGrid:
+def _to_analysis_grid(phases, region: Region, grid: F.SamplingGrid, sigma_px: float, blur, p: AnalyzerParams,
+                      passes: int = 1) -> _AnalysisGrid:
     """Block means of the demodulation grid, as coarse as the reporting smoothing allows.
 
     The block step stays below half the residual smoothing. The instrument transfer
@@ -574,10 +574,10 @@ def _to_analysis_grid(phases, region: Region, grid: F.SamplingGrid, sigma_px: fl
     m = _analysis_block(sigma_px, blur, grid, p)
     agrid = grid if m == 1 else F.block_grid(grid, m)
     transfer = None if blur is None else InstrumentTransfer(
-        blur, fine_step_px=grid.step, block=m, interp_step_px=None if agrid.is_full else agrid.step,
+        blur, fine_step_px=grid.step, block=m, interp_step_px=None if agrid.is_full else agrid.step, passes=passes,
     )
     if m == 1:
-        return _AnalysisGrid(grid, phases, region.valid, region.labels, region.valid, None, transfer)
+        return _AnalysisGrid(grid, phases, region.valid, region.labels, region.valid, None, transfer, passes)
     phases, fill = F.block_mean(phases, region.valid, m)
     hb, wb = agrid.shape
     block_label = region.labels.reshape(hb, m, wb * m).max(axis=1).reshape(hb, wb, m).max(axis=2)
@@ -586,7 +586,7 @@ def _to_analysis_grid(phases, region: Region, grid: F.SamplingGrid, sigma_px: fl
     labels = np.where(fill >= 1.0, block_label, 0)
     valid = labels > 0
     report = ndimage.binary_dilation(valid, iterations=1) & (fill > 0)
-    return _AnalysisGrid(agrid, phases, valid, labels, report, region.valid, transfer)
+    return _AnalysisGrid(agrid, phases, valid, labels, report, region.valid, transfer, passes)
 
 
 def _direct_pass2(ag: _AnalysisGrid, carriers: F.CarrierPair, fit: HomographyFit) -> np.ndarray:
@@ -981,7 +981,7 @@ def _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn
     mm_per_px = p_c * float(np.sqrt(carriers.k1.norm * carriers.k2.norm))
     sigma_mm, blur = _smoothing_mm(demod, p, p_c, mm_per_px, warn)
     sigma_px = sigma_mm / mm_per_px
-    ag = _to_analysis_grid(phases, region, demod.grid, sigma_px, blur, p)
+    ag = _to_analysis_grid(phases, region, demod.grid, sigma_px, blur, p, passes=demod.passes)
     del phases
     if fit is not None:
         ag = replace(ag, phases=_direct_pass2(ag, carriers, fit))
@@ -1074,6 +1074,7 @@ def _result(meas: _Measurement, evaluated, warn: list[str], *, extra_fields: dic
         sampling_step_px=ag.grid.step,
         effective_sigma_mm=meas.sigma_mm if ag.transfer is None else ag.transfer.effective_sigma_px(meas.sigma_mm / meas.mm_per_px) * meas.mm_per_px,
         n_regions=meas.n_regions if n_regions is None else n_regions,
+        demodulations=ag.passes,
         margin_px=meas.margin_px,
         guard_px=meas.guard_px,
         noise_std=meas.noise_std,
