@@ -14,8 +14,9 @@ Every field is written as ``u`` (px) with ``img(r) = ref(r - u(r))`` (glassdist:
   valid region (the same pixels for every method);
 * **amplitude**: regression slope of glassdist's field on FCD's at matched smoothing (the
   peer's field passed through the documented transfer of glassdist's displacement output,
-  Block F's Gaussian per carrier, then both smoothed by one carrier period, NaN-aware), means
-  removed, over the pixels where both are valid; 1 = the same amplitude. Every score is
+  Block F's Gaussian per carrier or, after F5, ``(1 - (1 - G B)^n) / B``; then every field
+  restricted to glassdist's region and smoothed by one carrier period over it, NaN-aware),
+  means removed, over the pixels where both are valid; 1 = the same amplitude. Every score is
   also given for the peers at matched smoothing ("matched");
 * **agreement area**: pixels where FCD and Farneback agree within 0.1 carrier period
   (largest component); **coverage** = share of it inside glassdist's ``valid``;
@@ -100,16 +101,35 @@ def slope(a: np.ndarray, b: np.ndarray, where: np.ndarray) -> float:
 
 
 def matched(u: np.ndarray, res) -> np.ndarray:
-    """A peer's field ``u`` (px) through the transfer of glassdist's displacement output: Block F's Gaussian per carrier."""
+    """A peer's field ``u`` (px) through the transfer of glassdist's displacement output, per carrier.
+
+    Block F's Gaussian ``G_i``, or after F5's ``n`` demodulations (``res.demodulations``)
+    ``(1 - (1 - G_i B)^n) / B`` (:class:`glassdist.analyzer.transfer.InstrumentTransfer`),
+    applied in the spectrum of the whole field (periodic FFT on the field extended by odd
+    reflection).
+    """
+    import scipy.fft as sfft
+
     from glassdist.analyzer import deform as D, fourier as F
     from glassdist.analyzer.pipeline import _covariances, _demodulation_blur_px2
+    from glassdist.analyzer.transfer import InstrumentTransfer
 
     ks = res.carriers
     blur = _demodulation_blur_px2(ks, _covariances(ks, res.params), res.params)
-    grid = F.SamplingGrid(u.shape[:2], u.shape[:2])
+    # the demodulation grid's step (B), from the decimation the analysis used
+    fine = F.sampling_grid(u.shape[:2], list(_covariances(ks, res.params)), res.params.decimation)
+    tr = InstrumentTransfer(blur, fine_step_px=fine.step, passes=res.demodulations)
     ph = D.displacement_to_phase(u, ks)
-    ph = np.stack([D.blur_cov(ph[..., i], blur[i], grid) for i in range(2)], axis=-1)
-    return D.phase_to_displacement_px(ph, ks)
+    h, w = u.shape[:2]
+    pad = 64
+    out = []
+    for i in range(2):
+        ext = np.pad(ph[..., i], pad, mode="reflect", reflect_type="odd")
+        fy = sfft.fftfreq(ext.shape[0])[:, None]
+        fx = sfft.rfftfreq(ext.shape[1])[None, :]
+        g = tr.demodulation(i, fy, fx)
+        out.append(sfft.irfft2(sfft.rfft2(ext) * g, s=ext.shape)[pad : pad + h, pad : pad + w])
+    return D.phase_to_displacement_px(np.stack(out, axis=-1), ks)
 
 
 def run(image: Path, reference: Path, params: dict) -> dict:
@@ -135,7 +155,9 @@ def run(image: Path, reference: Path, params: dict) -> dict:
     agree = close(fields["FCD"], fields["Farneback"])
     for k in ("FCD", "Farneback"):
         fields[f"{k} matched"] = matched(fields[k], res)
-    sm = {k: smooth_nan(v, period) for k, v in fields.items()}
+    # Smoothed over the same support (glassdist's region) for every method: a peer's values where
+    # glassdist has none (the excluded rings) would otherwise leak into the comparison near its border.
+    sm = {k: smooth_nan(np.where(valid[..., None], v, np.nan), period) for k, v in fields.items()}
     rows = {}
     for k, u in fields.items():
         rows[k] = {

@@ -10,6 +10,7 @@ import pytest
 
 from glassdist.analyzer.metrics import (
     channel_statistics,
+    detrend_increment,
     evaluate_displacement,
     masked_gaussian,
     polynomial_detrend,
@@ -105,6 +106,33 @@ def test_detrend_removes_polynomials_of_its_degree_per_region(degree):
     assert np.allclose(polynomial_detrend(f, labels, degree), 0, atol=1e-8)
     if degree >= 1:
         assert not np.allclose(polynomial_detrend(f, labels, degree - 1), 0, atol=1e-3)
+
+
+@pytest.mark.parametrize("degree", [1, 3, 4])
+def test_detrend_increment_is_the_top_degree_part_of_a_polynomial(degree):
+    # f = (degree-N polynomial) + (a polynomial of exact degree N + 1 orthogonal to nothing in
+    # particular) per region: raising N removes the rest of f, so the increment is f's degree-N
+    # residual; on a field with NaN holes the identity with two separate detrends holds too.
+    X, Y = _grid(50, 60, 1.0)
+    rng = np.random.default_rng(5)
+    labels = np.ones(X.shape, int)
+    labels[:, 30:] = 2
+    labels[:4] = 0
+    f = np.zeros(X.shape)
+    for r in (1, 2):
+        c = rng.normal(size=(degree + 2, degree + 2))
+        poly = sum(c[i, j] * (X / 50) ** i * (Y / 50) ** j for i in range(degree + 2) for j in range(degree + 2 - i))
+        f[labels == r] = poly[labels == r]
+    inc = detrend_increment(f, labels, degree)
+    assert np.isnan(inc[labels == 0]).all()
+    assert np.allclose(inc[labels > 0], polynomial_detrend(f, labels, degree)[labels > 0], atol=1e-8)
+    noisy = f + rng.normal(size=f.shape)
+    noisy[10:14, 5:9] = np.nan
+    two = np.stack([noisy, -noisy], -1)
+    inc = detrend_increment(two, labels, degree)
+    want = polynomial_detrend(two, labels, degree) - polynomial_detrend(two, labels, degree + 1)
+    ok = np.isfinite(want)
+    assert np.allclose(inc[ok], want[ok], atol=1e-9) and np.abs(inc[ok]).max() > 1e-3
 
 
 def test_masked_gaussian_keeps_linear_fields_and_matches_sigma():

@@ -15,10 +15,12 @@ PIV; Huang et al. 1993 in fringe analysis) removes the cause:
    cancels and the heterodyne is the residual ``phi - pred``, small and measured linearly;
 4. ``pred += residual``; repeat until the RMS update is below ``deformation_tolerance_periods``.
 
-The phase handed on is ``G * pred + residual`` (:func:`smoothing_correction`), with ``G``
-Block F's linear transfer (the Gaussian of :mod:`~glassdist.analyzer.transfer`) times the
-bilinear interpolation by which the warped reference receives the prediction: the output's
-transfer function is exactly the one-pass linear one, without its non-linear losses.
+The phase handed on is ``pred + residual``: the filters' Gaussian ``G`` acts on the residual
+only. In the linear regime each pass measures ``G (true - B pred)`` (``B`` the bilinear
+interpolation by which the warped reference receives the prediction), so after ``n``
+demodulations the output's transfer is ``(1 - (1 - G B)^n) / B`` (close to 1 wherever ``G``
+is not small), without the one-pass non-linear losses; Block A divides it out
+(:class:`~glassdist.analyzer.transfer.InstrumentTransfer`, ``passes``).
 
 References
 ----------
@@ -34,7 +36,7 @@ from scipy import ndimage
 
 from . import fourier as F
 
-__all__ = ["phase_to_displacement_px", "displacement_to_phase", "fill_nearest", "warped_reference", "blur_cov", "smoothing_correction"]
+__all__ = ["phase_to_displacement_px", "displacement_to_phase", "fill_nearest", "warped_reference"]
 
 
 def _frequency_matrix(carriers: F.CarrierPair) -> np.ndarray:
@@ -71,8 +73,8 @@ def warped_reference(pred: np.ndarray, own: np.ndarray | None, grid: F.SamplingG
     continuous: the prediction) and ``own`` (h, w, 2) complex, the reference photo's own
     baseband ``exp(i own_i)`` (None: the flat carrier of the Direct Method), both brought to
     the pixels by ``cv2.resize`` (bilinear: it maps the grid's sample positions exactly; its
-    transfer, ``sinc^2`` per axis, is applied to the prediction's share of the result, see
-    :func:`smoothing_correction`; the reference's phase is interpolated as a phasor, so its
+    transfer, ``sinc^2`` per axis, is the ``B`` of the output's transfer in the module notes;
+    the reference's phase is interpolated as a phasor, so its
     wraps do no harm). Demodulated by the same filters as the photo, it carries the same local
     frequencies and the same cross-talk between the two carriers, so the heterodyne of the two
     is the residual alone (the filters' non-linear effects cancel).
@@ -100,57 +102,3 @@ def warped_reference(pred: np.ndarray, own: np.ndarray | None, grid: F.SamplingG
         np.maximum(norm, np.float32(1e-6), out=norm)
         out += (np.cos(ph) * re - np.sin(ph) * im) / norm
     return out
-
-
-def blur_cov(a: np.ndarray, cov_px2: np.ndarray, grid: F.SamplingGrid, *, bilinear: bool = False) -> np.ndarray:
-    """Gaussian of covariance ``cov_px2`` (px^2, (x, y) order) applied to ``a`` (h, w) on ``grid``.
-
-    Spectral product ``exp(-2 pi^2 k^T C k)`` on the field extended by odd reflection
-    (a linear field is left exactly as it is, the edges included). ``bilinear``: times the
-    transfer of a bilinear interpolation from the grid, ``sinc^2(k_x s_x) sinc^2(k_y s_y)``.
-    """
-    sy, sx = grid.step
-    sd = float(np.sqrt(np.max(np.linalg.eigvalsh(cov_px2))))
-    py, px = int(np.ceil(4 * sd / sy)) + 1, int(np.ceil(4 * sd / sx)) + 1
-    h, w = a.shape
-    py, px = min(py, h - 1), min(px, w - 1)
-    ext = np.pad(np.asarray(a, np.float64), ((py, py), (px, px)), mode="reflect", reflect_type="odd")
-    ky = sfft.fftfreq(ext.shape[0], d=sy)[:, None]
-    kx = sfft.rfftfreq(ext.shape[1], d=sx)[None, :]
-    q = cov_px2[0, 0] * kx**2 + 2 * cov_px2[0, 1] * kx * ky + cov_px2[1, 1] * ky**2
-    gain = np.exp(-2 * np.pi**2 * q)
-    if bilinear:
-        gain = gain * np.sinc(kx * sx) ** 2 * np.sinc(ky * sy) ** 2
-    out = sfft.irfft2(sfft.rfft2(ext) * gain, s=ext.shape)
-    return out[py : py + h, px : px + w].astype(np.float32)
-
-
-def smoothing_correction(phase: np.ndarray, cov_px2: np.ndarray, grid: F.SamplingGrid) -> np.ndarray:
-    """``G * P - P`` for the continuous phase ``P`` (rad, (h, w)) that ``phase`` wraps to; 0 near its cuts.
-
-    ``G``: the Gaussian of ``cov_px2`` times the bilinear interpolation's transfer by which
-    :func:`warped_reference` brings the predictor to the pixels (the warped reference carries
-    ``G * P`` through the filters' linear part, so the predictor's share of the phase is that).
-
-    ``P`` is ``phase`` unwrapped over the whole grid. Around a phase singularity (a grid
-    dislocation) any unwrapping leaves a cut of 2 pi, and ``G * P`` is meaningless within the
-    kernel's reach of it: the correction is zero there (the phase keeps its unsmoothed
-    predictor, and the residue test of F4 sees the singularity).
-    """
-    from .unwrap import unwrap
-
-    every = np.ones(phase.shape, bool)
-    P = unwrap(np.angle(np.exp(1j * phase)), every, every.astype(np.int32), 1)
-    corr = blur_cov(P, cov_px2, grid, bilinear=True) - P
-    cut = np.zeros(phase.shape, bool)
-    jy = np.abs(np.diff(P, axis=0)) > np.pi
-    jx = np.abs(np.diff(P, axis=1)) > np.pi
-    cut[:-1] |= jy
-    cut[1:] |= jy
-    cut[:, :-1] |= jx
-    cut[:, 1:] |= jx
-    if cut.any():
-        sd = float(np.sqrt(np.max(np.linalg.eigvalsh(cov_px2))))
-        near = ndimage.distance_transform_edt(~cut, sampling=grid.step) <= 3 * sd
-        corr[near] = 0.0
-    return corr

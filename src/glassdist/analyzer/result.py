@@ -169,6 +169,10 @@ class AnalysisResult:
     bulk : BulkChannel or None
         The pane-level sphere and cylinder the detrend removed (:mod:`glassdist.analyzer.bulk`),
         or why it is not identifiable (Direct Method).
+    demodulations : int
+        Demodulations the displacement sums: 1 for the one-pass demodulation, more where F5
+        (iterative deformation) ran; the displacement's transfer per carrier follows from it
+        (:mod:`glassdist.analyzer.transfer`: ``G_i``, or ``(1 - (1 - G_i B)^n) / B``).
     """
 
     method: str
@@ -194,6 +198,7 @@ class AnalysisResult:
     effective_sigma_mm: float | None = None
     optics: dict | None = None
     bulk: BulkChannel | None = None
+    demodulations: int = 1
     _deferred: dict | None = field(default=None, repr=False, compare=False)
 
     def field_specs(self) -> tuple[FieldSpec, ...]:

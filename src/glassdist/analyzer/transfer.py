@@ -17,6 +17,14 @@ frequency in cycles/px (x, y order) and ``s`` the step of the grid each stage ru
 * A3's five-point centred difference on the analysis grid: ``(8 sin w - sin 2w) / (6 w)``,
   ``w = 2 pi S nu``, for the derivative along that axis.
 
+When F5 (iterative deformation, :mod:`~glassdist.analyzer.deform`) ran, the phase is the
+prediction plus the residual measured against the reference warped by it; in the linear
+regime each pass measures ``G_i (true - B pred)`` (``G_i`` the two Gaussian stages, ``B``
+the bilinear interpolation by which the warped reference receives the prediction from the
+demodulation grid), so after ``n`` demodulations (the one-pass one included) the Gaussian
+stages' response is ``(1 - (1 - G_i B)^n) / B`` instead of ``G_i``: the smoothing no longer
+attenuates what the passes have converged on.
+
 The product of the first four is the *instrument transfer* ``H_i(nu)``. The A2 smoothing
 then applies ``G_sigma(nu) / H_i(nu)`` (``G_sigma`` the requested Gaussian), so the
 reported field is the true one convolved with ``G_sigma``, exactly where the
@@ -101,12 +109,18 @@ class InstrumentTransfer:
     interp_step_px : (float, float) or None
         ``(sy, sx)``: step of the grid the fields are interpolated from (cubic
         B-spline), px; None when the fields are on the pixel grid already.
+    passes : int
+        Demodulations the displacement sums (F5's; 1: the one-pass demodulation, whose
+        Gaussian stages are Gaussian and divided out in closed form). Above 1 their
+        response is ``(1 - (1 - G_i B)^passes) / B`` (module notes), divided out with the
+        non-Gaussian stages, per component.
     """
 
     gaussian_px2: np.ndarray
     fine_step_px: tuple[float, float] = (1.0, 1.0)
     block: int = 1
     interp_step_px: tuple[float, float] | None = None
+    passes: int = 1
 
     def non_gaussian(self, fy: np.ndarray, fx: np.ndarray) -> np.ndarray:
         """Transfer of the block means and the interpolation at ``(fy, fx)`` cycles/px."""
@@ -117,18 +131,45 @@ class InstrumentTransfer:
             r = r * bspline_response(iy, fy) * bspline_response(ix, fx)
         return r
 
+    def demodulation(self, component: int, fy: np.ndarray, fx: np.ndarray) -> np.ndarray:
+        """Response of the demodulation's Gaussian stages: ``G_i``, or ``(1 - (1 - G_i B)^n) / B`` after F5."""
+        g = gaussian_response(self.gaussian_px2[component], fy, fx)
+        if self.passes <= 1:
+            return g
+        sy, sx = self.fine_step_px
+        b = np.sinc(sy * fy) ** 2 * np.sinc(sx * fx) ** 2  # bilinear interpolation from the demodulation grid
+        return (1.0 - (1.0 - g * b) ** self.passes) / b
+
     def response(self, component: int, fy: np.ndarray, fx: np.ndarray) -> np.ndarray:
         """``H_i(nu)``: end-to-end transfer of displacement component ``component`` (0 or 1)."""
-        return gaussian_response(self.gaussian_px2[component], fy, fx) * self.non_gaussian(fy, fx)
+        return self.demodulation(component, fy, fx) * self.non_gaussian(fy, fx)
 
     def residual_cov_px2(self, component: int, sigma_px: float) -> np.ndarray:
-        """Covariance of the Gaussian still to apply, ``sigma^2 I - Sigma_i`` clipped to be positive, px^2."""
+        """Covariance of the Gaussian still to apply, px^2.
+
+        One pass: ``sigma^2 I - Sigma_i`` clipped to be positive. After F5 the demodulation's
+        response is not Gaussian and :meth:`component_correction` divides it out: the whole
+        Gaussian of the sigma reached (:meth:`effective_sigma_px`) remains to apply.
+        """
+        if self.passes > 1:
+            return self.effective_sigma_px(sigma_px) ** 2 * np.eye(2)
         w, V = np.linalg.eigh(sigma_px**2 * np.eye(2) - np.asarray(self.gaussian_px2[component], float))
         return (V * np.clip(w, 0.0, None)) @ V.T
 
     def correction(self, fy: np.ndarray, fx: np.ndarray) -> np.ndarray:
         """``1 / (non-Gaussian transfer)``, capped at ``1 / MIN_RESPONSE``."""
         return 1.0 / np.maximum(self.non_gaussian(fy, fx), MIN_RESPONSE)
+
+    def component_correction(self, component: int):
+        """The transfer the smoothing of ``component`` divides out beyond :meth:`residual_cov_px2`'s Gaussian.
+
+        One pass: :meth:`correction`. After F5: ``1 / H_i``, capped at ``1 / MIN_RESPONSE``
+        (where ``H_i`` falls below it the Gaussian of at least the instrument's resolution
+        has already removed the content).
+        """
+        if self.passes <= 1:
+            return self.correction
+        return lambda fy, fx: 1.0 / np.maximum(self.response(component, fy, fx), MIN_RESPONSE)
 
     def resolution_px(self) -> float:
         """Finest Gaussian sigma the smoothing can reach: the instrument's largest Gaussian blur, px."""
@@ -145,4 +186,5 @@ class InstrumentTransfer:
             "block": int(self.block),
             "interp_step_px": None if self.interp_step_px is None else list(self.interp_step_px),
             "resolution_px": self.resolution_px(),
+            "passes": int(self.passes),
         }
