@@ -17,7 +17,7 @@ import pytest
 from conftest import write_lens_pair
 
 import glassdist
-from glassdist.report.outputs import EXIT_SPEC_FAIL, finish_analysis
+from glassdist.storage.writer import EXIT_SPEC_FAIL, finish_analysis
 
 PASSING = {"name": "lenient", "criteria": [{"channel": "phi_eff", "statistic": "p95_abs", "max_mD": 1000}]}
 FAILING = {
@@ -188,7 +188,7 @@ def test_report_parameters_show_the_smoothing_used(analysed):
 
 def test_direct_report_shows_the_homography_fit(analysed):
     from glassdist.report.html import render_report
-    from glassdist.report.stats import result_statistics
+    from glassdist.acceptance.stats import result_statistics
 
     result = glassdist.analyze(analysed["image"], pitch_mm=2.0, distance_m=1.0)  # the Direct Method
     fit = result.homography_fit

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from glassdist.errors import InputError
-from glassdist.report.spec import load_spec, spec_limits, spec_verdict
-from glassdist.report.stats import area_over_percent, channel_statistics, result_statistics
+from glassdist.acceptance.spec import load_spec, spec_limits, spec_verdict
+from glassdist.acceptance.stats import area_over_percent, channel_statistics, result_statistics
 
 
 def _write(tmp_path, data, name="spec.json"):
@@ -148,7 +148,7 @@ def test_comment_key_is_allowed_and_hash_is_of_the_file(tmp_path):
 def test_example_specifications_and_manifest_use_detrend_3_with_the_direct_method():
     from pathlib import Path
 
-    from glassdist.report.batch import read_manifest
+    from glassdist.jobs.batch import read_manifest
 
     examples = Path(__file__).resolve().parents[1] / "examples"
     factory, _ = load_spec(examples / "factory" / "spec.json")
@@ -165,7 +165,7 @@ def test_example_specifications_and_manifest_use_detrend_3_with_the_direct_metho
 def test_one_name_per_evaluate_spec():
     """``glassdist.evaluate_spec(result, spec)`` is the only function of that name; the engine has its own."""
     import glassdist
-    import glassdist.report.spec as spec_module
+    import glassdist.acceptance.spec as spec_module
     from glassdist._api import evaluate_spec
 
     assert glassdist.evaluate_spec is evaluate_spec
@@ -176,8 +176,8 @@ def test_one_name_per_evaluate_spec():
 def test_uncertainty_criteria_fail_a_noisy_capture_and_pass_a_clean_one():
     """A spec may require a precise enough measurement: p95 of phi_eff_sigma_mD under a limit."""
     import glassdist
-    from glassdist.report.acceptance import assess
-    from glassdist.report.spec import as_spec
+    from glassdist.acceptance.assess import assess
+    from glassdist.acceptance.spec import as_spec
     from glassdist.synthetic import synthetic_capture, wave_displacement
 
     spec, _ = as_spec({"name": "precision", "criteria": [
@@ -201,7 +201,7 @@ def test_pane_corners_must_be_a_convex_quadrilateral():
     """Convex in either order is accepted; concave, self-crossing or with three corners on a line is refused."""
     import pydantic
 
-    from glassdist.report.spec import Pane
+    from glassdist.acceptance.spec import Pane
 
     square = [[0, 0], [100, 0], [100, 80], [0, 80]]
     for corners in (square, square[::-1]):
@@ -216,7 +216,7 @@ def test_pane_corners_must_be_a_convex_quadrilateral():
 
 def test_protocol_sigma_in_carrier_periods_of_a_checkerboard():
     """sigma_periods counts carrier periods: pitch for lines, pitch * sqrt(2) for a checkerboard."""
-    from glassdist.report.spec import Protocol, resolve_protocol
+    from glassdist.acceptance.spec import Protocol, resolve_protocol
 
     for pattern, period in (("lines", 5.0), ("checkerboard", 5.0 * np.sqrt(2.0))):
         r = resolve_protocol(Protocol(sigma_periods=2, pattern=pattern), reference_given=True, pitch_mm=5.0,

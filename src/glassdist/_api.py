@@ -2,9 +2,9 @@
 
 :func:`evaluate_spec` is what ``glassdist analyze --spec`` prints, for a result in hand
 (``glassdist.evaluate_spec``); the engine underneath is
-:func:`glassdist.report.acceptance.assess`. :func:`write_report` writes the record
+:func:`glassdist.acceptance.assess.assess`. :func:`write_report` writes the record
 (``report.html`` and the rest of the output folder) through the one output stage,
-:func:`glassdist.report.outputs.write_outputs`.
+:func:`glassdist.storage.writer.write_outputs`.
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ def evaluate_spec(result, spec, *, mask=None):
     Protocol pins are checks here (the analysis already ran): a result computed with
     another distance, pitch, smoothing scale or detrend degree than the specification
     pins fails them. Zones, per-zone statistics and worst regions are computed as in
-    :func:`glassdist.report.acceptance.assess`.
+    :func:`glassdist.acceptance.assess.assess`.
 
     Examples
     --------
@@ -60,8 +60,8 @@ def evaluate_spec(result, spec, *, mask=None):
     >>> v.label, [c.passed for c in v.checks]
     ('PASS', [True, True, True])
     """
-    from .report.acceptance import assess
-    from .report.spec import as_spec
+    from .acceptance.assess import assess
+    from .acceptance.spec import as_spec
 
     s, sha = as_spec(spec)
     path = "" if isinstance(spec, dict) or hasattr(spec, "criteria") else str(spec)
@@ -114,8 +114,8 @@ def write_report(result, out, *, spec=None, image=None, reference=None, mask=Non
     """
     from pathlib import Path
 
-    from .report.outputs import write_outputs
-    from .report.spec import as_spec
+    from .storage.writer import write_outputs
+    from .acceptance.spec import as_spec
 
     from .io import read_mask
 

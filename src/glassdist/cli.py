@@ -34,7 +34,7 @@ EXIT_INTERNAL = 1
 EXIT_BAD_INPUT = 2
 
 # Modules adding sub-commands: each provides register(subparsers) -> sets func=run(args) -> int.
-COMMAND_MODULES = ["glassdist.report._batch_cli", "glassdist.render._cli", "glassdist.theory._cli", "glassdist.virtual._cli", "glassdist.render.cycles", "glassdist.experiments._cli", "glassdist.virtual._sweep_cli", "glassdist.web._cli", "glassdist.history._cli"]
+COMMAND_MODULES = ["glassdist.jobs._cli", "glassdist.render._cli", "glassdist.theory._cli", "glassdist.virtual._cli", "glassdist.render.cycles", "glassdist.experiments._cli", "glassdist.virtual._sweep_cli", "glassdist.web._cli", "glassdist.history._cli"]
 
 
 class OneLineErrorParser(argparse.ArgumentParser):
@@ -153,7 +153,7 @@ def _read_inputs(args):
     """Every input of ``analyze``, validated before any work or any write; the spec's protocol fills omitted options."""
     from .analyzer import load_params
     from .io import read_image, read_mask
-    from .report.spec import load_spec, resolve_protocol
+    from .acceptance.spec import load_spec, resolve_protocol
 
     if args.spec is None:
         missing = [opt for opt, v in (("--pitch-mm", args.pitch_mm), ("--distance-m", args.distance_m)) if v is None]
@@ -247,7 +247,7 @@ def _lens_source(args, spec, protocol, params, images):
     """The camera lens from ``--camera-file`` or ``--lens-photo`` (Direct Method), or None."""
     from .analyzer.lens import calibrate_from_photo, calibration_from_camera_file
     from .io import read_image
-    from .report.spec import check_lens_source
+    from .acceptance.spec import check_lens_source
 
     check_lens_source(spec[0].protocol if spec else None, lens_photo=args.lens_photo is not None,
                       camera_file=args.camera_file is not None, spec_label=f"the specification '{args.spec}'")
@@ -269,8 +269,9 @@ def _lens_source(args, spec, protocol, params, images):
 def _run_analyze(args) -> int:
     from .analyzer import FIELDS, analyze, analyze_captures, prepare_reference
     from .analyzer.reflection import reflect_result
-    from .report.outputs import open_output_folder, plan_outputs, preview, write_outputs
-    from .report.spec import check_capture, spec_limits
+    from .report.maps import preview
+    from .storage import open_output_folder, plan_outputs, write_outputs
+    from .acceptance.spec import check_capture, spec_limits
 
     with _stage_progress(not args.quiet) as step:
         step("reading the inputs")

@@ -1,4 +1,4 @@
-"""Image and mask input/output.
+"""Input/output of images, masks, EXIF and JSON documents.
 
 Images are returned as ``float64`` arrays indexed ``(row, col)``, scaled so that
 the largest value of the file's bit depth maps to 1.0 (8-bit: /255, 16-bit: /65535,
@@ -22,7 +22,8 @@ import numpy as np
 from .errors import InputError
 from .validation import check_input_file, limits, safe_text
 
-__all__ = ["read_image", "image_shape", "read_mask", "write_png16", "prepare_output_dir", "open_with_pillow"]
+__all__ = ["read_image", "image_shape", "read_mask", "write_png16", "prepare_output_dir", "open_with_pillow",
+           "camera_metadata", "to_jsonable"]
 
 _READABLE = {".png", ".tif", ".tiff", ".bmp", ".jpg", ".jpeg"}
 
@@ -347,3 +348,70 @@ def prepare_output_dir(path: str | os.PathLike) -> Path:
         raise InputError(f"cannot create output folder '{safe_text(p, 200)}': {exc.strerror}; "
                          "choose a writable location with a shorter name") from None
     return p
+
+
+_EXIF_TAGS = {  # EXIF tag id -> name recorded
+    0x010F: "make", 0x0110: "model", 0x0132: "datetime", 0x9003: "datetime_original", 0x829A: "exposure_time_s",
+    0x829D: "f_number", 0x920A: "focal_length_mm", 0x8827: "iso", 0xA434: "lens_model", 0xA431: "serial_number",
+}
+
+
+def camera_metadata(path):
+    """Camera facts from a photo's EXIF block (Pillow), or ``None`` when it has none.
+
+    Parameters
+    ----------
+    path : path
+        The photograph.
+
+    Returns
+    -------
+    dict or None
+        Any of ``make``, ``model``, ``lens_model``, ``serial_number``, ``datetime``,
+        ``datetime_original``, ``exposure_time_s``, ``f_number``, ``focal_length_mm``,
+        ``iso`` that the file records.
+    """
+    try:
+        with open_with_pillow(path) as im:
+            exif = im.getexif()
+            tags = dict(exif)
+            tags.update(exif.get_ifd(0x8769))  # the Exif sub-IFD: exposure, lens, original time
+    except (OSError, ValueError, SyntaxError):
+        return None
+    out = {}
+    for tag, name in _EXIF_TAGS.items():
+        value = tags.get(tag)
+        if value is None:
+            continue
+        if isinstance(value, bytes):
+            value = value.decode("ascii", "replace")
+        if isinstance(value, str):
+            value = value.strip("\x00 ").strip()
+            if not value:
+                continue
+        elif isinstance(value, tuple):
+            value = value[0]
+        else:
+            try:
+                value = float(value)
+            except (TypeError, ValueError):
+                value = str(value)
+        out[name] = value
+    return out or None
+
+
+def to_jsonable(obj):
+    """``obj`` with numpy values turned into Python ones and NaN / inf into ``None`` (strict JSON)."""
+    if isinstance(obj, dict):
+        return {str(k): to_jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [to_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return to_jsonable(obj.tolist())
+    if isinstance(obj, (np.generic,)):
+        obj = obj.item()
+    if isinstance(obj, float):
+        return obj if np.isfinite(obj) else None
+    if obj is None or isinstance(obj, (bool, int, str)):
+        return obj
+    return str(obj)

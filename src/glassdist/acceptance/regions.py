@@ -2,7 +2,7 @@
 
 A worst region is a connected set (8-neighbourhood) of analysed pixels where
 ``|phi| > T`` mD. For each region, with ``a(x, y)`` the pixel's area in the frame
-(mm^2, see :class:`glassdist.report.zones.PaneFrame`) and ``(u, v)`` its frame
+(mm^2, see :class:`glassdist.acceptance.zones.PaneFrame`) and ``(u, v)`` its frame
 coordinates (mm):
 
 * ``area_mm2 = sum a``;
@@ -75,7 +75,7 @@ def worst_regions(field, valid, frame, threshold_mD, *, channel="phi_eff", max_c
     valid : ndarray of bool, shape (H, W)
         Region the search is restricted to (analysed pixels, or those of a zone).
     frame : PaneFrame
-        Pixel-to-millimetre map (:mod:`glassdist.report.zones`).
+        Pixel-to-millimetre map (:mod:`glassdist.acceptance.zones`).
     threshold_mD : float
         Threshold on ``|field|``, mD.
     channel : str
@@ -92,7 +92,7 @@ def worst_regions(field, valid, frame, threshold_mD, *, channel="phi_eff", max_c
 
     Examples
     --------
-    >>> from glassdist.report.zones import pane_frame_from_region
+    >>> from glassdist.acceptance.zones import pane_frame_from_region
     >>> f = np.zeros((40, 60)); f[10:20, 30:50] = 7.0
     >>> frame = pane_frame_from_region(np.ones(f.shape, bool), 0.5)
     >>> (r,) = worst_regions(f, np.ones(f.shape, bool), frame, 5.0)

@@ -21,7 +21,7 @@ A specification is a JSON object::
 Criteria
 --------
 * ``statistic`` one of ``mean_abs``, ``std``, ``p95_abs``, ``max_abs`` (see
-  :mod:`glassdist.report.stats`) with ``max_mD``: passes when ``value <= max_mD``;
+  :mod:`glassdist.acceptance.stats`) with ``max_mD``: passes when ``value <= max_mD``;
 * ``statistic`` ``area_over`` with ``threshold_mD`` and ``max_percent``: passes when
   the percentage of the valid region where ``|phi| > threshold_mD`` is
   ``<= max_percent``.
@@ -40,10 +40,10 @@ Criteria
   photo under ``min_px_per_period`` is refused (:func:`check_capture`). The verdict
   repeats each pin as a check (a result computed otherwise fails it).
 * ``pane`` (optional, :class:`Pane`) and ``zones`` (optional, :class:`Zone`): named parts
-  of the pane in pane millimetres (:mod:`glassdist.report.zones`).
+  of the pane in pane millimetres (:mod:`glassdist.acceptance.zones`).
 * ``figures`` (optional, :class:`Figures`) and ``worst_regions`` (optional,
   :class:`WorstRegions`): heatmap colour limit; worst-region threshold and count
-  (:mod:`glassdist.report.regions`).
+  (:mod:`glassdist.acceptance.regions`).
 
 A value that cannot be computed (empty valid region) fails its criterion. Unknown
 keys are errors. Limits are in mD, percentages in percent of the valid region.
@@ -101,7 +101,7 @@ class Criterion(BaseModel):
 
     @property
     def stat_key(self):
-        """Key of the statistic in :func:`glassdist.report.stats.channel_statistics`'s dict."""
+        """Key of the statistic in :func:`glassdist.acceptance.stats.channel_statistics`'s dict."""
         return format_limit(self.threshold_mD) if self.statistic == "area_over" else self.statistic
 
     def describe(self):
@@ -232,7 +232,7 @@ class Zone(BaseModel):
 
 
 class WorstRegions(BaseModel):
-    """Settings of the worst-region list (see :mod:`glassdist.report.regions`)."""
+    """Settings of the worst-region list (see :mod:`glassdist.acceptance.regions`)."""
 
     model_config = MODEL_CONFIG
 
@@ -407,7 +407,7 @@ def as_spec(spec):
 
 
 def spec_channels(spec):
-    """Channels the criteria of ``spec`` judge (those of :data:`glassdist.report.stats.STATISTIC_FIELDS`), in order."""
+    """Channels the criteria of ``spec`` judge (those of :data:`glassdist.acceptance.stats.STATISTIC_FIELDS`), in order."""
     return tuple(dict.fromkeys(c.channel for c in spec.criteria))
 
 
@@ -747,7 +747,7 @@ def _protocol_checks(protocol, result):
 def spec_verdict(spec, stats, result, *, spec_path="", spec_sha256="", zones=None, coverage_percent=None):
     """Check every criterion of ``spec`` against an analysis whose statistics are already computed.
 
-    The engine under :func:`glassdist.report.acceptance.assess`; from a result alone use
+    The engine under :func:`glassdist.acceptance.assess.assess`; from a result alone use
     the public ``glassdist.evaluate_spec(result, spec)``, which computes the statistics,
     zones and coverage first.
 
@@ -755,7 +755,7 @@ def spec_verdict(spec, stats, result, *, spec_path="", spec_sha256="", zones=Non
     ----------
     spec : Spec
     stats : dict
-        ``{channel: statistics}`` from :func:`glassdist.report.stats.result_statistics`,
+        ``{channel: statistics}`` from :func:`glassdist.acceptance.stats.result_statistics`,
         computed with ``over_limits_mD=spec_limits(spec)``.
     result : AnalysisResult
         For ``valid`` (coverage) and the protocol fields ``method``, ``sigma_mm``,
@@ -764,7 +764,7 @@ def spec_verdict(spec, stats, result, *, spec_path="", spec_sha256="", zones=Non
         Recorded in the verdict.
     zones : dict, optional
         ``{zone name: {"statistics": {channel: statistics}, "coverage_percent": float}}``
-        (see :func:`glassdist.report.zones.zone_statistics`); needed when a criterion
+        (see :func:`glassdist.acceptance.zones.zone_statistics`); needed when a criterion
         or a zone limit names a zone.
     coverage_percent : float, optional
         Analysed share (percent) that ``min_valid_percent`` is checked against; default

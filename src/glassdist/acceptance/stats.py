@@ -21,6 +21,7 @@ __all__ = [
     "UNCERTAINTY_FIELDS",
     "STATISTIC_FIELDS",
     "STATISTICS",
+    "shared_limit",
     "channel_statistics",
     "area_over_percent",
     "result_statistics",
@@ -220,3 +221,31 @@ def regions_statistics(result, regions, *, channels=tuple(CHANNEL_FIELDS), over_
                 st["p95_abs"] = percentile(np.abs(f[np.asarray(regions[key], bool) & np.isfinite(f)]), 95.0)
             st.update({format_limit(t): pct for t, pct in st.pop("over_percent", {}).items()})
     return out
+
+
+def shared_limit(*fields, valid=None, percentile=99.0):
+    """Colour limit ``V`` (mD) shared by several channels.
+
+    Parameters
+    ----------
+    *fields : ndarray, shape (H, W)
+        Channel fields in mD (NaN where invalid).
+    valid : ndarray of bool, shape (H, W), optional
+        Region the limit is computed on.
+    percentile : float
+        Percentile of ``|field|`` used (robust to a few outlier pixels).
+
+    Returns
+    -------
+    float
+        The largest of the fields' ``percentile`` of ``|value|``, in mD; 1.0 when
+        no field has a finite valid value (so that a blank plot still draws).
+    """
+    best = 0.0
+    for f in fields:
+        ok = np.isfinite(np.asarray(f, dtype=np.float64))
+        if valid is not None:
+            ok &= np.asarray(valid, dtype=bool)
+        if ok.any():
+            best = max(best, float(np.percentile(np.abs(np.asarray(f)[ok]), percentile)))
+    return best if best > 0 else 1.0
