@@ -42,7 +42,8 @@ SPEC = {
 
 
 def _verdict(tmp_path, spec, result=None):
-    s, sha = load_spec(_write(tmp_path, spec))
+    loaded = load_spec(_write(tmp_path, spec))
+    s, sha = loaded.spec, loaded.sha256
     result = result if result is not None else _known_result()
     stats = result_statistics(result, over_limits_mD=spec_limits(s))
     return spec_verdict(s, stats, result, spec_path="spec.json", spec_sha256=sha)
@@ -140,9 +141,9 @@ def test_comment_key_is_allowed_and_hash_is_of_the_file(tmp_path):
     import hashlib
 
     p = _write(tmp_path, dict(SPEC, **{"$comment": "example"}))
-    spec, sha = load_spec(p)
-    assert spec.name == "line 2" and sha == hashlib.sha256(p.read_bytes()).hexdigest()
-    assert spec_limits(spec) == {"phi_eff": [40.0, 60.0], "phi_shear": [10.0]}
+    loaded = load_spec(p)
+    assert loaded.spec.name == "line 2" and loaded.sha256 == hashlib.sha256(p.read_bytes()).hexdigest()
+    assert spec_limits(loaded.spec) == loaded.limits == {"phi_eff": [40.0, 60.0], "phi_shear": [10.0]}
 
 
 def test_example_specifications_and_manifest_use_detrend_3_with_the_direct_method():
@@ -151,8 +152,8 @@ def test_example_specifications_and_manifest_use_detrend_3_with_the_direct_metho
     from glassdist.jobs.batch import read_manifest
 
     examples = Path(__file__).resolve().parents[1] / "examples"
-    factory, _ = load_spec(examples / "factory" / "spec.json")
-    contract, _ = load_spec(examples / "insitu" / "contract_spec.json")
+    factory = load_spec(examples / "factory" / "spec.json").spec
+    contract = load_spec(examples / "insitu" / "contract_spec.json").spec
     assert factory.protocol.method == "comparative"
     # the Direct method needs N >= 3 on real cameras (cubic lens distortion, no reference to cancel it)
     assert contract.protocol.method == "direct" and contract.protocol.detrend_degree == 3
@@ -180,7 +181,7 @@ def test_uncertainty_criteria_fail_a_noisy_capture_and_pass_a_clean_one():
     from glassdist.acceptance.spec import as_spec
     from glassdist.synthetic import synthetic_capture, wave_displacement
 
-    spec, _ = as_spec({"name": "precision", "criteria": [
+    spec = as_spec({"name": "precision", "criteria": [
         {"channel": "phi_eff_sigma", "statistic": "p95_abs", "max_mD": 0.02},
         {"channel": "phi_eff", "statistic": "p95_abs", "max_mD": 1e5}]})
     sigmas = {}

@@ -21,7 +21,7 @@ from pathlib import Path
 from .errors import InputError
 
 __all__ = [
-    "TEMP_NAME", "atomic_write", "atomic_write_bytes", "atomic_write_text", "check_writable", "file_sha256",
+    "PATCH_WINDOW_BYTES", "TEMP_NAME", "atomic_write", "atomic_write_bytes", "atomic_write_text", "check_writable", "file_sha256",
     "first_missing", "lock_folder", "pid_alive", "remove_empty_tree", "same_file",
 ]
 
@@ -109,22 +109,64 @@ def check_writable(path: Path) -> None:
         raise InputError(f"cannot write into output folder '{path}': {exc.strerror}; choose a writable --out") from None
 
 
+#: most bytes held back from the hash while a writer may still patch them (one zip member's data)
+PATCH_WINDOW_BYTES = 64 << 20
+
+
 class _HashingFile:
-    """A binary file that hashes what is written to it, in order; a seek (a zip header patched) stops the hashing."""
+    """A binary file that hashes its bytes as they are written, in order.
+
+    ``zipfile`` (``numpy.savez``, :func:`glassdist.storage.fields.write_npz`) writes a
+    member's header, its data, then seeks back to patch the header with the sizes and
+    CRC, and returns to the end. The bytes since the last return to the end are held
+    (at most :data:`PATCH_WINDOW_BYTES`: one member) until the writer is back at the end
+    with no patch pending; only then are they hashed. A writer that seeks further back,
+    or a member larger than the window, leaves ``hashed`` False (the caller then hashes
+    the finished temporary file instead).
+    """
 
     def __init__(self, fh):
-        self._fh, self.sha256, self.sequential, self.size = fh, hashlib.sha256(), True, 0
+        self._fh, self.sha256, self.hashed = fh, hashlib.sha256(), True
+        self._held, self._held_at, self._end = bytearray(), 0, 0  # bytes not hashed yet, their offset, file size
 
     def write(self, data):
-        n = self._fh.write(data)
-        if self.sequential:
-            self.sha256.update(memoryview(data)[:n] if n is not None else data)
-        self.size += n if n is not None else len(data)
+        view = memoryview(data).cast("B")
+        at = self._fh.tell()
+        n = self._fh.write(view)
+        n = len(view) if n is None else n
+        if self.hashed:
+            if at < self._held_at:
+                self.hashed = False
+            else:
+                i = at - self._held_at
+                self._held[i:i + n] = view[:n]
+                if len(self._held) > PATCH_WINDOW_BYTES:
+                    self.hashed = False
+                    self._held = bytearray()
+        self._end = max(self._end, at + n)
         return n
 
-    def seek(self, *args):
-        self.sequential = False
-        return self._fh.seek(*args)
+    def seek(self, offset, whence=0):
+        pos = self._fh.seek(offset, whence)
+        if self.hashed:
+            if pos < self._held_at:
+                self.hashed = False
+                self._held = bytearray()
+            elif pos == self._end:  # back at the end: what is held is final
+                self._settle()
+        return pos
+
+    def _settle(self):
+        self.sha256.update(self._held)
+        self._held_at += len(self._held)
+        self._held = bytearray()
+
+    def hexdigest(self) -> str | None:
+        """SHA-256 of everything written (None when the writer's seeks could not be followed)."""
+        if not self.hashed:
+            return None
+        self._settle()
+        return self.sha256.hexdigest()
 
     def __getattr__(self, name):  # tell, flush, seekable, ... of the file
         return getattr(self._fh, name)
@@ -144,9 +186,9 @@ def atomic_write(path, write, *, digests=None):
         ``write(fh)`` writes the file's bytes to the binary file ``fh``.
     digests : dict, optional
         Receives ``{path: {"size": bytes, "sha256": hex}}`` of the file written, hashed
-        from the bytes as they are written (a writer that seeks back, as ``zipfile``
-        does to patch a member's header, has its temporary file hashed before the
-        rename instead).
+        from the bytes as they are written, the patches of a ``zipfile`` writer followed
+        (:class:`_HashingFile`); only a writer whose seeks cannot be followed (a zip
+        member over :data:`PATCH_WINDOW_BYTES`) has its temporary file read to hash it.
 
     Returns
     -------
@@ -160,7 +202,7 @@ def atomic_write(path, write, *, digests=None):
             hashing = _HashingFile(fh)
             write(hashing if digests is not None else fh)
         if digests is not None:
-            sha = hashing.sha256.hexdigest() if hashing.sequential else file_sha256(tmp)
+            sha = hashing.hexdigest() or file_sha256(tmp)
             digests[path] = {"size": os.stat(tmp).st_size, "sha256": sha}
         os.replace(tmp, path)
     except BaseException:
@@ -170,8 +212,12 @@ def atomic_write(path, write, *, digests=None):
 
 
 def atomic_write_bytes(path, data, *, digests=None):
-    """:func:`atomic_write` of ``data`` (bytes)."""
-    return atomic_write(path, lambda fh: fh.write(data), digests=digests)
+    """:func:`atomic_write` of ``data`` (bytes; ``digests`` as there, hashed from ``data``)."""
+    path = atomic_write(path, lambda fh: fh.write(data))
+    if digests is not None:
+        view = memoryview(data).cast("B")
+        digests[path] = {"size": len(view), "sha256": hashlib.sha256(view).hexdigest()}
+    return path
 
 
 def atomic_write_text(path, text, *, digests=None):

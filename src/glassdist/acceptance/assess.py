@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .regions import REGION_CHANNELS, all_worst_regions, regions_csv
-from .spec import spec_channels, spec_limits, spec_verdict
+from .spec import as_spec, check_capture, spec_channels, spec_limits, spec_verdict
 from .stats import CHANNEL_FIELDS, regions_statistics, shared_limit, valid_percent
 from .zones import measured_region, pane_frame, zone_masks, zone_statistics
 
@@ -84,11 +84,14 @@ class Acceptance:
         return regions_csv(self.regions)
 
 
-def colour_limits(result, spec=None, channels=("phi_eff", "phi_shear")):
+def colour_limits(result, spec=None, channels=("phi_eff", "phi_shear"), *, limits=None):
     """Colour limit (mD) of each heatmap: the spec's choice (``figures.colour_limit``), else a shared p99.
 
     The shared p99 is taken where the heatmaps are drawn from: the trusted samples of the
     analysis grid.
+
+    ``limits``: :func:`~glassdist.acceptance.spec.spec_limits` of ``spec`` when already
+    computed (:attr:`LoadedSpec.limits <glassdist.acceptance.spec.LoadedSpec>`).
 
     Returns
     -------
@@ -103,22 +106,20 @@ def colour_limits(result, spec=None, channels=("phi_eff", "phi_shear")):
         return {c: shared for c in channels}
     if choice != "spec":
         return {c: float(choice) for c in channels}
-    limits = spec_limits(spec)
+    limits = spec_limits(spec) if limits is None else limits
     return {c: float(min(limits[c])) if limits.get(c) else shared for c in channels}
 
 
-def assess(result, spec=None, *, spec_path="", spec_sha256="", protocol=None, mask=None, metadata=None,
-           camera=False):
-    """Statistics, pane frame, zones, worst regions and verdict of one analysis.
+def assess(result, spec=None, *, protocol=None, mask=None, metadata=None, camera=False):
+    """Capture check, statistics, pane frame, zones, worst regions and verdict of one analysis.
 
     Parameters
     ----------
     result : AnalysisResult
-    spec : Spec, optional
-        Without one: whole-region statistics, the pane found in the image, worst
-        regions over the default threshold, no verdict.
-    spec_path, spec_sha256 : str
-        Recorded in the verdict.
+    spec : LoadedSpec, Spec, dict or path, optional
+        The specification (:func:`~glassdist.acceptance.spec.as_spec`; its path and
+        SHA-256 are recorded in the verdict). Without one: whole-region statistics, the
+        pane found in the image, worst regions over the default threshold, no verdict.
     protocol : ResolvedProtocol, optional
         The settings resolved from the options and the spec (recorded).
     mask : ndarray of bool, shape (H, W), optional
@@ -139,7 +140,11 @@ def assess(result, spec=None, *, spec_path="", spec_sha256="", protocol=None, ma
     InputError
         The capture violates the protocol's capture limits.
     """
-    limits = spec_limits(spec) if spec is not None else {}
+    loaded = as_spec(spec) if spec is not None else None
+    spec = loaded.spec if loaded is not None else None
+    limits = loaded.limits if loaded is not None else {}
+    if loaded is not None:  # a capture outside the protocol is not judged (exit 2)
+        check_capture(spec.protocol, result, spec_label=loaded.label)
     # the power channels always; the uncertainty channels where a criterion judges them
     channels = tuple(dict.fromkeys((*CHANNEL_FIELDS, *(spec_channels(spec) if spec is not None else ()))))
     measured = measured_region(result)
@@ -159,9 +164,9 @@ def assess(result, spec=None, *, spec_path="", spec_sha256="", protocol=None, ma
         coverage = valid_percent(measured)
     verdict = None
     if spec is not None:
-        verdict = spec_verdict(spec, stats, result, spec_path=spec_path, spec_sha256=spec_sha256, zones=zones,
+        verdict = spec_verdict(spec, stats, result, spec_path=loaded.path, spec_sha256=loaded.sha256, zones=zones,
                                 coverage_percent=None if mask is None else coverage)
-    regions = all_worst_regions(result, frame, spec, channels=REGION_CHANNELS, statistics=stats)
+    regions = all_worst_regions(result, frame, spec, channels=REGION_CHANNELS, statistics=stats, limits=limits)
     meta = {k: v for k, v in (metadata or {}).items() if v is not None}
     if camera is not False:
         meta["camera"] = camera
@@ -178,6 +183,6 @@ def assess(result, spec=None, *, spec_path="", spec_sha256="", protocol=None, ma
                          "px_per_period": px_per_period(result)}
     warnings = (frame.warning,) if frame.warning and zones_def else ()
     return Acceptance(stats, frame, zones, masks, regions, verdict, float(coverage), proto, meta,
-                      colour_limits(result, spec), warnings)
+                      colour_limits(result, spec, limits=limits), warnings)
 
 

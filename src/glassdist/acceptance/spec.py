@@ -69,7 +69,7 @@ from .stats import format_limit, valid_percent
 
 __all__ = [
     "Criterion", "Protocol", "Pane", "Zone", "WorstRegions", "Figures", "Spec", "Check", "Verdict", "ResolvedProtocol",
-    "load_spec", "as_spec", "spec_verdict", "spec_channels", "spec_limits", "resolve_protocol", "check_capture", "px_per_period",
+    "LoadedSpec", "load_spec", "as_spec", "spec_verdict", "spec_channels", "spec_limits", "resolve_protocol", "check_capture", "px_per_period",
 ]
 
 _SYMBOL = {"phi_eff": "phi_eff", "phi_shear": "phi_shear", "phi_total": "phi_total",
@@ -357,8 +357,39 @@ class Verdict:
         }
 
 
-def load_spec(path):
-    """Read and validate a specification JSON file.
+@dataclass(frozen=True)
+class LoadedSpec:
+    """A specification as one run uses it: the model, the file it came from and what is derived from it, once.
+
+    Attributes
+    ----------
+    spec : Spec
+    sha256 : str
+        SHA-256 of the file's bytes as read (``""`` for a Spec or a dict given in Python);
+        recorded with every verdict.
+    path : str
+        The file (``""`` when none).
+    limits : dict
+        :func:`spec_limits`: ``{channel: sorted limits, mD}`` (one threshold mask each).
+    """
+
+    spec: Spec
+    sha256: str = ""
+    path: str = ""
+    limits: dict = None
+
+    def __post_init__(self):
+        if self.limits is None:
+            object.__setattr__(self, "limits", spec_limits(self.spec))
+
+    @property
+    def label(self) -> str:
+        """How messages name it: ``the specification 'PATH'`` (or ``the specification``)."""
+        return f"the specification '{self.path}'" if self.path else "the specification"
+
+
+def load_spec(path) -> LoadedSpec:
+    """Read and validate a specification JSON file (read once: its SHA-256 is of the bytes parsed).
 
     Parameters
     ----------
@@ -367,9 +398,8 @@ def load_spec(path):
 
     Returns
     -------
-    spec : Spec
-    sha256 : str
-        SHA-256 of the file's bytes (recorded with every verdict).
+    LoadedSpec
+        ``.spec``, ``.sha256`` (recorded with every verdict), ``.path``, ``.limits``.
 
     Raises
     ------
@@ -377,32 +407,29 @@ def load_spec(path):
         Missing file, invalid JSON, unknown key, missing or out-of-range limit.
     """
     p = check_input_file(path, "specification file", option="--spec")
-    data = load_mapping(p, "specification file", option="--spec", fmt="json", expect="'name' and 'criteria'")
+    digest = hashlib.sha256()
+    data = load_mapping(p, "specification file", option="--spec", fmt="json", expect="'name' and 'criteria'",
+                        digest=digest)
     spec = validate_model(Spec, data, "specification", f"'{safe_text(p)}'", "see docs/industrial_workflow.md for the format")
-    raw = p.read_bytes()
-    return spec, hashlib.sha256(raw).hexdigest()
+    return LoadedSpec(spec, digest.hexdigest(), str(path))
 
 
-def as_spec(spec):
-    """A :class:`Spec` from a Spec, a dict of its JSON form, or a JSON file.
-
-    Returns
-    -------
-    spec : Spec
-    sha256 : str
-        SHA-256 of the file (``""`` for a Spec or a dict).
+def as_spec(spec) -> LoadedSpec:
+    """A :class:`LoadedSpec` from a LoadedSpec, a Spec, a dict of its JSON form, or a JSON file.
 
     Raises
     ------
     InputError
         Invalid specification (one line).
     """
+    if isinstance(spec, LoadedSpec):
+        return spec
     if isinstance(spec, Spec):
-        return spec, ""
+        return LoadedSpec(spec)
     if isinstance(spec, dict):
         data = {k: v for k, v in spec.items() if k != "$comment"}
-        return validate_model(Spec, data, "specification", "the given mapping",
-                              "see docs/industrial_workflow.md for the format"), ""
+        return LoadedSpec(validate_model(Spec, data, "specification", "the given mapping",
+                                         "see docs/industrial_workflow.md for the format"))
     return load_spec(spec)
 
 
@@ -774,12 +801,9 @@ def spec_verdict(spec, stats, result, *, spec_path="", spec_sha256="", zones=Non
     -------
     Verdict
 
-    Raises
-    ------
-    InputError
-        The capture violates the protocol's capture limits (:func:`check_capture`).
+    The capture is checked beforehand (:func:`check_capture`, once per run, by
+    :func:`glassdist.acceptance.assess.assess`).
     """
-    check_capture(spec.protocol, result)
     zones = zones or {}
     checks = _protocol_checks(spec.protocol, result)
     if spec.min_valid_percent is not None:

@@ -74,14 +74,14 @@ def _fmt(v):
     return "" if np.isnan(v) else f"{v:.6g}"
 
 
-def write_statistics_csv(stats, path):
+def write_statistics_csv(stats, path, *, digests=None):
     """Write :func:`statistics_table` of ``{channel: statistics}`` as CSV; returns the path."""
     rows = statistics_table(stats)
     buf = io.StringIO()
     writer = csv.DictWriter(buf, fieldnames=list(rows[0]) if rows else ["channel"], lineterminator="\n")
     writer.writeheader()
     writer.writerows(rows)
-    return atomic_write_text(path, buf.getvalue())
+    return atomic_write_text(path, buf.getvalue(), digests=digests)
 
 
 def _planes(spec):
@@ -106,7 +106,7 @@ def _pixel_arrays(result):
         del a
 
 
-def write_fields_npz(result, path):
+def write_fields_npz(result, path, *, digests=None):
     """Write every field (pixel grid), ``valid`` and the scalars as a compressed NPZ, one field at a time; returns the path."""
     def members():
         for spec, a in _pixel_arrays(result):
@@ -116,10 +116,10 @@ def write_fields_npz(result, path):
             yield name, np.float64(getattr(result, name)), False
         yield "version", np.str_(result.version), False
 
-    return atomic_write(path, lambda fh: write_npz(fh, members()))
+    return atomic_write(path, lambda fh: write_npz(fh, members()), digests=digests)
 
 
-def write_fields_tiff(result, folder):
+def write_fields_tiff(result, folder, *, digests=None):
     """Write each field (pixel grid) as a TIFF in ``folder`` (created), one plane at a time; returns the paths."""
     import tifffile
 
@@ -131,7 +131,7 @@ def write_fields_tiff(result, folder):
         meta = {"field": name, "unit": unit, "glassdist_version": result.version, "invalid": "NaN"}
         tifffile.imwrite(buf, np.ascontiguousarray(data), description=json.dumps(meta), compression="zlib",
                          compressionargs={"level": 1})
-        return atomic_write_bytes(folder / f"{name}.tif", buf.getbuffer())
+        return atomic_write_bytes(folder / f"{name}.tif", buf.getbuffer(), digests=digests)
 
     written = []
     for spec, a in _pixel_arrays(result):

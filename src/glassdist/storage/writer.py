@@ -1,18 +1,13 @@
-"""The output stage of ``glassdist analyze``: every file of a run, planned, written and recorded here.
+"""The output stage of glassdist: every file of a run, written once from its record.
 
-The command line, ``glassdist batch`` (through its child ``glassdist analyze`` processes)
-and the Python API (:func:`write_outputs`) all write a run's folder through this module:
-
-1. :func:`plan_outputs` names the files a run can write, before any work;
-2. :func:`open_output_folder` takes the folder before the analysis: created, refused when
-   a planned output would overwrite an input, checked writable, locked against a second
-   run into it (exit status 2), and cleaned of the temporary files a killed run left;
-3. :func:`write_outputs` writes ``result.npz`` and ``summary.json``, then
-   :func:`finish_analysis` the statistics, verdict, figures, report and exports; each file
-   is written atomically (a temporary name, then a rename) and recorded with its size and
-   SHA-256 in ``summary.json`` (``outputs``); files of an earlier run into the folder that
-   this run did not write again are removed only where they still have the SHA-256 that
-   run recorded (a crafted summary.json cannot make glassdist delete another file).
+The command line, ``glassdist batch`` and the web app (through their child ``glassdist
+analyze`` processes) and the Python API (:func:`write_outputs`) all write a run's folder
+through :func:`write_run`: ``result.npz`` (:mod:`~glassdist.storage.fields`),
+``statistics.csv``, ``worst_regions.csv``, the figures (rendered by
+:mod:`glassdist.report.maps`), ``report.html`` (``report``), ``fields.npz`` and
+``tiff/*.tif`` (``export``), then ``summary.json`` once, last, with the size and SHA-256
+of every file, hashed while it was written (:func:`glassdist.fs.atomic_write`). Each file is
+written atomically (a temporary name, then a rename).
 
 Exit codes (also those of ``glassdist analyze``):
 
@@ -21,12 +16,6 @@ Exit codes (also those of ``glassdist analyze``):
 ``2``       bad input (one-line error, e.g. an invalid specification file)
 ``3``       analysis done, specification FAILED (:data:`EXIT_SPEC_FAIL`)
 ==========  ====================================================================
-
-Files besides ``result.npz`` and ``summary.json``: ``statistics.csv``,
-``worst_regions.csv``, the heatmaps ``phi_eff.png``, ``phi_shear.png``, ``axis.png``,
-``input_region.png``, ``histograms.png``, ``mask_<channel>_<T>mD.png`` per limit of the
-specification, ``report.html`` (``report=True``), ``fields.npz`` and ``tiff/*.tif``
-(``exports=True``, pixel grid; :mod:`glassdist.storage.fields`).
 """
 
 from __future__ import annotations
@@ -37,68 +26,58 @@ import logging
 import shutil
 from pathlib import Path
 
-import numpy as np
-
-from ..acceptance.spec import load_spec, spec_limits
-from ..acceptance.stats import STATISTIC_FIELDS, valid_percent
+from ..acceptance.spec import as_spec
+from ..acceptance.stats import valid_percent
 from ..errors import InputError
-from ..fs import atomic_write, atomic_write_bytes, atomic_write_text, file_sha256
-from ..io import camera_metadata, to_jsonable
-from ..report.console import echo_acceptance
+from ..fs import atomic_write, atomic_write_bytes, atomic_write_text
+from ..io import to_jsonable
+from ..report.html import render_report
 from ..report.maps import run_figures
-from .fields import GRID_KEYS, SUMMARY_NAME, grid_members, pixel_members, write_fields_npz, write_fields_tiff, write_npz
+from .fields import SUMMARY_NAME, grid_members, pixel_members, write_fields_npz, write_fields_tiff, write_npz
 from .fields import write_statistics_csv
-from .folder import OutputFolder, estimate_output_bytes, open_output_folder, plan_outputs, recorded_outputs, remove_outputs
+from .folder import OutputFolder, estimate_output_bytes, open_output_folder, plan_outputs, remove_outputs
+from .record import EXIT_OK, EXIT_SPEC_FAIL, RunRequest, build_record, read_inputs
 
-__all__ = ["EXIT_OK", "EXIT_SPEC_FAIL", "finish_analysis", "output_record", "write_outputs"]
+__all__ = ["EXIT_OK", "EXIT_SPEC_FAIL", "write_outputs", "write_run"]
 
 logger = logging.getLogger(__name__)
 
-EXIT_OK = 0
-#: exit status of ``glassdist analyze --spec`` when the analysis ran but the specification failed
-EXIT_SPEC_FAIL = 3
 
-
-def output_record(out_dir, paths) -> dict[str, dict]:
-    """``{path relative to out_dir (with '/'): {"size": bytes, "sha256": hex}}`` of files written into ``out_dir``.
-
-    ``summary.json``, which holds the record, is left out of it.
-    """
-    out_dir = Path(out_dir)
-    record = {Path(p).relative_to(out_dir).as_posix(): {"size": Path(p).stat().st_size, "sha256": file_sha256(p)}
-              for p in paths if Path(p).name != SUMMARY_NAME or Path(p).parent != out_dir}
-    return dict(sorted(record.items()))
-
-
-def write_outputs(result, out_dir, *, fields="analysis", report=False, export=False, spec_path=None, spec=None,
+def write_outputs(result, out_dir, *, fields="analysis", report=False, export=False, spec=None, spec_path=None,
                   protocol=None, mask=None, metadata=None, image=None, image_path=None, reference_path=None,
-                  mask_path=None, captures=(), echo=print, history=None):
-    """Write every output of an analysis into ``out_dir``: the one output stage of glassdist.
+                  mask_path=None, history=None):
+    """Write every file ``glassdist analyze`` writes for an analysis made in Python; prints nothing.
+
+    The same straight line as the command line, from a result in hand: the request from
+    the arguments, the inputs read once (the photo for its preview, SHA-256 and EXIF),
+    the folder taken, the capture checked and the result assessed
+    (:func:`~glassdist.storage.record.build_record`), then :func:`write_run`.
 
     Parameters
     ----------
     result : AnalysisResult
-    out_dir : path or OutputFolder
-        A path is taken with :func:`open_output_folder` (and released on return); an
-        :class:`OutputFolder` (the command line takes it before the analysis) is used as is.
+    out_dir : path
+        Created if needed; taken with :func:`~glassdist.storage.folder.open_output_folder`.
     fields : {'analysis', 'pixel'}
-        Layout of ``result.npz`` (see the module documentation).
+        Layout of ``result.npz`` (:mod:`~glassdist.storage.fields`).
     report, export : bool
         Also write ``report.html``; ``fields.npz`` and ``tiff/``.
-    spec_path : path, optional
+    spec : LoadedSpec, Spec, dict or path, optional
         Acceptance specification: verdict, masks, exit status 3 on FAIL.
-    spec : (Spec, str), optional
-        The specification already loaded from ``spec_path`` and its SHA-256.
-    protocol, mask, metadata
-        As for :func:`finish_analysis`.
+    spec_path : path, optional
+        The specification file, when ``spec`` is not given.
+    protocol : ResolvedProtocol, optional
+        The settings resolved from the options and the specification (recorded).
+    mask : ndarray of bool, optional
+        The region the analysis was asked for (coverage is of it).
+    metadata : dict, optional
+        ``pane_id``, ``lot``, ``site``, ``operator``.
     image : ndarray, optional
-        The photograph (any size; reduced for the figure), else read from ``image_path``.
+        The photograph (any size), drawn with the analysed region outlined when no
+        ``image_path`` is given.
     image_path, reference_path, mask_path : path, optional
-        The inputs: recorded with their SHA-256, never overwritten.
-    captures : sequence of path
-        Every photo when several captures were averaged.
-    echo : callable
-        Receives the user-facing lines (verdict, zones, report).
+        The inputs: recorded with their SHA-256, never overwritten; the photo is drawn
+        with the analysed region outlined (``input_region.png``).
     history : glassdist.history.Recording or False, optional
         How the run is recorded in the results history once its files are written
         (:func:`glassdist.history.record_run`: a history that cannot be written is a
@@ -116,195 +95,87 @@ def write_outputs(result, out_dir, *, fields="analysis", report=False, export=Fa
     >>> glassdist.write_outputs(res, "out/pane", report=True)           # doctest: +SKIP
     0
     """
-    if not isinstance(out_dir, OutputFolder):
-        limits = spec_limits((spec or load_spec(spec_path))[0]) if spec_path is not None or spec else {}
-        planned = plan_outputs(result.field_specs(), fields=fields, report=report, export=export, limits=limits)
-        with open_output_folder(out_dir, planned=planned, inputs=(image_path, reference_path, mask_path, spec_path,
-                                                                  *captures)) as folder:
-            return write_outputs(result, folder, fields=fields, report=report, export=export, spec_path=spec_path,
-                                 spec=spec, protocol=protocol, mask=mask, metadata=metadata, image=image,
-                                 image_path=image_path, reference_path=reference_path, mask_path=mask_path,
-                                 captures=captures, echo=echo, history=history)
-    folder, out = out_dir, out_dir.path
-    try:
-        return _write_all(result, folder, fields=fields, report=report, export=export, spec_path=spec_path, spec=spec,
-                          protocol=protocol, mask=mask, metadata=metadata, image=image, image_path=image_path,
-                          reference_path=reference_path, mask_path=mask_path, captures=captures, echo=echo,
-                          history=history)
-    except OSError as exc:
-        if exc.errno not in (errno.ENOSPC, errno.EDQUOT):
-            raise
-        free = shutil.disk_usage(out).free
-        raise InputError(
-            f"no space left on the disk of '{out}' ({free / 1e6:.0f} MB free): this run's outputs need up to "
-            f"{estimate_output_bytes(result, folder.planned, fields) / 1e6:.0f} MB; free some space or choose "
-            "another --out (without --export and --report a run needs far less)"
-        ) from None
+    loaded = as_spec(spec if spec is not None else spec_path) if spec is not None or spec_path is not None else None
+    request = RunRequest(fields=fields, report=report, export=export, spec=loaded, protocol=protocol, mask=mask,
+                         metadata=dict(metadata or {}), history=history)
+    inputs = read_inputs(image_path, reference_path, mask_path, image=image)
+    planned = plan_outputs(result.field_specs(), fields=fields, report=report, export=export, limits=request.limits)
+    spec_file = Path(loaded.path) if loaded is not None and loaded.path else None
+    with open_output_folder(out_dir, planned=planned, inputs=(*inputs.paths, spec_file)) as folder:
+        record = build_record(request, inputs, result)
+        write_run(record, folder)
+    return record.exit_code
 
 
-def _write_all(result, folder, *, fields, report, export, spec_path, spec, protocol, mask, metadata, image,
-               image_path, reference_path, mask_path, captures, echo, history):
-    """The writing of :func:`write_outputs` into the folder it holds."""
-    out = folder.path
-    spec = spec or (load_spec(spec_path) if spec_path is not None else None)
-    members = grid_members(result) if fields == "analysis" else pixel_members(result)
-    npz = atomic_write(out / "result.npz", lambda fh: write_npz(fh, members))
-    acc = _assess(result, spec, spec_path, protocol=protocol, mask=mask, metadata=metadata, image_path=image_path)
-    # the acceptance statistics are over the same trusted pixels: one pass over them for both files
-    summary = result.summary(statistics={STATISTIC_FIELDS[ch]: s for ch, s in acc.stats.items()})
-    summary["inputs"] = {
-        "image": None if image_path is None else str(image_path),
-        "image_sha256": None if image_path is None else file_sha256(image_path),
-        "reference": None if reference_path is None else str(reference_path),
-        "reference_sha256": None if reference_path is None else file_sha256(reference_path),
-        "mask": None if mask_path is None else str(mask_path),
-    }
-    if len(captures) > 1:
-        summary["inputs"]["captures"] = [{"image": str(c), "sha256": file_sha256(c)} for c in captures]
-    summary["fields"] = {"layout": fields, "file": "result.npz", "keys": [f.name for f in result.field_specs()]
-                         + (list(GRID_KEYS) if fields == "analysis" else ["valid"])}
-    atomic_write_text(out / SUMMARY_NAME, json.dumps(to_jsonable(summary), indent=2, allow_nan=False) + "\n")
-    code = finish_analysis(result, out_dir=out, image_path=image_path, reference_path=reference_path,
-                           spec_path=spec_path, report=report, exports=export, written=[npz], echo=echo,
-                           protocol=protocol, mask=mask, metadata=metadata, spec=spec, image=image, acceptance=acc,
-                           summary=summary)
-    # The earlier run's files that this one did not write again (its report, masks of another spec).
-    names = sorted(set(folder.previous) - set(recorded_outputs(out)))
-    folder.removed, folder.problems = remove_outputs(out, folder.previous, names, keep=folder.inputs)
-    if history is not False:  # once every file is in place: the history can cost the run nothing
-        from ..history import Recording, record_run
+def write_run(record, folder: OutputFolder) -> dict:
+    """Write every file of a run into the folder it holds: the one output stage of glassdist.
 
-        record_run(to_jsonable(summary), exit_code=code, out_dir=out, recording=history or Recording())
-    return code
-
-
-def _assess(result, spec, spec_path, **kw):
-    """:func:`~glassdist.acceptance.assess.assess` with the specification ``(Spec, sha256)`` or its path."""
-    from ..acceptance.assess import assess
-
-    spec, sha = spec or (load_spec(spec_path) if spec_path is not None else (None, ""))
-    image_path = kw.pop("image_path", None)
-    if image_path is not None:
-        kw["camera"] = camera_metadata(image_path)
-    return assess(result, spec, spec_path=spec_path or "", spec_sha256=sha, **kw)
-
-
-def _describe_input(path, shape):
-    if path is None:
-        return None
-    path = Path(path)
-    return {"name": path.name, "path": str(path), "sha256": file_sha256(path), "size": f"{shape[1]} x {shape[0]} px"}
-
-
-def _update_summary(path, additions, summary=None):
-    """Add ``additions`` to ``summary.json``: to ``summary`` (what the caller wrote, updated in place) or the file's."""
-    if summary is not None:
-        summary.update(additions)
-        atomic_write_text(path, json.dumps(to_jsonable(summary), indent=2, allow_nan=False) + "\n")
-        return summary
-    summary = {}
-    if path.is_file():
-        try:
-            summary = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, json.JSONDecodeError):
-            logger.warning("could not read %s; writing a new one", path)
-            summary = {}
-    summary.update(additions)
-    atomic_write_text(path, json.dumps(to_jsonable(summary), indent=2, allow_nan=False) + "\n")
-    return summary
-
-
-def finish_analysis(result, *, out_dir, image_path, reference_path=None, spec_path=None, report=False,
-                    exports=False, written=(), echo=print, protocol=None, mask=None, metadata=None, spec=None,
-                    image=None, acceptance=None, summary=None):
-    """Statistics, verdict, zones, worst regions, A4 figures, report and exports of an analysis.
+    ``result.npz``, ``statistics.csv``, ``worst_regions.csv``, the figures, the exports
+    (``request.export``), ``report.html`` (``request.report``) and, last and once,
+    ``summary.json`` with the size and SHA-256 of every file, hashed from the bytes as
+    they were written (nothing is read back). Then the files of an earlier run into the
+    folder that this run did not write again are removed (where they still have the
+    SHA-256 it recorded) and the run is recorded in the results history.
 
     Parameters
     ----------
-    result : AnalysisResult
-    out_dir : path
-        Existing output folder (holds ``summary.json`` if the caller wrote one).
-    image_path : path
-        The analysed photograph (hashed, and drawn with the region outline).
-    reference_path : path, optional
-        The glass-less reference (Comparative method), hashed.
-    spec_path : path, optional
-        Acceptance specification JSON (:mod:`glassdist.acceptance.spec`).
-    report : bool
-        Write ``report.html``.
-    exports : bool
-        Write ``fields.npz`` and ``tiff/``.
-    written : sequence of path
-        Files the caller already wrote into ``out_dir`` for this analysis (``result.npz``);
-        listed with this function's own in ``summary.json`` ``"outputs"``.
-    echo : callable
-        Receives the user-facing lines (verdict, files); default ``print``.
-    protocol : ResolvedProtocol, optional
-        The settings resolved from the options and the specification (recorded).
-    mask : ndarray of bool, optional
-        The user's region to analyse (coverage is of it).
-    metadata : dict, optional
-        ``pane_id``, ``lot``, ``site``, ``operator`` for the report (and the history).
-    spec : (Spec, str), optional
-        The specification already loaded from ``spec_path`` and its SHA-256.
-    image : ndarray, optional
-        The photograph (any size), instead of reading ``image_path`` again.
-    acceptance : Acceptance, optional
-        The assessment already made (:func:`glassdist.acceptance.assess.assess`).
-    summary : dict, optional
-        What the caller wrote to ``summary.json``: completed in place (and written) rather
-        than read back from the file.
+    record : RunRecord
+        :func:`~glassdist.storage.record.build_record`.
+    folder : OutputFolder
+        :func:`~glassdist.storage.folder.open_output_folder`, held by this run.
 
     Returns
     -------
-    int
-        :data:`EXIT_OK` or :data:`EXIT_SPEC_FAIL`.
+    dict
+        The ``summary.json`` written.
 
     Raises
     ------
     InputError
-        Invalid specification file, or a capture outside its protocol's limits.
+        The disk filled up (with the space the outputs need).
     """
-    from ..io import read_image
-
-    out_dir = Path(out_dir)
-    spec, spec_sha = spec or (load_spec(spec_path) if spec_path is not None else (None, ""))
-    limits = spec_limits(spec) if spec is not None else {}
-    acc = acceptance or _assess(result, (spec, spec_sha), spec_path, protocol=protocol, mask=mask, metadata=metadata,
-                                image_path=image_path)
-    stats, verdict = acc.stats, acc.verdict
-    inputs = {k: _describe_input(v, result.valid.shape) for k, v in (("image", image_path), ("reference", reference_path))}
-    cover = valid_percent(result.valid)
-    files = [write_statistics_csv(stats, out_dir / "statistics.csv"),
-             atomic_write_text(out_dir / "worst_regions.csv", acc.regions_csv())]
-    figs = run_figures(result, read_image(image_path, dtype=np.float32) if image is None and image_path is not None else image, limits,
-                      heatmaps=True, acceptance=acc)
-    files += [atomic_write_bytes(out_dir / f"{stem}.png", png) for stem, _, png in figs]
-    if exports:
-        files += [write_fields_npz(result, out_dir / "fields.npz"), *write_fields_tiff(result, out_dir / "tiff")]
-    measures, html = _measures_and_report(result, acc, figs, inputs, cover, report)
-    if html is not None:
-        files.append(atomic_write_text(out_dir / "report.html", html))
-    names = [str(p.relative_to(out_dir)) for p in files]
-    _update_summary(out_dir / "summary.json", {
-        "verdict": verdict.to_dict() if verdict else None,
-        "a4": {"statistics": stats, "valid_percent": cover, "files": names, "inputs": inputs},
-        **acc.summary(), "measures": measures, "outputs": output_record(out_dir, [*written, *files]),
-    }, summary)
-    echo_acceptance(acc, out_dir / "report.html" if report else None, echo)
-    logger.info("A4 outputs written to %s: %s", out_dir, ", ".join(names))
-    return EXIT_SPEC_FAIL if verdict is not None and not verdict.passed else EXIT_OK
+    try:
+        return _write_files(record, folder)
+    except OSError as exc:
+        if exc.errno not in (errno.ENOSPC, errno.EDQUOT):
+            raise
+        out = folder.path
+        free = shutil.disk_usage(out).free
+        need = estimate_output_bytes(record.result, folder.planned, record.request.fields)
+        raise InputError(
+            f"no space left on the disk of '{out}' ({free / 1e6:.0f} MB free): this run's outputs need up to "
+            f"{need / 1e6:.0f} MB; free some space or choose another --out (without --export and --report a run "
+            "needs far less)"
+        ) from None
 
 
-def _measures_and_report(result, acc, figs, inputs, cover, report):
-    """The standard measures (as a dict) and, when ``report``, the HTML report's text (else None)."""
-    from ..measures import standard_measures
-    from ..report.html import render_report
+def _write_files(record, folder) -> dict:
+    result, request, acc = record.result, record.request, record.acceptance
+    out = folder.path
+    digests: dict = {}
+    members = grid_members(result) if request.fields == "analysis" else pixel_members(result)
+    atomic_write(out / "result.npz", lambda fh: write_npz(fh, members), digests=digests)
+    files = [write_statistics_csv(acc.stats, out / "statistics.csv", digests=digests),
+             atomic_write_text(out / "worst_regions.csv", acc.regions_csv(), digests=digests)]
+    figs = run_figures(result, record.inputs.preview, request.limits, heatmaps=True, acceptance=acc)
+    files += [atomic_write_bytes(out / f"{stem}.png", png, digests=digests) for stem, _, png in figs]
+    if request.export:
+        files += [write_fields_npz(result, out / "fields.npz", digests=digests),
+                  *write_fields_tiff(result, out / "tiff", digests=digests)]
+    if request.report:
+        html = render_report(result, stats=acc.stats, figures=figs, inputs=record.described_inputs(),
+                             verdict=acc.verdict, valid_percent=valid_percent(result.valid), acceptance=acc,
+                             measures=record.measures)
+        files.append(atomic_write_text(out / "report.html", html, digests=digests))
+    summary = to_jsonable(record.summary(files=[str(p.relative_to(out)) for p in files]))
+    summary["outputs"] = dict(sorted((Path(p).relative_to(out).as_posix(), d) for p, d in digests.items()))
+    atomic_write_text(out / SUMMARY_NAME, json.dumps(summary, indent=2, allow_nan=False) + "\n")
+    # The earlier run's files that this one did not write again (its report, masks of another spec).
+    names = sorted(set(folder.previous) - set(summary["outputs"]))
+    folder.removed, folder.problems = remove_outputs(out, folder.previous, names, keep=folder.inputs)
+    if request.history is not False:  # once every file is in place: the history can cost the run nothing
+        from ..history import Recording, record_run
 
-    measures = standard_measures(result).to_dict()
-    if not report:
-        return measures, None
-    return measures, render_report(result, stats=acc.stats, figures=figs, inputs=inputs, verdict=acc.verdict,
-                                   valid_percent=cover, acceptance=acc, measures=measures)
-
-
+        record_run(summary, exit_code=record.exit_code, out_dir=out, recording=request.history or Recording())
+    logger.info("outputs written to %s: %s", out, ", ".join(summary["outputs"]))
+    return summary
