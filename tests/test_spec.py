@@ -10,7 +10,7 @@ import pytest
 
 from glassdist.errors import InputError
 from glassdist.acceptance.spec import load_spec, spec_limits, spec_verdict
-from glassdist.acceptance.stats import area_over_percent, channel_statistics, result_statistics
+from glassdist.acceptance.stats import acceptance_statistics, area_over_percent, result_statistics
 
 
 def _write(tmp_path, data, name="spec.json"):
@@ -51,7 +51,7 @@ def _verdict(tmp_path, spec, result=None):
 
 def test_statistics_match_closed_form():
     r = _known_result()
-    s = channel_statistics(r.phi_eff_mD, r.valid, over_limits_mD=[40, 60])
+    s = acceptance_statistics(r.phi_eff_mD, r.valid, over_limits_mD=[40, 60])
     assert s["mean_abs"] == pytest.approx(15.0)
     assert s["mean"] == pytest.approx(-15.0)
     assert s["std"] == pytest.approx(np.sqrt(0.3 * 0.7) * 50.0)
@@ -68,10 +68,10 @@ def test_statistics_ignore_invalid_and_nan():
     valid[:5] = True
     field[:5] = 2.0
     field[0, 0] = np.nan
-    s = channel_statistics(field, valid)
+    s = acceptance_statistics(field, valid)
     assert s["max_abs"] == 2.0 and s["n_valid"] == 49
     assert area_over_percent(field, valid, 1.0) == 100.0
-    assert np.isnan(channel_statistics(field, np.zeros_like(valid))["p95_abs"])
+    assert np.isnan(acceptance_statistics(field, np.zeros_like(valid))["p95_abs"])
 
 
 def test_limits_are_inclusive_and_verdict_passes(tmp_path):

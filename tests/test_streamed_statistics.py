@@ -30,7 +30,7 @@ def result():
 
 
 def _whole(res, region, ch):
-    return S.channel_statistics(getattr(res, S.STATISTIC_FIELDS[ch]), region, over_limits_mD=(5.0, 20.0))
+    return S.acceptance_statistics(getattr(res, S.STATISTIC_FIELDS[ch]), region, over_limits_mD=(5.0, 20.0))
 
 
 @pytest.mark.parametrize("max_pixels", [560, 560 * 37, 1 << 21])

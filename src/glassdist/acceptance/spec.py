@@ -101,7 +101,7 @@ class Criterion(BaseModel):
 
     @property
     def stat_key(self):
-        """Key of the statistic in :func:`glassdist.acceptance.stats.channel_statistics`'s dict."""
+        """Key of the statistic in :func:`glassdist.acceptance.stats.acceptance_statistics`'s dict."""
         return format_limit(self.threshold_mD) if self.statistic == "area_over" else self.statistic
 
     def describe(self):

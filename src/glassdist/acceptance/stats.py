@@ -22,7 +22,7 @@ __all__ = [
     "STATISTIC_FIELDS",
     "STATISTICS",
     "shared_limit",
-    "channel_statistics",
+    "acceptance_statistics",
     "area_over_percent",
     "result_statistics",
     "regions_statistics",
@@ -80,8 +80,8 @@ def area_over_percent(field, valid=None, limit_mD=0.0):
     return float(100.0 * np.count_nonzero(np.abs(v) > limit_mD) / v.size)
 
 
-def channel_statistics(field, valid=None, *, over_limits_mD=()):
-    """Statistics of one channel over the valid region.
+def acceptance_statistics(field, valid=None, *, over_limits_mD=()):
+    """Statistics of one channel over the valid region, as the acceptance reports them (``area_over_<T>`` keys).
 
     Parameters
     ----------
@@ -125,7 +125,7 @@ def result_statistics(result, *, over_limits_mD=None):
     Returns
     -------
     dict
-        ``{channel: channel_statistics(...)}`` for each channel present.
+        ``{channel: acceptance_statistics(...)}`` for each channel present.
     """
     over_limits_mD = over_limits_mD or {}
     stats = {}
@@ -133,7 +133,7 @@ def result_statistics(result, *, over_limits_mD=None):
         field = getattr(result, attr, None)
         if field is None:
             continue
-        stats[name] = channel_statistics(field, result.valid, over_limits_mD=over_limits_mD.get(name, ()))
+        stats[name] = acceptance_statistics(field, result.valid, over_limits_mD=over_limits_mD.get(name, ()))
     return stats
 
 
@@ -201,7 +201,7 @@ def regions_statistics(result, regions, *, channels=tuple(CHANNEL_FIELDS), over_
     Returns
     -------
     dict
-        ``{key: {channel: statistics}}``, each as :func:`channel_statistics`: the same
+        ``{key: {channel: statistics}}``, each as :func:`acceptance_statistics`: the same
         values (the mean and standard deviation summed in float64 block by block, the
         percentile exact), without a full-size copy of any field.
     """
