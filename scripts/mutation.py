@@ -3,7 +3,7 @@
 Each mutant changes one operator or constant of one function of a core module (Block F
 ``analyzer/fourier.py``, the unwrapping ``analyzer/unwrap.py``, Block I
 ``analyzer/homography.py``, Block A ``analyzer/metrics.py``, the acceptance checks
-``report/acceptance.py`` and ``report/spec.py``). It is written into a scratch copy of
+``acceptance/assess.py`` and ``acceptance/spec.py``). It is written into a scratch copy of
 ``src/`` and the module's targeted tests run against it (``PYTHONPATH``, first failure
 stops the run). A mutant is *killed* when a test fails (or the run exceeds the time
 limit), *survived* otherwise. The mutants are a seeded random sample of every possible
@@ -51,8 +51,8 @@ MODULES = {
                                              "tests/test_accuracy_truth.py"]),
     "metrics": ("analyzer/metrics.py", ["tests/test_analyzer_metrics.py", "tests/test_streamed_statistics.py",
                                        "tests/test_accuracy_truth.py"]),
-    "acceptance": ("report/acceptance.py", ["tests/test_acceptance.py"]),
-    "spec": ("report/spec.py", ["tests/test_spec.py"]),
+    "acceptance": ("acceptance/assess.py", ["tests/test_acceptance.py"]),
+    "spec": ("acceptance/spec.py", ["tests/test_spec.py"]),
 }
 
 _SWAP = {ast.Add: ast.Sub, ast.Sub: ast.Add, ast.Mult: ast.Div, ast.Div: ast.Mult, ast.Pow: ast.Mult,

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from glassdist.errors import InputError
-from glassdist.report.regions import all_worst_regions, regions_csv, worst_regions
-from glassdist.report.spec import Protocol, Spec, Zone, check_capture, resolve_protocol, spec_limits, spec_verdict
-from glassdist.report.stats import result_statistics
-from glassdist.report.zones import pane_frame, pane_frame_from_corners, pane_frame_from_region, zone_masks
-from glassdist.report.zones import zone_statistics
+from glassdist.acceptance.regions import all_worst_regions, regions_csv, worst_regions
+from glassdist.acceptance.spec import Protocol, Spec, Zone, check_capture, resolve_protocol, spec_limits, spec_verdict
+from glassdist.acceptance.stats import result_statistics
+from glassdist.acceptance.zones import pane_frame, pane_frame_from_corners, pane_frame_from_region, zone_masks
+from glassdist.acceptance.zones import zone_statistics
 
 # ----------------------------------------------------------------- protocol
 
@@ -379,7 +379,7 @@ def test_mask_coverage_is_of_the_mask():
 
 
 def test_statistics_and_regions_use_the_trusted_pixels():
-    from glassdist.report.acceptance import assess
+    from glassdist.acceptance.assess import assess
 
     res = _field_result()
     res.trusted = res.valid.copy()
@@ -418,7 +418,7 @@ def test_api_write_report_from_arrays_and_with_a_spec(lens_photos, tmp_path):
 @pytest.mark.parametrize("radius", [0.5, 1.0, 2.5, 3.0, 4.2])
 def test_grow_region_is_the_distance_threshold(radius):
     """The disk dilation keeps exactly the pixels within ``radius`` of the region (exact Euclidean distance)."""
-    from glassdist.report.zones import distance_to_outside, grow_region
+    from glassdist.acceptance.zones import distance_to_outside, grow_region
 
     rng = np.random.default_rng(5)
     mask = rng.random((90, 130)) < 0.01
@@ -429,7 +429,7 @@ def test_grow_region_is_the_distance_threshold(radius):
 
 def test_coverage_is_of_the_mask_asked_for():
     """With a mask, coverage is the measured share of the mask (closed form), else of the image."""
-    from glassdist.report.acceptance import assess
+    from glassdist.acceptance.assess import assess
 
     res = _field_result()  # 200 x 260 px, every pixel measured
     res.valid = res.valid.copy()
@@ -441,7 +441,7 @@ def test_coverage_is_of_the_mask_asked_for():
 
 
 def test_caption_says_clipped_only_beyond_the_colour_limit():
-    from glassdist.report.acceptance import describe_clipping
+    from glassdist.report.maps import describe_clipping
 
     f = np.array([[1.0, -10.0], [4.0, np.nan]])
     ok = np.ones(f.shape, bool)
@@ -453,7 +453,7 @@ def test_caption_says_clipped_only_beyond_the_colour_limit():
 
 def test_the_frame_warning_is_given_only_where_zones_need_the_frame():
     """Without a pane in the spec the analysed region stands in for it: a warning only when zones use it."""
-    from glassdist.report.acceptance import assess
+    from glassdist.acceptance.assess import assess
 
     res = _field_result()
     crit = [{"channel": "phi_eff", "statistic": "max_abs", "max_mD": 50}]
@@ -467,7 +467,7 @@ def test_camera_metadata_from_exif(tmp_path):
     """The camera's EXIF tags, the sub-IFD's too; blank text tags left out; a file without EXIF gives None."""
     from PIL import Image
 
-    from glassdist.report.acceptance import camera_metadata
+    from glassdist.io import camera_metadata
 
     im = Image.fromarray(np.full((16, 16), 128, np.uint8))
     exif = Image.Exif()
@@ -487,7 +487,8 @@ def test_heatmap_axes_and_overlays_keep_the_frame_limits():
     overlays (zones, worst regions) leave the heatmap's limits where the extent put them."""
     from matplotlib.figure import Figure
 
-    from glassdist.report.acceptance import assess, draw_overlays, heatmap_axes
+    from glassdist.acceptance.assess import assess
+    from glassdist.report.maps import draw_overlays, heatmap_axes
 
     res = _field_result()
     crit = [{"channel": "phi_eff", "statistic": "max_abs", "max_mD": 50}]

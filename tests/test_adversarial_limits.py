@@ -14,8 +14,9 @@ import tifffile
 
 from glassdist.errors import InputError
 from glassdist.io import image_shape, read_image, read_mask
-from glassdist.report.batch import Pane, PaneOutcome, check_panes, read_manifest, run_batch, write_index
-from glassdist.report.spec import Check, Verdict
+from glassdist.jobs.batch import Pane, check_panes, read_manifest, run_batch, write_index
+from glassdist.jobs.runner import PaneOutcome
+from glassdist.acceptance.spec import Check, Verdict
 from glassdist.validation import load_document, safe_text
 
 

@@ -10,15 +10,15 @@ import shutil
 import pytest
 
 from glassdist.errors import InputError
-from glassdist.report.batch import (
+from glassdist.jobs.batch import (
     EXIT_PANE_ERRORS,
     Pane,
-    PaneOutcome,
     pane_defaults,
     panes_from_folder,
     read_manifest,
     run_batch,
 )
+from glassdist.jobs.runner import PaneOutcome
 
 
 class FakeRunner:
@@ -289,7 +289,7 @@ def test_thumbnails_share_one_colour_scale_and_trend_groups_lots(tmp_path):
     import matplotlib.image
     import numpy as np
 
-    from glassdist.report.batch_index import write_thumbnails, write_trend
+    from glassdist.jobs.index_figures import write_thumbnails, write_trend
 
     for pid, value in (("a", 10.0), ("b", 20.0)):
         d = tmp_path / "panes" / pid

@@ -230,7 +230,7 @@ def _record(*paths):
 
 
 def test_recorded_outputs_never_leave_the_folder(tmp_path):
-    from glassdist.report.outputs import recorded_outputs, remove_outputs
+    from glassdist.storage.folder import recorded_outputs, remove_outputs
 
     out = tmp_path / "out"
     (out / "sub").mkdir(parents=True)
@@ -252,7 +252,7 @@ def test_recorded_outputs_never_leave_the_folder(tmp_path):
 
 def test_crafted_summary_never_deletes_an_unrelated_file(tmp_path):
     """Cleanup removes a file only when it still has the SHA-256 its run recorded: sizes alone are not enough."""
-    from glassdist.report.outputs import recorded_outputs, remove_outputs
+    from glassdist.storage.folder import recorded_outputs, remove_outputs
 
     out = tmp_path / "out"
     out.mkdir()

@@ -119,16 +119,16 @@ def test_debug_keeps_exit_2_for_bad_input_and_adds_the_traceback(pair, tmp_path)
 
 def test_a_full_disk_under_report_export_exits_2_saying_what_is_needed(pair, tmp_path, monkeypatch, capsys):
     """ENOSPC while writing the exports: exit 2 with the space the outputs need, no traceback."""
-    from glassdist.report import exports
+    from glassdist.storage import fields
 
-    real = exports.atomic_write
+    real = fields.atomic_write
 
-    def full_disk(path, write):
+    def full_disk(path, write, **kw):
         if path.name == "fields.npz":
             raise OSError(errno.ENOSPC, "No space left on device", str(path))
-        return real(path, write)
+        return real(path, write, **kw)
 
-    monkeypatch.setattr(exports, "atomic_write", full_disk)
+    monkeypatch.setattr(fields, "atomic_write", full_disk)
     code = cli.main([str(a) for a in _analyze(pair, tmp_path / "o", "--report", "--export", "--quiet")])
     err = capsys.readouterr().err
     assert code == 2, err

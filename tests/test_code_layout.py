@@ -95,3 +95,151 @@ def test_round_trip_truth_is_the_independent_helper():
     modules = {n.module for n in ast.walk(fn) if isinstance(n, ast.ImportFrom)}
     modules |= {a.name for n in ast.walk(fn) if isinstance(n, ast.Import) for a in n.names}
     assert modules == {"_truth"}, modules
+
+
+def _module_name(path: Path) -> str:
+    parts = ("glassdist", *path.relative_to(SRC).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _import_graph(*, deferred: bool) -> dict[str, set[str]]:
+    """``{module: modules of glassdist it imports}``, from the source (AST); ``deferred``: also imports inside functions.
+
+    ``from package import name`` counts as an import of the module ``package.name`` when
+    there is one, else of ``package``; a module's own ancestor packages (always imported
+    before it) are left out.
+    """
+    modules = {_module_name(p): p for p in SRC.rglob("*.py")}
+    graph = {}
+    for module, path in modules.items():
+        package = module if path.name == "__init__.py" else module.rsplit(".", 1)[0]
+        tree = ast.parse(path.read_text())
+        nodes = ast.walk(tree) if deferred else _top_level_imports(tree.body)
+        deps = set()
+        for node in nodes:
+            if isinstance(node, ast.ImportFrom):
+                base = package.split(".")
+                target = ".".join(base[: len(base) - node.level + 1] + ([node.module] if node.module else [])) \
+                    if node.level else (node.module or "")
+                found = [f"{target}.{a.name}" if f"{target}.{a.name}" in modules else target for a in node.names]
+            elif isinstance(node, ast.Import):
+                found = [a.name for a in node.names]
+            else:
+                continue
+            deps |= {m for m in found if m in modules and m != module and not module.startswith(m + ".")}
+        graph[module] = deps
+    return graph
+
+
+def _top_level_imports(body):
+    """Import statements run when the module is imported (not those inside functions or classes)."""
+    for node in body:
+        if isinstance(node, (ast.Import, ast.ImportFrom)):
+            yield node
+        elif isinstance(node, (ast.If, ast.Try, ast.With)):
+            for field in ("body", "orelse", "finalbody", "handlers"):
+                yield from _top_level_imports(getattr(node, field, []))
+        elif isinstance(node, ast.ExceptHandler):
+            yield from _top_level_imports(node.body)
+
+
+def _cycles(graph) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan), each sorted."""
+    index, low, stack, on, out, counter = {}, {}, [], set(), [], [0]
+
+    def visit(v):
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on.add(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_cycle_finder_finds_a_cycle():
+    """The check below can fail: a two-module loop and a three-module loop are found, a chain is not."""
+    graph = {"a": {"b"}, "b": {"a"}, "c": {"d"}, "d": {"e"}, "e": {"c"}, "f": {"a"}}
+    assert sorted(_cycles(graph)) == [["a", "b"], ["c", "d", "e"]]
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": set()}) == []
+
+
+def test_no_import_cycle_when_modules_are_imported():
+    """No two modules of glassdist import each other, directly or through others, at import time."""
+    assert _cycles(_import_graph(deferred=False)) == []
+
+
+#: deferred (function-level) import loops between the analyzer's stages, kept by the analyzer
+ANALYZER_DEFERRED = {"glassdist.analyzer.homography", "glassdist.analyzer.lens", "glassdist.analyzer.pipeline",
+                     "glassdist.analyzer.result"}
+
+
+def test_no_import_cycle_even_through_deferred_imports():
+    """Counting the imports inside functions too, no loop outside the analyzer's own stages."""
+    assert [c for c in _cycles(_import_graph(deferred=True)) if not set(c) <= ANALYZER_DEFERRED] == []
+
+
+#: the output floor, lowest layer first: a module may import its own layer and those below, never one above
+OUTPUT_FLOOR = (
+    ("leaves", ("glassdist.fs", "glassdist.io", "glassdist.errors", "glassdist.validation")),
+    ("acceptance", ("glassdist.acceptance", "glassdist.measures")),
+    ("rendering", ("glassdist.report",)),
+    ("storage", ("glassdist.storage",)),
+    ("jobs", ("glassdist.jobs",)),
+    ("entry points", ("glassdist.cli", "glassdist._api", "glassdist.web", "glassdist.virtual.sweep")),
+)
+
+
+def _layer(module: str):
+    for rank, (_, prefixes) in enumerate(OUTPUT_FLOOR):
+        if any(module == p or module.startswith(p + ".") for p in prefixes):
+            return rank
+    return None
+
+
+def _layering_violations(graph):
+    out = []
+    for module, deps in graph.items():
+        here = _layer(module)
+        if here is None:
+            continue
+        for dep in deps:
+            there = _layer(dep)
+            if there is not None and there > here:
+                out.append(f"{module} ({OUTPUT_FLOOR[here][0]}) imports {dep} ({OUTPUT_FLOOR[there][0]})")
+    return sorted(out)
+
+
+def test_output_floor_is_layered():
+    """Leaves < acceptance and measures < rendering < storage < jobs < entry points, deferred imports included."""
+    assert _layering_violations(_import_graph(deferred=True)) == []
+
+
+def test_layering_check_finds_an_upward_import():
+    graph = {"glassdist.report.maps": {"glassdist.storage.writer"}, "glassdist.storage.writer": {"glassdist.report.maps"}}
+    assert _layering_violations(graph) == ["glassdist.report.maps (rendering) imports glassdist.storage.writer (storage)"]
+
+
+@pytest.mark.parametrize("path", sorted(p for sub in ("acceptance", "storage", "report", "jobs") for p in (SRC / sub).glob("*.py"))
+                         + [SRC / "fs.py", SRC / "io.py", SRC / "measures.py", SRC / "cli.py", SRC / "_api.py"],
+                         ids=lambda p: str(p.relative_to(SRC)))
+def test_output_floor_modules_stay_under_900_lines(path):
+    assert len(path.read_text().splitlines()) <= 900

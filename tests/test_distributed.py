@@ -16,7 +16,7 @@ distributed = pytest.importorskip("distributed", reason="the distributed tests n
 
 from glassdist.distributed import open_executor  # noqa: E402
 from glassdist.errors import InputError  # noqa: E402
-from glassdist.report.batch import Pane, run_batch  # noqa: E402
+from glassdist.jobs.batch import Pane, run_batch  # noqa: E402
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")
 SCENES = Path(__file__).resolve().parents[1] / "examples" / "scenes"
@@ -115,7 +115,7 @@ def test_batch_on_dask_matches_the_serial_run(photos, tmp_path, executor):
 
 def _quick_runner(pane, out_dir, **kw):
     """Stands in for analyze (the real one is compared above): a summary made from the input's bytes."""
-    from glassdist.report.batch import PaneOutcome
+    from glassdist.jobs.runner import PaneOutcome
 
     digest = sum(Path(pane.image).read_bytes()) % 1000
     summary = {"method": "direct", "a4": {"valid_percent": 90.0, "statistics": {"phi_eff": {"p95_abs": digest}}}}

@@ -104,7 +104,7 @@ def _png_header_only(path: Path, width: int, height: int) -> None:
 
 def test_a_100_mpx_photo_never_prints_pillows_bomb_warning(tmp_path):
     from glassdist.io import image_shape
-    from glassdist.report.acceptance import camera_metadata
+    from glassdist.io import camera_metadata
 
     big = tmp_path / "big.png"
     _png_header_only(big, 12000, 8400)  # 100.8 Mpx, over Pillow's 89 Mpx warning level
@@ -137,7 +137,7 @@ def test_the_pane_outline_in_summary_is_compact_and_faithful():
     """One 'x,y x,y ...' string per polygon, within 1.5 px (+ rounding) of the traced outline."""
     import cv2
 
-    from glassdist.report.zones import pane_frame_from_region
+    from glassdist.acceptance.zones import pane_frame_from_region
 
     yy, xx = np.mgrid[0:600, 0:800]
     region = (np.hypot(xx - 400, (yy - 300) * 1.3) < 250) & ~((abs(xx - 400) < 40) & (yy > 420))

@@ -1,4 +1,4 @@
-"""finish_analysis: verdict and exit code, summary.json, exports, and the HTML report's content."""
+"""The output stage (glassdist.write_outputs): verdict and exit code, summary.json, exports, and the HTML report's content."""
 
 from __future__ import annotations
 
@@ -17,7 +17,9 @@ import pytest
 from conftest import write_lens_pair
 
 import glassdist
-from glassdist.report.outputs import EXIT_SPEC_FAIL, finish_analysis
+from glassdist.acceptance.assess import assess
+from glassdist.report.console import acceptance_lines
+from glassdist.storage import EXIT_SPEC_FAIL, write_outputs
 
 PASSING = {"name": "lenient", "criteria": [{"channel": "phi_eff", "statistic": "p95_abs", "max_mD": 1000}]}
 FAILING = {
@@ -56,7 +58,7 @@ class _Collector(HTMLParser):
 
 @pytest.fixture(scope="module")
 def analysed(tmp_path_factory):
-    """One real analysis (160 x 160 px lens, -100 mD at its centre, Comparative) finished twice: with a
+    """One real analysis (160 x 160 px lens, -100 mD at its centre, Comparative) written twice: with a
     failing spec + report + exports, and with a passing spec; and the same photo by the Direct Method."""
     root = write_lens_pair(tmp_path_factory.mktemp("finish"))
     image, ref = root / "pane.png", root / "reference.png"
@@ -64,14 +66,10 @@ def analysed(tmp_path_factory):
     (root / "fail.json").write_text(json.dumps(FAILING))
     (root / "pass.json").write_text(json.dumps(PASSING))
     out_fail, out_pass = root / "out_fail", root / "out_pass"
-    out_fail.mkdir()
-    out_pass.mkdir()
-    (out_fail / "summary.json").write_text(json.dumps({"method": "comparative", "version": glassdist.__version__}))
-    lines = []
-    code_fail = finish_analysis(result, out_dir=out_fail, image_path=image, reference_path=ref,
-                                spec_path=root / "fail.json", report=True, exports=True, echo=lines.append)
-    code_pass = finish_analysis(result, out_dir=out_pass, image_path=image, spec_path=root / "pass.json",
-                                echo=lambda s: None)
+    code_fail = write_outputs(result, out_fail, image_path=image, reference_path=ref, spec=root / "fail.json",
+                              report=True, export=True, history=False)
+    code_pass = write_outputs(result, out_pass, image_path=image, spec=root / "pass.json", history=False)
+    lines = acceptance_lines(assess(result, root / "fail.json"))
     return dict(root=root, image=image, ref=ref, out=out_fail, out_pass=out_pass, lines=lines,
                 code_fail=code_fail, code_pass=code_pass, result=result)
 
@@ -88,7 +86,7 @@ def test_exit_codes_and_printed_verdict(analysed):
 
 def test_summary_keeps_existing_keys_and_gains_verdict(analysed):
     s = json.loads((analysed["out"] / "summary.json").read_text())
-    assert s["method"] == "comparative"  # written by the analyze command, kept
+    assert s["method"] == "comparative"
     assert s["verdict"]["result"] == "FAIL" and [c["passed"] for c in s["verdict"]["checks"]] == [True, False, False]
     assert s["a4"]["inputs"]["image"]["sha256"] == hashlib.sha256(analysed["image"].read_bytes()).hexdigest()
     assert s["a4"]["inputs"]["reference"]["sha256"] == hashlib.sha256(analysed["ref"].read_bytes()).hexdigest()
@@ -188,7 +186,7 @@ def test_report_parameters_show_the_smoothing_used(analysed):
 
 def test_direct_report_shows_the_homography_fit(analysed):
     from glassdist.report.html import render_report
-    from glassdist.report.stats import result_statistics
+    from glassdist.acceptance.stats import result_statistics
 
     result = glassdist.analyze(analysed["image"], pitch_mm=2.0, distance_m=1.0)  # the Direct Method
     fit = result.homography_fit

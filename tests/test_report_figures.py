@@ -10,6 +10,7 @@ from conftest import DATA
 
 from glassdist.analyzer import FIELDS
 from glassdist.analyzer.fourier import SamplingGrid
+from glassdist.acceptance.stats import shared_limit
 from glassdist.report import figures
 
 
@@ -63,9 +64,9 @@ def test_save_channel_heatmaps_writes_pngs(tmp_path):
 
 def test_shared_limit_ignores_invalid_and_covers_both_channels():
     r = fake_result()
-    v = figures.shared_limit(r.phi_eff_mD, r.phi_shear_mD, valid=r.valid, percentile=100)
+    v = shared_limit(r.phi_eff_mD, r.phi_shear_mD, valid=r.valid, percentile=100)
     assert v == pytest.approx(max(np.nanmax(np.abs(r.phi_eff_mD)), np.nanmax(r.phi_shear_mD)))
-    assert figures.shared_limit(np.full((4, 4), np.nan)) == 1.0
+    assert shared_limit(np.full((4, 4), np.nan)) == 1.0
 
 
 def test_diverging_limits_are_symmetric_and_sequential_start_at_zero():
@@ -107,8 +108,8 @@ def test_heatmap_caption_speaks_of_trusted_pixels():
     import re
 
     import glassdist
-    from glassdist.report.acceptance import assess
-    from glassdist.report.outputs import a4_figures
+    from glassdist.acceptance.assess import assess
+    from glassdist.report.maps import run_figures
     from glassdist.synthetic import synthetic_capture, wave_displacement
 
     cap = synthetic_capture((240, 320), pitch_mm=8.0, mm_per_px=1.0, displacement=wave_displacement(0.6, 90.0, 25.0))
@@ -116,7 +117,7 @@ def test_heatmap_caption_speaks_of_trusted_pixels():
     img[100:140, 140:180] = 0.5  # an opaque drop: excluded, with a guard band around it
     res = glassdist.analyze(img, pitch_mm=8.0, distance_m=10.0, reference=cap.reference)
     acc = assess(res)
-    figs = {stem: caption for stem, caption, _ in a4_figures(res, heatmaps=True, acceptance=acc)}
+    figs = {stem: caption for stem, caption, _ in run_figures(res, heatmaps=True, acceptance=acc)}
     for name, attr in (("phi_eff", "phi_eff_mD"), ("phi_shear", "phi_shear_mD")):
         shown = float(re.search(r"max \|phi\| ([0-9.eE+-]+) mD", figs[name]).group(1))
         assert shown == pytest.approx(acc.stats[name]["max_abs"], rel=1e-2)
@@ -181,12 +182,12 @@ def test_histogram_ranges_are_the_trusted_statistics_range(photo, tmp_path, monk
     monkeypatch.setattr(figures, "plot_histogram", spy)
     res = glassdist.analyze(DATA / photo, reference=DATA / "reference.png", pitch_mm=5, distance_m=0.5,
                             detrend_degree=3)
-    glassdist.write_outputs(res, tmp_path / "out", echo=lambda line: None)
+    glassdist.write_outputs(res, tmp_path / "out", history=False)
     assert len(ranges) == 2
     for name, signed in (("phi_eff", True), ("phi_shear", False)):
         field = getattr(res, f"{name}_mD")
         top = float(np.max(np.abs(field[res.trusted & np.isfinite(field)])))  # independent of the figure code
-        lo, hi = ranges[figures.CHANNELS[name][1]]
+        lo, hi = ranges[figures.CHANNEL_STYLES[name][1]]
         assert hi == pytest.approx(top, rel=1e-6) and lo == pytest.approx(-top if signed else 0.0, rel=1e-6)
         # the reported (guard band included) values reach further: the old range would have shown them
         assert np.nanmax(np.abs(np.where(res.valid, field, np.nan))) > top

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from glassdist.analyzer.metrics import evaluate_displacement
-from glassdist.report.measures import (
+from glassdist.measures import (
     ARCMIN_PER_RAD,
     angular_deviation,
     equivalent_power,
@@ -251,8 +251,8 @@ def test_standard_measures_of_an_analysis_find_the_roll_wave():
 
 def test_result_profile_in_backdrop_and_pane_mm():
     import glassdist
-    from glassdist.report.measures import result_profile
-    from glassdist.report.zones import pane_frame_from_corners
+    from glassdist.measures import result_profile
+    from glassdist.acceptance.zones import pane_frame_from_corners
     from glassdist.synthetic import synthetic_capture
 
     pitch, mmpx, L = 5.0, 0.625, 2.0
@@ -278,7 +278,7 @@ def test_result_profile_in_backdrop_and_pane_mm():
 
 
 def test_measures_rows_state_units_and_conventions():
-    from glassdist.report.measures import measures_rows
+    from glassdist.report.html import measures_rows
 
     s = 2.0
     X, Y = _grid(100, 100, s, s)

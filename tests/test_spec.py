@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from glassdist.errors import InputError
-from glassdist.report.spec import load_spec, spec_limits, spec_verdict
-from glassdist.report.stats import area_over_percent, channel_statistics, result_statistics
+from glassdist.acceptance.spec import load_spec, spec_limits, spec_verdict
+from glassdist.acceptance.stats import acceptance_statistics, area_over_percent, result_statistics
 
 
 def _write(tmp_path, data, name="spec.json"):
@@ -42,7 +42,8 @@ SPEC = {
 
 
 def _verdict(tmp_path, spec, result=None):
-    s, sha = load_spec(_write(tmp_path, spec))
+    loaded = load_spec(_write(tmp_path, spec))
+    s, sha = loaded.spec, loaded.sha256
     result = result if result is not None else _known_result()
     stats = result_statistics(result, over_limits_mD=spec_limits(s))
     return spec_verdict(s, stats, result, spec_path="spec.json", spec_sha256=sha)
@@ -50,7 +51,7 @@ def _verdict(tmp_path, spec, result=None):
 
 def test_statistics_match_closed_form():
     r = _known_result()
-    s = channel_statistics(r.phi_eff_mD, r.valid, over_limits_mD=[40, 60])
+    s = acceptance_statistics(r.phi_eff_mD, r.valid, over_limits_mD=[40, 60])
     assert s["mean_abs"] == pytest.approx(15.0)
     assert s["mean"] == pytest.approx(-15.0)
     assert s["std"] == pytest.approx(np.sqrt(0.3 * 0.7) * 50.0)
@@ -67,10 +68,10 @@ def test_statistics_ignore_invalid_and_nan():
     valid[:5] = True
     field[:5] = 2.0
     field[0, 0] = np.nan
-    s = channel_statistics(field, valid)
+    s = acceptance_statistics(field, valid)
     assert s["max_abs"] == 2.0 and s["n_valid"] == 49
     assert area_over_percent(field, valid, 1.0) == 100.0
-    assert np.isnan(channel_statistics(field, np.zeros_like(valid))["p95_abs"])
+    assert np.isnan(acceptance_statistics(field, np.zeros_like(valid))["p95_abs"])
 
 
 def test_limits_are_inclusive_and_verdict_passes(tmp_path):
@@ -140,19 +141,19 @@ def test_comment_key_is_allowed_and_hash_is_of_the_file(tmp_path):
     import hashlib
 
     p = _write(tmp_path, dict(SPEC, **{"$comment": "example"}))
-    spec, sha = load_spec(p)
-    assert spec.name == "line 2" and sha == hashlib.sha256(p.read_bytes()).hexdigest()
-    assert spec_limits(spec) == {"phi_eff": [40.0, 60.0], "phi_shear": [10.0]}
+    loaded = load_spec(p)
+    assert loaded.spec.name == "line 2" and loaded.sha256 == hashlib.sha256(p.read_bytes()).hexdigest()
+    assert spec_limits(loaded.spec) == loaded.limits == {"phi_eff": [40.0, 60.0], "phi_shear": [10.0]}
 
 
 def test_example_specifications_and_manifest_use_detrend_3_with_the_direct_method():
     from pathlib import Path
 
-    from glassdist.report.batch import read_manifest
+    from glassdist.jobs.batch import read_manifest
 
     examples = Path(__file__).resolve().parents[1] / "examples"
-    factory, _ = load_spec(examples / "factory" / "spec.json")
-    contract, _ = load_spec(examples / "insitu" / "contract_spec.json")
+    factory = load_spec(examples / "factory" / "spec.json").spec
+    contract = load_spec(examples / "insitu" / "contract_spec.json").spec
     assert factory.protocol.method == "comparative"
     # the Direct method needs N >= 3 on real cameras (cubic lens distortion, no reference to cancel it)
     assert contract.protocol.method == "direct" and contract.protocol.detrend_degree == 3
@@ -165,7 +166,7 @@ def test_example_specifications_and_manifest_use_detrend_3_with_the_direct_metho
 def test_one_name_per_evaluate_spec():
     """``glassdist.evaluate_spec(result, spec)`` is the only function of that name; the engine has its own."""
     import glassdist
-    import glassdist.report.spec as spec_module
+    import glassdist.acceptance.spec as spec_module
     from glassdist._api import evaluate_spec
 
     assert glassdist.evaluate_spec is evaluate_spec
@@ -176,11 +177,11 @@ def test_one_name_per_evaluate_spec():
 def test_uncertainty_criteria_fail_a_noisy_capture_and_pass_a_clean_one():
     """A spec may require a precise enough measurement: p95 of phi_eff_sigma_mD under a limit."""
     import glassdist
-    from glassdist.report.acceptance import assess
-    from glassdist.report.spec import as_spec
+    from glassdist.acceptance.assess import assess
+    from glassdist.acceptance.spec import as_spec
     from glassdist.synthetic import synthetic_capture, wave_displacement
 
-    spec, _ = as_spec({"name": "precision", "criteria": [
+    spec = as_spec({"name": "precision", "criteria": [
         {"channel": "phi_eff_sigma", "statistic": "p95_abs", "max_mD": 0.02},
         {"channel": "phi_eff", "statistic": "p95_abs", "max_mD": 1e5}]})
     sigmas = {}
@@ -201,7 +202,7 @@ def test_pane_corners_must_be_a_convex_quadrilateral():
     """Convex in either order is accepted; concave, self-crossing or with three corners on a line is refused."""
     import pydantic
 
-    from glassdist.report.spec import Pane
+    from glassdist.acceptance.spec import Pane
 
     square = [[0, 0], [100, 0], [100, 80], [0, 80]]
     for corners in (square, square[::-1]):
@@ -216,7 +217,7 @@ def test_pane_corners_must_be_a_convex_quadrilateral():
 
 def test_protocol_sigma_in_carrier_periods_of_a_checkerboard():
     """sigma_periods counts carrier periods: pitch for lines, pitch * sqrt(2) for a checkerboard."""
-    from glassdist.report.spec import Protocol, resolve_protocol
+    from glassdist.acceptance.spec import Protocol, resolve_protocol
 
     for pattern, period in (("lines", 5.0), ("checkerboard", 5.0 * np.sqrt(2.0))):
         r = resolve_protocol(Protocol(sigma_periods=2, pattern=pattern), reference_given=True, pitch_mm=5.0,

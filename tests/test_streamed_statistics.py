@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 import glassdist
-from glassdist.report import stats as S
-from glassdist.report.regions import all_worst_regions, worst_regions
-from glassdist.report.zones import measured_region, pane_frame
+from glassdist.acceptance import stats as S
+from glassdist.acceptance.regions import all_worst_regions, worst_regions
+from glassdist.acceptance.zones import measured_region, pane_frame
 from glassdist.synthetic import lens_displacement, synthetic_capture, wave_displacement
 
 
@@ -30,7 +30,7 @@ def result():
 
 
 def _whole(res, region, ch):
-    return S.channel_statistics(getattr(res, S.STATISTIC_FIELDS[ch]), region, over_limits_mD=(5.0, 20.0))
+    return S.acceptance_statistics(getattr(res, S.STATISTIC_FIELDS[ch]), region, over_limits_mD=(5.0, 20.0))
 
 
 @pytest.mark.parametrize("max_pixels", [560, 560 * 37, 1 << 21])

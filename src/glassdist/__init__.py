@@ -32,7 +32,7 @@ from .analyzer import (
 from ._api import evaluate_spec, write_report
 from .errors import AnalysisError, GlassdistError, InputError
 from .io import read_image, read_mask
-from .report.outputs import load_result, write_outputs
+from .storage import load_result, write_outputs
 from .history import history
 
 __all__ = [

@@ -2,9 +2,9 @@
 
 :func:`evaluate_spec` is what ``glassdist analyze --spec`` prints, for a result in hand
 (``glassdist.evaluate_spec``); the engine underneath is
-:func:`glassdist.report.acceptance.assess`. :func:`write_report` writes the record
+:func:`glassdist.acceptance.assess.assess`. :func:`write_report` writes the record
 (``report.html`` and the rest of the output folder) through the one output stage,
-:func:`glassdist.report.outputs.write_outputs`.
+:func:`glassdist.storage.writer.write_outputs`.
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ def evaluate_spec(result, spec, *, mask=None):
     Protocol pins are checks here (the analysis already ran): a result computed with
     another distance, pitch, smoothing scale or detrend degree than the specification
     pins fails them. Zones, per-zone statistics and worst regions are computed as in
-    :func:`glassdist.report.acceptance.assess`.
+    :func:`glassdist.acceptance.assess.assess`.
 
     Examples
     --------
@@ -60,16 +60,13 @@ def evaluate_spec(result, spec, *, mask=None):
     >>> v.label, [c.passed for c in v.checks]
     ('PASS', [True, True, True])
     """
-    from .report.acceptance import assess
-    from .report.spec import as_spec
+    from .acceptance.assess import assess
 
-    s, sha = as_spec(spec)
-    path = "" if isinstance(spec, dict) or hasattr(spec, "criteria") else str(spec)
-    return assess(result, s, spec_path=path, spec_sha256=sha, mask=mask).verdict
+    return assess(result, spec, mask=mask).verdict
 
 
 def write_report(result, out, *, spec=None, image=None, reference=None, mask=None, pane_id=None, site=None,
-                 operator=None, lot=None, export=False, fields="analysis", echo=None, history=None):
+                 operator=None, lot=None, export=False, fields="analysis", history=None):
     """Write the self-contained HTML report of an analysis, with the rest of its output folder.
 
     Parameters
@@ -90,8 +87,6 @@ def write_report(result, out, *, spec=None, image=None, reference=None, mask=Non
         Also ``fields.npz`` and ``tiff/``.
     fields : {'analysis', 'pixel'}
         Layout of ``result.npz``.
-    echo : callable, optional
-        Receives the lines the command line prints (verdict, zones); default: none.
     history : glassdist.history.Recording or False, optional
         How the run is recorded in the results history (default: ``GLASSDIST_DB``, else
         the user's data folder; False: not recorded); see :func:`glassdist.write_outputs`.
@@ -114,17 +109,13 @@ def write_report(result, out, *, spec=None, image=None, reference=None, mask=Non
     """
     from pathlib import Path
 
-    from .report.outputs import write_outputs
-    from .report.spec import as_spec
-
     from .io import read_mask
+    from .storage.writer import write_outputs
 
-    loaded = as_spec(spec) if spec is not None else None
-    spec_path = None if spec is None or isinstance(spec, dict) or hasattr(spec, "criteria") else Path(spec)
     mask_path = Path(mask) if isinstance(mask, (str, Path)) else None
     if mask_path is not None:
         mask = read_mask(mask_path, result.valid.shape)
-    write_outputs(result, out, fields=fields, report=True, export=export, spec_path=spec_path, spec=loaded, mask=mask,
+    write_outputs(result, out, fields=fields, report=True, export=export, spec=spec, mask=mask,
                   metadata={"pane_id": pane_id, "lot": lot, "site": site, "operator": operator}, image_path=image,
-                  reference_path=reference, mask_path=mask_path, echo=echo or (lambda line: None), history=history)
+                  reference_path=reference, mask_path=mask_path, history=history)
     return Path(out) / "report.html"

@@ -11,7 +11,6 @@ import argparse
 import contextlib
 import difflib
 import importlib
-import json
 import logging
 import sys
 import traceback
@@ -34,7 +33,7 @@ EXIT_INTERNAL = 1
 EXIT_BAD_INPUT = 2
 
 # Modules adding sub-commands: each provides register(subparsers) -> sets func=run(args) -> int.
-COMMAND_MODULES = ["glassdist.report._batch_cli", "glassdist.render._cli", "glassdist.theory._cli", "glassdist.virtual._cli", "glassdist.render.cycles", "glassdist.experiments._cli", "glassdist.virtual._sweep_cli", "glassdist.web._cli", "glassdist.history._cli"]
+COMMAND_MODULES = ["glassdist.jobs._cli", "glassdist.render._cli", "glassdist.theory._cli", "glassdist.virtual._cli", "glassdist.render.cycles", "glassdist.experiments._cli", "glassdist.virtual._sweep_cli", "glassdist.web._cli", "glassdist.history._cli"]
 
 
 class OneLineErrorParser(argparse.ArgumentParser):
@@ -150,27 +149,37 @@ def _stage_progress(enabled: bool):
 
 
 def _read_inputs(args):
-    """Every input of ``analyze``, validated before any work or any write; the spec's protocol fills omitted options."""
+    """Every input of ``analyze``, read once and validated before any work or any write.
+
+    The specification's protocol fills omitted options. Returns the run's request and
+    inputs (:mod:`glassdist.storage.record`: each photo hashed from the bytes decoded, the
+    first one's EXIF from the same bytes) and what the analysis takes: parameters, the
+    photos, the reference photo, the reflection geometry and the camera lens.
+    """
+    from .acceptance.spec import load_spec, resolve_protocol
     from .analyzer import load_params
-    from .io import read_image, read_mask
-    from .report.spec import load_spec, resolve_protocol
+    from .io import read_mask, read_photo
+    from .report.maps import preview
+    from .storage.record import InputFile, RunInputs, RunRequest
 
     if args.spec is None:
         missing = [opt for opt, v in (("--pitch-mm", args.pitch_mm), ("--distance-m", args.distance_m)) if v is None]
         if missing:
             args.parser.error(f"the following arguments are required: {', '.join(missing)}")
     spec = load_spec(args.spec) if args.spec is not None else None
+    pinned = spec.spec.protocol if spec is not None else None
 
     def protocol_with(pattern):
         return resolve_protocol(
-            spec[0].protocol if spec else None, reference_given=args.reference is not None, pitch_mm=args.pitch_mm,
+            pinned, reference_given=args.reference is not None, pitch_mm=args.pitch_mm,
             distance_m=args.distance_m, pattern=pattern, sigma_mm=args.sigma_mm, detrend_degree=args.detrend_degree,
             params=load_params(args.params) if args.params is not None else None,
             spec_label=f"the specification '{args.spec}'")
 
     protocol = protocol_with(None if args.pattern == "auto" else args.pattern)
     paths = list(args.image)
-    images = [read_image(path, dtype=np.float32) for path in paths]  # the analyzer works in single precision
+    photos = [read_photo(path, dtype=np.float32) for path in paths]  # the analyzer works in single precision
+    images = [p.image for p in photos]
     image = images[0]
     for path, other in zip(paths[1:], images[1:]):
         if other.shape != image.shape:
@@ -178,7 +187,8 @@ def _read_inputs(args):
                 f"the image '{path}' is {other.shape[1]}x{other.shape[0]} px but '{paths[0]}' is "
                 f"{image.shape[1]}x{image.shape[0]} px; captures of one set-up come from the same camera"
             )
-    reference = read_image(args.reference, dtype=np.float32) if args.reference is not None else None
+    ref_photo = read_photo(args.reference, dtype=np.float32) if args.reference is not None else None
+    reference = ref_photo.image if ref_photo is not None else None
     if reference is not None and reference.shape != image.shape:
         raise InputError(
             f"the reference '{args.reference}' is {reference.shape[1]}x{reference.shape[0]} px but the image is "
@@ -187,13 +197,21 @@ def _read_inputs(args):
     if protocol.sources["pattern"] == "default":  # neither given nor pinned: the photo decides
         protocol = _pattern_from_photo(protocol, protocol_with, reference if reference is not None else image)
     params = load_params(args.params, **protocol.params_overrides)
-    optics = _optics(args, spec[0].protocol if spec else None, protocol.distance_m)
-    if optics is not None and params.sigma_mm is not None and not (spec and spec[0].protocol.sigma_periods):
+    optics = _optics(args, pinned, protocol.distance_m)
+    if optics is not None and params.sigma_mm is not None and not (pinned is not None and pinned.sigma_periods):
         params = load_params({**params.model_dump(exclude_unset=True)}, sigma_mm=params.sigma_mm * optics.magnification)
     check_sigma_extent(params.sigma_mm, image.shape, protocol.pitch_mm, pattern=params.pattern,
                        min_period_px=params.min_period_px)
     mask = read_mask(args.mask, image.shape) if args.mask is not None else None
-    return spec, protocol, params, images, reference, mask, optics, _lens_source(args, spec, protocol, params, images)
+    lens = _lens_source(args, pinned, protocol, params, images)
+    request = RunRequest(fields=args.fields, report=args.report, export=args.export, spec=spec, protocol=protocol,
+                         mask=mask, metadata={"pane_id": args.pane_id, "lot": args.lot, "site": args.site,
+                                              "operator": args.operator}, history=recording(args))
+    captures = tuple(InputFile(str(p), ph.sha256) for p, ph in zip(paths, photos))
+    inputs = RunInputs(image=captures[0], captures=captures, camera=photos[0].camera, preview=preview(image),
+                       reference=None if ref_photo is None else InputFile(str(args.reference), ref_photo.sha256),
+                       mask=None if args.mask is None else str(args.mask))
+    return request, inputs, params, images, reference, optics, lens
 
 
 def _optics(args, pinned, distance_m: float):
@@ -243,13 +261,13 @@ def _pattern_from_photo(protocol, protocol_with, photo):
     return replace(decided, sources={**decided.sources, "pattern": "auto"})
 
 
-def _lens_source(args, spec, protocol, params, images):
-    """The camera lens from ``--camera-file`` or ``--lens-photo`` (Direct Method), or None."""
+def _lens_source(args, pinned, protocol, params, images):
+    """The camera lens from ``--camera-file`` or ``--lens-photo`` (Direct Method), or None; ``pinned``: the spec's protocol."""
+    from .acceptance.spec import check_lens_source
     from .analyzer.lens import calibrate_from_photo, calibration_from_camera_file
     from .io import read_image
-    from .report.spec import check_lens_source
 
-    check_lens_source(spec[0].protocol if spec else None, lens_photo=args.lens_photo is not None,
+    check_lens_source(pinned, lens_photo=args.lens_photo is not None,
                       camera_file=args.camera_file is not None, spec_label=f"the specification '{args.spec}'")
     if args.lens_photo is None and args.camera_file is None:
         return None
@@ -267,69 +285,43 @@ def _lens_source(args, spec, protocol, params, images):
 
 
 def _run_analyze(args) -> int:
+    """One run as a straight line: request, inputs, folder, analysis, record, files, console lines, exit code."""
     from .analyzer import FIELDS, analyze, analyze_captures, prepare_reference
     from .analyzer.reflection import reflect_result
-    from .report.outputs import open_output_folder, plan_outputs, preview, write_outputs
-    from .report.spec import check_capture, spec_limits
+    from .report.console import run_lines, warning_lines
+    from .storage import open_output_folder, plan_outputs
+    from .storage.record import build_record
+    from .storage.writer import write_run
 
     with _stage_progress(not args.quiet) as step:
         step("reading the inputs")
-        spec, protocol, params, images, reference, mask, optics, lens = _read_inputs(args)
-        limits = spec_limits(spec[0]) if spec is not None else {}
-        planned = plan_outputs(FIELDS, fields=args.fields, report=args.report, export=args.export, limits=limits)
-        inputs = (*args.image, args.reference, args.mask, args.spec, args.params, args.lens_photo, args.camera_file)
-        with open_output_folder(args.out, planned=planned, inputs=inputs) as folder:
+        request, inputs, params, images, reference, optics, lens = _read_inputs(args)
+        planned = plan_outputs(FIELDS, fields=request.fields, report=request.report, export=request.export,
+                               limits=request.limits)
+        paths = (*args.image, args.reference, args.mask, args.spec, args.params, args.lens_photo, args.camera_file)
+        with open_output_folder(args.out, planned=planned, inputs=paths) as folder:
             if reference is not None:
                 step("preparing the reference")
                 reference = prepare_reference(reference, params=params)
             step("analysing")
+            protocol = request.protocol
             L = protocol.distance_m if optics is None else optics.effective_distance_m  # reflection: D / m
-            kw = dict(pitch_mm=protocol.pitch_mm, distance_m=L, reference=reference, params=params, mask=mask)
-            small = preview(images[0])  # only the reduced photo is drawn from here on
+            kw = dict(pitch_mm=protocol.pitch_mm, distance_m=L, reference=reference, params=params, mask=request.mask)
             # a single photo is handed over, so that the analysis frees it once Block F is done
             result = analyze(images.pop(), lens=lens, **kw) if len(images) == 1 else analyze_captures(images, **kw)
             del images, reference, kw
             if optics is not None:
                 result = reflect_result(result, optics)
-            if spec is not None:  # a capture outside the protocol is not judged (exit 2), nothing written
-                check_capture(spec[0].protocol, result, spec_label=f"the specification '{args.spec}'")
+            # a capture outside the protocol is not judged (exit 2), nothing written
+            record = build_record(request, inputs, result)
             step("writing the outputs")
-            lines = []
-            code = write_outputs(
-                result, folder, fields=args.fields, report=args.report, export=args.export, spec_path=args.spec,
-                spec=spec, protocol=protocol, mask=mask, image=small, image_path=args.image[0],
-                reference_path=args.reference, mask_path=args.mask, captures=args.image,
-                metadata={"pane_id": args.pane_id, "lot": args.lot, "site": args.site, "operator": args.operator},
-                echo=lines.append, history=recording(args),
-            )
-    for w in result.warnings:
-        print(f"warning: {w}", file=sys.stderr)
-    for line in folder.problems:
-        print(f"warning: {line}", file=sys.stderr)
+            summary = write_run(record, folder)
+    for line in warning_lines(record, folder.problems):
+        print(line, file=sys.stderr)
     if not args.quiet:
-        _echo_run(result, folder, lines)
-    return code
-
-
-def _echo_run(result, folder, lines) -> None:
-    """The run's lines on stdout: verdict and zones, a summary of the statistics, what was removed."""
-    for line in lines:
-        print(line)
-    s = json.loads((folder.path / "summary.json").read_text(encoding="utf-8"))["statistics"]
-    optics = "" if result.optics is None else (
-        f"reflection (D {result.optics['board_distance_m']:g} m, incidence {result.optics['incidence_deg']:g} deg), ")
-
-    def mD(v) -> str:  # null when no pixel is trusted
-        return "n/a" if v is None else f"{v:.3g} mD"
-
-    print(
-        f"{optics}{result.method} method: valid {100 * result.valid_fraction:.1f}% of the image, "
-        f"mean |phi_eff| {mD(s['phi_eff_mD']['mean_abs'])}, p95 |phi_eff| {mD(s['phi_eff_mD']['p95_abs'])}, "
-        f"mean phi_shear {mD(s['phi_shear_mD']['mean_abs'])}"
-    )
-    if folder.removed:
-        print(f"removed from {folder.path}, left by the previous run: {', '.join(folder.removed)}")
-    print(f"results written to {folder.path}")
+        for line in run_lines(record, summary, folder.path, folder.removed):
+            print(line)
+    return record.exit_code
 
 
 def build_parser() -> argparse.ArgumentParser:

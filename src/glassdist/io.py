@@ -1,4 +1,4 @@
-"""Image and mask input/output.
+"""Input/output of images, masks, EXIF and JSON documents.
 
 Images are returned as ``float64`` arrays indexed ``(row, col)``, scaled so that
 the largest value of the file's bit depth maps to 1.0 (8-bit: /255, 16-bit: /65535,
@@ -12,9 +12,12 @@ meaning for saturation and contrast checks.
 from __future__ import annotations
 
 import contextlib
+import hashlib
+import io as _io
 import json
 import os
 import warnings
+from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
 import numpy as np
@@ -22,20 +25,29 @@ import numpy as np
 from .errors import InputError
 from .validation import check_input_file, limits, safe_text
 
-__all__ = ["read_image", "image_shape", "read_mask", "write_png16", "prepare_output_dir", "open_with_pillow"]
+__all__ = ["Photo", "read_photo", "read_image", "image_shape", "read_mask", "write_png16", "prepare_output_dir", "open_with_pillow",
+           "camera_metadata", "to_jsonable"]
 
 _READABLE = {".png", ".tif", ".tiff", ".bmp", ".jpg", ".jpeg"}
 
 
-def _imread_any(path: Path, max_pixels: float) -> tuple[np.ndarray, int | None]:
-    """Decode an image file (RGB(A) channel order); returns the array and its bits per sample (TIFF)."""
+def _read_bytes(path: Path) -> bytes:
+    """The file's bytes, read once (decoded, hashed and searched for EXIF from memory)."""
+    try:
+        with open(path, "rb") as fh:
+            return fh.read()
+    except OSError as exc:
+        raise InputError(f"cannot read image '{safe_text(path)}': {exc.strerror}; check the file") from None
+
+
+def _imread_any(path: Path, data: bytes, max_pixels: float) -> tuple[np.ndarray, int | None]:
+    """Decode an image file's bytes ``data`` (RGB(A) channel order); returns the array and its bits per sample (TIFF)."""
     import cv2
 
     if path.suffix.lower() in {".tif", ".tiff"}:
-        return _tiff_frame(path, max_pixels)
-    _check_pixels(path, *_header_size(path), max_pixels)
-    data = np.fromfile(str(path), dtype=np.uint8)
-    img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+        return _tiff_frame(path, max_pixels, data)
+    _check_pixels(path, *_header_size(path, data), max_pixels)
+    img = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
     if img is None:
         raise InputError(
             f"cannot decode image '{safe_text(path)}'; supported formats are PNG, TIFF, BMP and JPEG (8 or 16 bit)"
@@ -64,12 +76,12 @@ def _tiff_page(tif, p: Path, max_pixels: float):
     return page
 
 
-def _open_tiff(p: Path, use):
-    """``use(TiffFile)``, any decoder failure reported as a one-line InputError."""
+def _open_tiff(p: Path, use, data: bytes | None = None):
+    """``use(TiffFile)`` of the file ``p`` (or of its bytes ``data``), any decoder failure reported as a one-line InputError."""
     import tifffile
 
     try:
-        with tifffile.TiffFile(p) as tif:
+        with tifffile.TiffFile(p if data is None else _io.BytesIO(data)) as tif:
             return use(tif)
     except (InputError, MemoryError):
         raise
@@ -79,13 +91,13 @@ def _open_tiff(p: Path, use):
         ) from None
 
 
-def _tiff_frame(p: Path, max_pixels: float) -> tuple[np.ndarray, int | None]:
+def _tiff_frame(p: Path, max_pixels: float, data: bytes) -> tuple[np.ndarray, int | None]:
     """Page 0 of a single-frame TIFF as (H, W) or (H, W, S) and its BitsPerSample, size checked first."""
     def decode(tif):
         page = _tiff_page(tif, p, max_pixels)
         return page.asarray(), page.axes, page.bitspersample
 
-    data, axes, bits = _open_tiff(p, decode)
+    data, axes, bits = _open_tiff(p, decode, data)
     # drop length-1 axes; planar (separate) colour planes come first ('SYX'): samples go last
     dims = [(n, a) for n, a in zip(data.shape, axes) if a in "SYX" or n != 1]
     data = data.reshape([n for n, _ in dims])
@@ -124,12 +136,12 @@ def open_with_pillow(path):
         yield im
 
 
-def _header_size(p: Path) -> tuple[int, int]:
-    """(width, height) from a PNG/BMP/JPEG header, without decoding the pixels."""
+def _header_size(p: Path, data: bytes | None = None) -> tuple[int, int]:
+    """(width, height) from a PNG/BMP/JPEG header (of the file, or of its bytes ``data``), without decoding the pixels."""
     from PIL import UnidentifiedImageError
 
     try:
-        with open_with_pillow(p) as im:
+        with open_with_pillow(p if data is None else _io.BytesIO(data)) as im:
             return im.size
     except (UnidentifiedImageError, OSError, SyntaxError, ValueError):
         raise InputError(
@@ -226,7 +238,12 @@ def read_image(path: str | os.PathLike, *, max_megapixels: float | None = None, 
     >>> folder.cleanup()
     """
     p = _checked_image_path(path)
-    raw, bits = _imread_any(p, _max_pixels(max_megapixels))
+    return _decoded(p, _read_bytes(p), max_megapixels, dtype)
+
+
+def _decoded(p: Path, data: bytes, max_megapixels, dtype) -> np.ndarray:
+    """:func:`read_image` of the file ``p`` whose bytes are ``data``."""
+    raw, bits = _imread_any(p, data, _max_pixels(max_megapixels))
     if raw.ndim == 3 and raw.shape[2] >= 3:
         rgb = raw[..., :3].astype(np.float64)
         grey = 0.299 * rgb[..., 0] + 0.587 * rgb[..., 1] + 0.114 * rgb[..., 2]
@@ -347,3 +364,106 @@ def prepare_output_dir(path: str | os.PathLike) -> Path:
         raise InputError(f"cannot create output folder '{safe_text(p, 200)}': {exc.strerror}; "
                          "choose a writable location with a shorter name") from None
     return p
+
+
+_EXIF_TAGS = {  # EXIF tag id -> name recorded
+    0x010F: "make", 0x0110: "model", 0x0132: "datetime", 0x9003: "datetime_original", 0x829A: "exposure_time_s",
+    0x829D: "f_number", 0x920A: "focal_length_mm", 0x8827: "iso", 0xA434: "lens_model", 0xA431: "serial_number",
+}
+
+
+def camera_metadata(path):
+    """Camera facts from a photo's EXIF block (Pillow), or ``None`` when it has none.
+
+    Parameters
+    ----------
+    path : path or binary file
+        The photograph (or its bytes, ``io.BytesIO``).
+
+    Returns
+    -------
+    dict or None
+        Any of ``make``, ``model``, ``lens_model``, ``serial_number``, ``datetime``,
+        ``datetime_original``, ``exposure_time_s``, ``f_number``, ``focal_length_mm``,
+        ``iso`` that the file records.
+    """
+    try:
+        with open_with_pillow(path) as im:
+            exif = im.getexif()
+            tags = dict(exif)
+            tags.update(exif.get_ifd(0x8769))  # the Exif sub-IFD: exposure, lens, original time
+    except (OSError, ValueError, SyntaxError):
+        return None
+    out = {}
+    for tag, name in _EXIF_TAGS.items():
+        value = tags.get(tag)
+        if value is None:
+            continue
+        if isinstance(value, bytes):
+            value = value.decode("ascii", "replace")
+        if isinstance(value, str):
+            value = value.strip("\x00 ").strip()
+            if not value:
+                continue
+        elif isinstance(value, tuple):
+            value = value[0]
+        else:
+            try:
+                value = float(value)
+            except (TypeError, ValueError):
+                value = str(value)
+        out[name] = value
+    return out or None
+
+
+def to_jsonable(obj):
+    """``obj`` with numpy values turned into Python ones and NaN / inf into ``None`` (strict JSON)."""
+    if isinstance(obj, dict):
+        return {str(k): to_jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [to_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return to_jsonable(obj.tolist())
+    if isinstance(obj, (np.generic,)):
+        obj = obj.item()
+    if isinstance(obj, float):
+        return obj if np.isfinite(obj) else None
+    if obj is None or isinstance(obj, (bool, int, str)):
+        return obj
+    return str(obj)
+
+
+@dataclass(frozen=True)
+class Photo:
+    """A photograph as a run reads it (:func:`read_photo`): pixels, digest and camera, from one read of the file.
+
+    Attributes
+    ----------
+    image : ndarray (H, W)
+        As :func:`read_image` returns it.
+    sha256 : str
+        SHA-256 of the file's bytes, the bytes decoded.
+    camera : dict or None
+        :func:`camera_metadata` of the same bytes.
+    """
+
+    image: np.ndarray
+    sha256: str
+    camera: dict | None
+
+
+def read_photo(path: str | os.PathLike, *, max_megapixels: float | None = None, dtype=np.float64) -> Photo:
+    """Read a photograph once: its pixels (:func:`read_image`), the SHA-256 of the bytes read and its EXIF camera.
+
+    The file is opened once; the hash, the header, the pixels and the EXIF block all come
+    from the bytes read, so the digest is of exactly what was analysed.
+
+    Raises
+    ------
+    InputError
+        As :func:`read_image`.
+    """
+    p = _checked_image_path(path)
+    data = _read_bytes(p)
+    image = _decoded(p, data, max_megapixels, dtype)
+    return Photo(image, hashlib.sha256(data).hexdigest(), camera_metadata(_io.BytesIO(data)))

@@ -180,7 +180,7 @@ def check_input_file(path, what: str, *, option: str | None = None, max_bytes: i
     return p
 
 
-def _read_text(p: Path, what: str, max_bytes: int) -> str:
+def _read_text(p: Path, what: str, max_bytes: int, digest=None) -> str:
     try:
         with open(p, "rb") as fh:
             raw = fh.read(max_bytes + 1)
@@ -188,6 +188,8 @@ def _read_text(p: Path, what: str, max_bytes: int) -> str:
         raise InputError(f"cannot read {what} '{safe_text(p)}': {exc.strerror}; check the file") from None
     if len(raw) > max_bytes:  # grew since it was checked
         raise InputError(f"{what} '{safe_text(p)}' is larger than the {max_bytes / 2**20:.1f} MiB accepted")
+    if digest is not None:
+        digest.update(raw)
     try:
         return raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
@@ -293,7 +295,7 @@ def _document_format(suffix: str, text: str) -> str:
 
 
 def load_document(path, what: str, *, option: str | None = None, fmt: str | None = None,
-                  hint: str = "check its syntax"):
+                  hint: str = "check its syntax", digest=None):
     """Read a JSON or YAML document with bounded resources.
 
     Parameters
@@ -308,6 +310,9 @@ def load_document(path, what: str, *, option: str | None = None, fmt: str | None
         (``scene.txt``) by its content: JSON when it starts with ``{`` or ``[``, else YAML.
     hint : str
         How to fix a syntax error (end of the message).
+    digest : hashlib hash, optional
+        Updated with the file's bytes as read (e.g. ``hashlib.sha256()``: the digest of
+        exactly what was parsed, without reading the file again).
 
     Returns
     -------
@@ -323,7 +328,7 @@ def load_document(path, what: str, *, option: str | None = None, fmt: str | None
     """
     lim = limits()
     p = check_input_file(path, what, option=option, max_bytes=lim.document_bytes)
-    text = _read_text(p, what, lim.document_bytes)
+    text = _read_text(p, what, lim.document_bytes, digest)
     fmt = fmt or _document_format(p.suffix, text)
     shown = safe_text(p)
     try:
@@ -346,7 +351,7 @@ def load_document(path, what: str, *, option: str | None = None, fmt: str | None
 
 
 def load_mapping(path, what: str, *, option: str | None = None, fmt: str | None = None,
-                 expect: str = "key: value pairs", hint: str = "check its syntax") -> dict:
+                 expect: str = "key: value pairs", hint: str = "check its syntax", digest=None) -> dict:
     """:func:`load_document` for documents that must hold one mapping (a JSON object).
 
     A top-level ``"$comment"`` key is allowed and dropped.
@@ -356,7 +361,7 @@ def load_mapping(path, what: str, *, option: str | None = None, fmt: str | None 
     expect : str
         What the mapping holds, for the message when it is not one.
     """
-    data = load_document(path, what, option=option, fmt=fmt, hint=hint)
+    data = load_document(path, what, option=option, fmt=fmt, hint=hint, digest=digest)
     if not isinstance(data, dict):
         raise InputError(f"{what} '{safe_text(path)}' must hold a mapping (a JSON object) of {expect}")
     data.pop("$comment", None)

@@ -389,7 +389,7 @@ def write_json(path: Path, record: dict) -> Path:
     """Write ``record`` (with the package version) as indented JSON."""
     path = Path(path)
     data = {"glassdist_version": __version__, **record}
-    from ..report.exports import to_jsonable
+    from ..io import to_jsonable
 
     path.write_text(json.dumps(to_jsonable(data), indent=2) + "\n", encoding="utf-8")
     return path

@@ -1,7 +1,7 @@
 """The results history: every analysis the output stage writes, recorded in a database.
 
 Every ``glassdist analyze``, batch pane, web job and Python-API run (all write through
-:func:`glassdist.report.outputs.write_outputs`) adds one row: time, pane, lot, site,
+:func:`glassdist.storage.writer.write_outputs`) adds one row: time, pane, lot, site,
 operator, camera, input hashes, the resolved protocol, the verdict with each check, the
 statistics per zone, the standard measures, warnings and the output folder. A re-run is a
 new row; rows are never changed. ``glassdist history`` lists, filters, exports and charts

@@ -64,7 +64,7 @@ def _csv_text(records, columns) -> str:
     import csv
     import io
 
-    from ..report.batch import csv_cell
+    from ..jobs.batch import csv_cell
 
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=list(columns), lineterminator="\n")
@@ -92,7 +92,7 @@ def _table(records) -> str:
 def run(args) -> int:
     """List / export / chart; exit 0, or 2 with one line (bad filter, unreadable database, existing file)."""
     from ..errors import InputError
-    from ..report.exports import atomic_write_bytes, atomic_write_text
+    from ..fs import atomic_write_bytes, atomic_write_text
     from ..report.figures import figure_png
     from . import COLUMNS, HistoryFilter, locate, plot_trends, trends
     from . import history as read_history

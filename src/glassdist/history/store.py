@@ -68,7 +68,7 @@ class Location:
 
 @dataclass(frozen=True)
 class Recording:
-    """How one run is recorded (:func:`glassdist.report.outputs.write_outputs` ``history=``).
+    """How one run is recorded (:func:`glassdist.storage.writer.write_outputs` ``history=``).
 
     Attributes
     ----------
@@ -317,7 +317,7 @@ def run_rows(summary: dict, *, exit_code: int, out_dir, recording: Recording = R
     Parameters
     ----------
     summary : dict
-        The summary the output stage wrote (``glassdist.report.outputs``).
+        The summary the output stage wrote (``glassdist.storage.writer``).
     exit_code : int
         The run's exit status (0, or 3 on a specification FAIL).
     out_dir : path

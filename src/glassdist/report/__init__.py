@@ -1,29 +1,10 @@
-"""A4 visual metrics and the industrial workflow built on them.
+"""Rendering of a run: figures, maps, the HTML report and the console lines.
 
-The output stage of a run (:mod:`~glassdist.report.outputs`) writes every file of
-``glassdist analyze``, for the command line, ``glassdist batch`` and the Python API alike;
-beside it: figures, statistics, specifications, acceptance zones and regions, the HTML
-report, exports and batches (one module each).
+Leaves of the output floor: they draw and format what they are given (an analysis
+result, its acceptance, its measures) and never read or write a run folder
+(:mod:`glassdist.storage` writes what they render).
 """
 
-from .outputs import (
-    EXIT_SPEC_FAIL,
-    OutputFolder,
-    StoredResult,
-    load_result,
-    open_output_folder,
-    plan_outputs,
-    preview,
-    write_outputs,
-)
+from .maps import preview, run_figures
 
-__all__ = [
-    "EXIT_SPEC_FAIL",
-    "OutputFolder",
-    "StoredResult",
-    "load_result",
-    "open_output_folder",
-    "plan_outputs",
-    "preview",
-    "write_outputs",
-]
+__all__ = ["preview", "run_figures"]

@@ -15,7 +15,7 @@ Colour conventions
 * astigmatism axis: cyclic map ``twilight`` on ``(-90, 90]`` degrees, drawn only
   where ``phi_shear`` is large enough for the axis to mean something.
 
-The two channels share the same ``V`` (see :func:`shared_limit`) so that their
+The two channels share the same ``V`` (see :func:`glassdist.acceptance.stats.shared_limit`) so that their
 colours compare directly.
 
 References
@@ -32,9 +32,10 @@ import numpy as np
 from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 
+from ..acceptance.stats import shared_limit
+
 __all__ = [
-    "CHANNELS",
-    "shared_limit",
+    "CHANNEL_STYLES",
     "histogram_range",
     "plot_channel",
     "plot_axis",
@@ -50,7 +51,7 @@ __all__ = [
 logger = logging.getLogger(__name__)
 
 #: channel name -> (result attribute, label, colour map, signed)
-CHANNELS = {
+CHANNEL_STYLES = {
     "phi_eff": ("phi_eff_mD", r"$\phi_{eff}$ (sphere-equivalent power)", "RdBu_r", True),
     "phi_shear": ("phi_shear_mD", r"$\phi_{shear}$ (cylinder-equivalent astigmatism)", "viridis", False),
     "phi_total": ("phi_total_mD", r"$\phi_{total}$ (Frobenius norm)", "magma", False),
@@ -129,32 +130,6 @@ def _masked(field, valid):
     if valid is not None:
         ok &= np.asarray(valid, dtype=bool)
     return np.ma.masked_where(~ok, field), ok
-
-
-def shared_limit(*fields, valid=None, percentile=99.0):
-    """Colour limit ``V`` (mD) shared by several channels.
-
-    Parameters
-    ----------
-    *fields : ndarray, shape (H, W)
-        Channel fields in mD (NaN where invalid).
-    valid : ndarray of bool, shape (H, W), optional
-        Region the limit is computed on.
-    percentile : float
-        Percentile of ``|field|`` used (robust to a few outlier pixels).
-
-    Returns
-    -------
-    float
-        The largest of the fields' ``percentile`` of ``|value|``, in mD; 1.0 when
-        no field has a finite valid value (so that a blank plot still draws).
-    """
-    best = 0.0
-    for f in fields:
-        _, ok = _masked(f, valid)
-        if ok.any():
-            best = max(best, float(np.percentile(np.abs(np.asarray(f)[ok]), percentile)))
-    return best if best > 0 else 1.0
 
 
 def plot_channel(field, valid=None, *, signed=True, vmax=None, cmap=None, title=None, ax=None, colorbar=True,
@@ -467,7 +442,7 @@ def save_channel_heatmaps(result, out_dir, *, vmax=None):
     method = getattr(result, "method", "")
     written = []
     for name in ("phi_eff", "phi_shear"):
-        attr, label, cmap, signed = CHANNELS[name]
+        attr, label, cmap, signed = CHANNEL_STYLES[name]
         fig, _ = plot_channel(
             getattr(result, attr), valid, signed=signed, vmax=vmax, cmap=cmap,
             title=f"{label}\n{method} method, mD" if method else f"{label}, mD",

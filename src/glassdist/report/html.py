@@ -22,10 +22,10 @@ from html import escape
 
 import numpy as np
 
-from .exports import resolved_parameters, to_jsonable
-from .stats import STATISTICS
+from ..acceptance.stats import STATISTICS
+from ..io import to_jsonable
 
-__all__ = ["render_report", "METHOD_TEXT"]
+__all__ = ["render_report", "METHOD_TEXT", "measures_rows", "metadata_rows", "resolved_parameters"]
 
 METHOD_TEXT = {
     "comparative": (
@@ -134,8 +134,6 @@ def _input_rows(label, info):
 
 def _acceptance_sections(acc):
     """Pane metadata, protocol, zones and worst-region tables (HTML) of an Acceptance."""
-    from .acceptance import metadata_rows
-
     meta = _kv_table([(k, escape(v)) for k, v in metadata_rows(acc.metadata)])
     proto = ""
     if acc.protocol:
@@ -183,9 +181,7 @@ def _acceptance_sections(acc):
 
 
 def _measures_section(measures):
-    """The standard measures (:func:`glassdist.report.measures.standard_measures`) as a table."""
-    from .measures import measures_rows
-
+    """The standard measures (:func:`glassdist.measures.standard_measures`) as a table."""
     rows = _kv_table([(k, escape(v)) for k, v in measures_rows(measures)])
     return f'<h3>Standard measures</h3><div id="standard-measures">{rows}</div>'
 
@@ -251,7 +247,7 @@ def render_report(result, *, stats, figures, inputs, verdict=None, valid_percent
     ----------
     result : AnalysisResult
     stats : dict
-        ``{channel: statistics}`` (mD, percent), see :mod:`glassdist.report.stats`.
+        ``{channel: statistics}`` (mD, percent), see :mod:`glassdist.acceptance.stats`.
     figures : list of (str, str, bytes)
         ``(id, caption, png bytes)`` in display order.
     inputs : dict
@@ -263,9 +259,9 @@ def render_report(result, *, stats, figures, inputs, verdict=None, valid_percent
         Time stamp written in the report (default: now, UTC).
     acceptance : Acceptance, optional
         Pane metadata, protocol, zones and worst regions
-        (:func:`glassdist.report.acceptance.assess`).
+        (:func:`glassdist.acceptance.assess.assess`).
     measures : dict, optional
-        :meth:`glassdist.report.measures.StandardMeasures.to_dict` (roll wave, angular
+        :meth:`glassdist.measures.StandardMeasures.to_dict` (roll wave, angular
         deviation, grid-line slope, P = -phi_eff/2), shown under the results.
 
     Returns
@@ -322,3 +318,92 @@ above.</p>
 """
     return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>{escape(title)}</title>'
             f"<style>{_CSS}</style></head><body>{body}</body></html>\n")
+
+
+def resolved_parameters(result):
+    """The analyzer parameters a result was computed with, as recorded in summary.json and the report.
+
+    ``result.params.resolved()`` with ``sigma_mm`` replaced by the smoothing scale actually
+    used (the parameter's default, ``None``, stands for 2 carrier periods).
+    """
+    params = getattr(result, "params", None)
+    resolved = dict(params.resolved()) if params is not None else {}
+    if getattr(result, "sigma_mm", None) is not None:
+        resolved["sigma_mm"] = result.sigma_mm
+    return resolved
+
+
+def metadata_rows(metadata):
+    """``(label, text)`` rows of the pane metadata for a report."""
+    rows = []
+    for key, label in (("pane_id", "pane ID"), ("lot", "lot"), ("site", "site"), ("operator", "operator")):
+        if metadata.get(key):
+            rows.append((label, str(metadata[key])))
+    cam = metadata.get("camera")
+    if cam:
+        parts = [" ".join(str(cam[k]) for k in ("make", "model") if cam.get(k))]
+        if cam.get("lens_model"):
+            parts.append(f"lens {cam['lens_model']}")
+        if cam.get("focal_length_mm"):
+            parts.append(f"f = {cam['focal_length_mm']:g} mm")
+        if cam.get("f_number"):
+            parts.append(f"f/{cam['f_number']:g}")
+        if cam.get("exposure_time_s"):
+            parts.append(f"{cam['exposure_time_s']:.3g} s")
+        if cam.get("iso"):
+            parts.append(f"ISO {cam['iso']:g}")
+        if cam.get("datetime_original") or cam.get("datetime"):
+            parts.append(str(cam.get("datetime_original") or cam.get("datetime")))
+        rows.append(("camera (EXIF)", ", ".join(p for p in parts if p)))
+    else:
+        rows.append(("camera (EXIF)", "not recorded in the photo"))
+    return rows
+
+
+def _g(v, unit: str = "", digits: int = 3) -> str:
+    if v is None or (isinstance(v, float) and not np.isfinite(v)):
+        return "—" if not (isinstance(v, float) and np.isinf(v)) else "∞"
+    return f"{float(v):.{digits}g}{unit}"
+
+
+def _direction(v) -> str:
+    """A direction modulo 180 degrees, one decimal, in (-90, 90] after rounding."""
+    if v is None or not np.isfinite(v):
+        return "—"
+    r = round(float(v), 1)
+    return f"{90.0 if r <= -90.0 else r:g}°"
+
+
+def measures_rows(measures: dict) -> list[tuple[str, str]]:
+    """``(label, text)`` rows of a :meth:`StandardMeasures.to_dict` for a report (plain text, units stated)."""
+    rw, ad = measures["roll_wave"], measures["angular_deviation"]
+    gl, ep = measures["grid_line_slope"], measures["equivalent_power"]
+    slopes = ", ".join(f"1 in {_g(n)} (lines at {_g(d, '°')})" for d, n in zip(gl["directions_deg"], gl["one_in_n"]))
+    if "reflected_roll_wave" in measures:  # reflection: the pane's roll wave, and what the others mean there
+        r, mean = measures["reflected_roll_wave"], measures["reflection_meaning"]
+        return [
+            ("reflected roll wave", f"period {_g(r['period_mm'], ' mm', 4)} along {_direction(r['direction_deg'])}; "
+             f"reflective power amplitude {_g(r['power_amplitude_mD'], ' mD')} (peak-to-valley {_g(r['power_pv_mD'], ' mD')}); "
+             f"surface peak-to-valley {_g(r['surface_pv_mm'], ' mm')} ({r['assumptions']})"),
+            ("deviation of the reflected ray", f"max {_g(ad['angle_max_arcmin'], ' arcmin')}, p95 {_g(ad['angle_p95_arcmin'], ' arcmin')}; "
+             f"change over {_g(ad['gauge_mm'], ' mm')}: p95 {_g(ad['rate_p95_arcmin'], ' arcmin')} ({mean['angular_deviation']})"),
+            ("grid-line slope of the reflected board", slopes),
+            ("sphere-equivalent power of the pane as a mirror P = −φ_eff/2",
+             f"mean {_g(ep['mean_mD'], ' mD')}, p95 |P| {_g(ep['p95_abs_mD'], ' mD')} ({mean['equivalent_power']})"),
+            ("field measured", str(measures["field"])),
+        ]
+    return [
+        ("roll wave (ASTM C1651 quantities)",
+         f"period {_g(rw['period_mm'], ' mm', 4)} along {_direction(rw['direction_deg'])}; amplitude {_g(rw['amplitude_mm'], ' mm')} "
+         f"= {_g(rw['power_amplitude_mD'], ' mD')} along the roll direction (peak-to-valley {_g(rw['displacement_pv_mm'], ' mm')}, "
+         f"{_g(rw['power_pv_mD'], ' mD')}); the wave explains {_g(100 * rw['explained_fraction'], ' %', 2)} of the "
+         "displacement along it"),
+        ("angular deviation (ECE R43 / ISO 3538)",
+         f"max {_g(ad['angle_max_arcmin'], ' arcmin')}, p95 {_g(ad['angle_p95_arcmin'], ' arcmin')}; change over "
+         f"{_g(ad['gauge_mm'], ' mm')}: max {_g(ad['rate_max_arcmin'], ' arcmin')}, p95 {_g(ad['rate_p95_arcmin'], ' arcmin')}"),
+        ("grid-line slope (ASTM F2156)", slopes),
+        ("sphere-equivalent power P = −φ_eff/2",
+         f"mean {_g(ep['mean_mD'], ' mD')}, min {_g(ep['min_mD'], ' mD')}, max {_g(ep['max_mD'], ' mD')}, "
+         f"p95 |P| {_g(ep['p95_abs_mD'], ' mD')}. {ep['convention']}"),
+        ("field measured", str(measures["field"])),
+    ]

@@ -163,7 +163,7 @@ def expand_variants(scene_path, vary: dict) -> list[Variant]:
 
 def _execute_variant(job):
     """Run ``glassdist validate`` on one variant into a new temporary folder (here or on a worker)."""
-    from ..report.batch import run_glassdist
+    from ..jobs.runner import run_glassdist
 
     args, variants_dir, vid, cwd = job
     tmp = Path(variants_dir) / f".tmp-{vid}-{os.getpid()}-{secrets.token_hex(3)}"
@@ -181,8 +181,8 @@ def _read_json(path):
 
 
 def _finish_variant(v, out, tmp, outcome, seconds, fingerprint):
-    from ..report.batch import place_folder
-    from ..report.exports import atomic_write_text
+    from ..jobs.runner import place_folder
+    from ..fs import atomic_write_text
 
     final = out / "variants" / v.id
     failed_json, failed_log = out / "failed" / f"{v.id}.json", out / "failed" / f"{v.id}.log"
@@ -231,9 +231,10 @@ def run_sweep(scene_path, vary: dict, out, *, method="direct", engine="exact", s
     Returns
     -------
     int
-        0 when every variant ran, 4 when some could not (:data:`~glassdist.report.batch.EXIT_PANE_ERRORS`).
+        0 when every variant ran, 4 when some could not (:data:`~glassdist.jobs.batch.EXIT_PANE_ERRORS`).
     """
-    from ..report.batch import EXIT_PANE_ERRORS, lock_job_folder, prepare_job_folder
+    from ..jobs.batch import EXIT_PANE_ERRORS
+    from ..jobs.runner import lock_job_folder, prepare_job_folder
 
     if method not in ("direct", "comparative"):
         raise InputError(f"unknown method '{method}'; use 'direct' or 'comparative'")
@@ -275,7 +276,7 @@ def _variants_to_run(variants, out, records: dict, *, method, engine, spp) -> li
     Every variant's scene file is (re)written where it is missing or differs, so the
     ``scenes`` folder always holds the sweep as it now stands.
     """
-    from ..report.exports import atomic_write_text
+    from ..fs import atomic_write_text
 
     todo = []
     for v in variants:
@@ -301,7 +302,7 @@ def _run_variants(variants, todo, jobs, out, records: dict, executor, progress, 
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from ..report.batch import PaneOutcome
+    from ..jobs.runner import PaneOutcome
 
     columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
     run_all = executor.as_completed if executor is not None else _serial
@@ -371,9 +372,9 @@ def _fmt(v):
 
 def write_sweep_index(variants, out):
     """Write ``OUT/index.csv`` and ``OUT/index.json``: one row per variant (varied values, status, figures)."""
-    from ..report.exports import atomic_write_text
+    from ..fs import atomic_write_text
 
-    from ..report.batch import write_csv
+    from ..jobs.batch import write_csv
 
     out = Path(out)
     rows = _index_rows(variants, out)

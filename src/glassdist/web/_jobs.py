@@ -224,8 +224,8 @@ class JobStore:
         return job
 
     def _run(self, job: Job) -> None:
-        from ..report.batch import run_glassdist
-        from ..report.outputs import EXIT_SPEC_FAIL
+        from ..jobs.runner import run_glassdist
+        from ..storage import EXIT_SPEC_FAIL
 
         job.state, job.started = "running", time.time()
         try:

@@ -50,8 +50,6 @@ import os
 import re
 import secrets
 import shutil
-import subprocess
-import sys
 import time
 from dataclasses import asdict, dataclass, fields
 from datetime import datetime, timezone
@@ -61,24 +59,19 @@ from pathlib import Path
 from ..errors import InputError
 from ..history.options import record_as_args
 from ..validation import DISTANCE_M, PITCH_MM, SIGMA_MM, check_number, read_csv_rows, safe_text
-from .exports import atomic_write_text
-from .outputs import EXIT_SPEC_FAIL
+from ..fs import atomic_write_text
+from ..storage import EXIT_SPEC_FAIL
+from .runner import PaneOutcome, lock_job_folder, place_folder, prepare_job_folder, read_json, subprocess_runner
 
 __all__ = [
     "EXIT_PANE_ERRORS",
     "Pane",
-    "PaneOutcome",
     "read_manifest",
     "panes_from_folder",
     "run_batch",
-    "run_glassdist",
-    "subprocess_runner",
     "write_index",
     "pane_defaults",
     "check_panes",
-    "prepare_job_folder",
-    "lock_job_folder",
-    "place_folder",
     "write_csv",
     "csv_cell",
 ]
@@ -151,15 +144,6 @@ class Pane:
             if path is not None and Path(path).is_file():
                 h.update(Path(path).read_bytes())
         return h.hexdigest()
-
-
-@dataclass(frozen=True)
-class PaneOutcome:
-    """What running one pane gave: ``exit_code`` of analyze (0, 3 = spec FAIL, else error), its log."""
-
-    exit_code: int
-    log: str = ""
-    error: str = ""
 
 
 # ---------------------------------------------------------------- reading panes
@@ -305,7 +289,7 @@ def check_panes(panes, defaults=None):
     from ..analyzer.params import load_params
     from ..io import image_shape
     from ..validation import check_input_file, check_sigma_extent
-    from .spec import load_spec
+    from ..acceptance.spec import load_spec
 
     options = {k: v for k, v in (defaults or {}).items() if k in ("reference", "mask") and v is not None}
     for name, path in options.items():
@@ -335,95 +319,6 @@ def check_panes(panes, defaults=None):
 
 
 # ---------------------------------------------------------------- running panes
-
-def run_glassdist(args, *, cwd=None, timeout_s=None):
-    """Run ``python -m glassdist ARGS`` in a child process (this interpreter, this glassdist).
-
-    Parameters
-    ----------
-    args : list of str
-        Command-line arguments after ``glassdist``.
-    cwd : path, optional
-        Working folder of the child (default: this process's).
-    timeout_s : float, optional
-        Stop the child after this many seconds (an error outcome).
-
-    Returns
-    -------
-    PaneOutcome
-        Exit code, the command and its combined output, and the error line (last
-        line of stderr) when the exit code is neither 0 nor 3 (spec FAIL).
-    """
-    import glassdist
-
-    env = dict(os.environ)
-    src = str(Path(glassdist.__file__).resolve().parent.parent)
-    env["PYTHONPATH"] = src + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-    cmd = [sys.executable, "-m", "glassdist", *args]
-    try:
-        proc = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=cwd, timeout=timeout_s)
-    except subprocess.TimeoutExpired:
-        return PaneOutcome(1, f"$ {' '.join(cmd)}\n(stopped after {timeout_s:g} s)",
-                           f"glassdist: error: the analysis took longer than {timeout_s:g} s and was stopped")
-    log = f"$ {' '.join(cmd)}\n{proc.stdout}{proc.stderr}"
-    error = ""
-    if proc.returncode not in (0, EXIT_SPEC_FAIL):
-        lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
-        error = lines[-1] if lines else f"glassdist exited with status {proc.returncode}"
-    return PaneOutcome(proc.returncode, log, error)
-
-
-def subprocess_runner(pane, out_dir, *, report=False, export=False, cwd=None):
-    """Run ``glassdist analyze`` for ``pane`` in a child process writing into ``out_dir``.
-
-    ``cwd``: the child's working folder (relative paths of the pane are read from it).
-
-    Returns
-    -------
-    PaneOutcome
-        Exit code, combined output, and the error line (last line of stderr) on failure.
-    """
-    return run_glassdist(pane.analyze_args(out_dir, report=report, export=export), cwd=cwd)
-
-
-def _read_json(path):
-    try:
-        return json.loads(Path(path).read_text(encoding="utf-8"))
-    except (OSError, json.JSONDecodeError):
-        return None
-
-
-def prepare_job_folder(out, *, command="batch", folders=("panes", "failed")):
-    """Create (or accept to resume) a job folder of ``glassdist COMMAND``, marked ``.glassdist-COMMAND``."""
-    out = Path(out)
-    marker = f".glassdist-{command}"
-    if out.exists() and not out.is_dir():
-        raise InputError(f"output path '{out}' is an existing file; give --out a folder path (new or existing)")
-    if out.is_dir() and any(out.iterdir()) and not (out / marker).exists():
-        raise InputError(f"output folder '{out}' is not empty and was not made by 'glassdist {command}'; "
-                         "choose a new or empty folder so that no file of yours is replaced")
-    try:
-        for name in folders:
-            (out / name).mkdir(parents=True, exist_ok=True)
-        (out / marker).touch()
-    except OSError as exc:
-        raise InputError(f"cannot create output folder '{out}': {exc.strerror}; choose a writable location") from None
-    return out
-
-
-def lock_job_folder(out, *, command="batch"):
-    """Hold an exclusive lock on the job folder (returns the open file), or raise InputError."""
-    fh = open(out / f".glassdist-{command}", "a+")  # noqa: SIM115 - kept open for the batch's duration
-    try:
-        import fcntl
-
-        fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except ImportError:  # no advisory locks on this platform
-        pass
-    except OSError:
-        fh.close()
-        raise InputError(f"another 'glassdist {command}' is writing to '{out}'; wait for it or choose another --out")
-    return fh
 
 
 def _execute_pane(job):
@@ -466,7 +361,7 @@ def _record_pane(pane, out, tmp, outcome, seconds, report, export):
                   "finished_utc": datetime.now(timezone.utc).isoformat(timespec="seconds")}
         atomic_write_text(failed_json, json.dumps(record, indent=2) + "\n")
         return record
-    summary = _read_json(tmp / "summary.json") or {}
+    summary = read_json(tmp / "summary.json") or {}
     verdict = (summary.get("verdict") or {}).get("result")
     record = {
         "id": pane.id, "status": "done", "verdict": verdict, "exit_code": outcome.exit_code,
@@ -482,19 +377,8 @@ def _record_pane(pane, out, tmp, outcome, seconds, report, export):
     return record
 
 
-def place_folder(tmp, final):
-    """Rename a complete temporary folder to its final name, replacing a stale result of other settings."""
-    if final.exists():  # swap it out, then delete it
-        old = final.parent / f".tmp-old-{final.name}-{os.getpid()}"
-        os.rename(final, old)
-        os.rename(tmp, final)
-        shutil.rmtree(old, ignore_errors=True)
-    else:
-        os.rename(tmp, final)
-
-
 def _done_record(pane, out, report, export):
-    record = _read_json(out / "panes" / pane.id / "pane.json")
+    record = read_json(out / "panes" / pane.id / "pane.json")
     if record and record.get("fingerprint") == pane.fingerprint(report=report, export=export):
         return record
     return None
@@ -528,7 +412,7 @@ def run_batch(panes, out, *, report=False, export=False, runner=None, progress=T
     Returns
     -------
     int
-        The batch exit code (0, :data:`~glassdist.report.outputs.EXIT_SPEC_FAIL` or
+        The batch exit code (0, :data:`~glassdist.storage.writer.EXIT_SPEC_FAIL` or
         :data:`EXIT_PANE_ERRORS`).
     """
     runner = runner or subprocess_runner
@@ -644,10 +528,10 @@ def _index_rows(panes, out):
                     "sigma_mm": ""})
         row.update({f"{c}_{s}_mD": "" for c, s in _INDEX_STATS})
         row.update({"valid_percent": "", "seconds": "", "report": "", "error": ""})
-        done = _read_json(out / "panes" / pane.id / "pane.json")
-        failed = _read_json(out / "failed" / f"{pane.id}.json")
+        done = read_json(out / "panes" / pane.id / "pane.json")
+        failed = read_json(out / "failed" / f"{pane.id}.json")
         if done:
-            summary = _read_json(out / "panes" / pane.id / "summary.json") or {}
+            summary = read_json(out / "panes" / pane.id / "summary.json") or {}
             a4 = summary.get("a4") or {}
             stats = a4.get("statistics") or {}
             row.update(status="done", verdict=done.get("verdict") or "", method=summary.get("method", ""),
@@ -697,7 +581,7 @@ def write_index(panes, out, *, figures=True):
     """Write ``OUT/index.csv`` and ``OUT/index.html`` listing every pane with its status and statistics.
 
     With ``figures`` (the final index of a run), also the thumbnails on one shared colour
-    scale and the per-lot trend plot (:mod:`glassdist.report.batch_index`); the indexes
+    scale and the per-lot trend plot (:mod:`glassdist.jobs.index_figures`); the indexes
     written while the batch runs link each pane's own heatmap instead.
     """
     out = Path(out)
@@ -709,7 +593,7 @@ def write_index(panes, out, *, figures=True):
 
 def _index_html(rows, out, *, figures=True):
     from .. import __version__
-    from .batch_index import write_thumbnails, write_trend
+    from .index_figures import write_thumbnails, write_trend
 
     thumbs, vmax = write_thumbnails(out, [r["id"] for r in rows if r["status"] == "done"]) if figures else ({}, None)
     trend = write_trend(out, rows) if figures else None

@@ -1,7 +1,7 @@
 """Zones of a pane: its outline in the photograph, a millimetre frame on it, named zones and their statistics.
 
 A specification's ``"zones"`` name parts of the pane in millimetres (see
-:class:`glassdist.report.spec.Zone`): a band along the pane outline
+:class:`glassdist.acceptance.spec.Zone`): a band along the pane outline
 (``edge_band_mm``), the pane minus a border (``inset_mm``) or a polygon
 (``polygon_mm``). They are drawn on the image through a :class:`PaneFrame`, the map
 between image pixels ``(x, y)`` (x along columns, y down the rows, pixel centres
@@ -318,7 +318,7 @@ def pane_frame(result, pane=None):
     result : AnalysisResult
         Needs ``valid`` and ``mm_per_px``; ``margin_px`` (the margin at excluded areas) is
         grown back onto the analysed region.
-    pane : glassdist.report.spec.Pane, optional
+    pane : glassdist.acceptance.spec.Pane, optional
     """
     valid = np.asarray(result.valid, dtype=bool)
     if pane is not None:
@@ -333,7 +333,7 @@ def zone_masks(frame, zones):
     Parameters
     ----------
     frame : PaneFrame
-    zones : sequence of glassdist.report.spec.Zone
+    zones : sequence of glassdist.acceptance.spec.Zone
 
     Returns
     -------
@@ -374,9 +374,9 @@ def measured_region(result):
 def region_statistics(result, region, *, over_limits_mD=None, channels=tuple(CHANNEL_FIELDS)):
     """``{channel: statistics}`` of ``channels`` of ``result`` (those it holds) over the pixels of ``region`` (bool, (H, W)).
 
-    ``channels``: names of :data:`glassdist.report.stats.STATISTIC_FIELDS` (default the power
+    ``channels``: names of :data:`glassdist.acceptance.stats.STATISTIC_FIELDS` (default the power
     channels; a specification may add the uncertainty channels). See
-    :func:`~glassdist.report.stats.regions_statistics`, which takes several regions in one pass.
+    :func:`~glassdist.acceptance.stats.regions_statistics`, which takes several regions in one pass.
     """
     return regions_statistics(result, {"region": region}, over_limits_mD=over_limits_mD, channels=channels)["region"]
 
@@ -390,7 +390,7 @@ def zone_statistics(result, frame, zones, *, over_limits_mD=None, masks=None, ch
     result : AnalysisResult
         The channels and ``valid``.
     frame : PaneFrame
-    zones : sequence of glassdist.report.spec.Zone
+    zones : sequence of glassdist.acceptance.spec.Zone
     over_limits_mD : dict, optional
         ``{channel: [T, ...]}`` thresholds for the area-over statistics.
     masks : dict, optional
@@ -406,7 +406,7 @@ def zone_statistics(result, frame, zones, *, over_limits_mD=None, masks=None, ch
         ``{name: {"definition", "area_mm2", "analysed_area_mm2", "coverage_percent",
         "statistics": {channel: statistics}}}``; ``coverage_percent`` is the analysed
         share of the zone's area (NaN for a zone outside the photo), the statistics are
-        over the analysed pixels of the zone (see :mod:`glassdist.report.stats`); analysed
+        over the analysed pixels of the zone (see :mod:`glassdist.acceptance.stats`); analysed
         pixels are those of :func:`measured_region`.
     """
     masks = zone_masks(frame, zones) if masks is None else masks

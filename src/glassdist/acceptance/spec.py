@@ -21,7 +21,7 @@ A specification is a JSON object::
 Criteria
 --------
 * ``statistic`` one of ``mean_abs``, ``std``, ``p95_abs``, ``max_abs`` (see
-  :mod:`glassdist.report.stats`) with ``max_mD``: passes when ``value <= max_mD``;
+  :mod:`glassdist.acceptance.stats`) with ``max_mD``: passes when ``value <= max_mD``;
 * ``statistic`` ``area_over`` with ``threshold_mD`` and ``max_percent``: passes when
   the percentage of the valid region where ``|phi| > threshold_mD`` is
   ``<= max_percent``.
@@ -40,10 +40,10 @@ Criteria
   photo under ``min_px_per_period`` is refused (:func:`check_capture`). The verdict
   repeats each pin as a check (a result computed otherwise fails it).
 * ``pane`` (optional, :class:`Pane`) and ``zones`` (optional, :class:`Zone`): named parts
-  of the pane in pane millimetres (:mod:`glassdist.report.zones`).
+  of the pane in pane millimetres (:mod:`glassdist.acceptance.zones`).
 * ``figures`` (optional, :class:`Figures`) and ``worst_regions`` (optional,
   :class:`WorstRegions`): heatmap colour limit; worst-region threshold and count
-  (:mod:`glassdist.report.regions`).
+  (:mod:`glassdist.acceptance.regions`).
 
 A value that cannot be computed (empty valid region) fails its criterion. Unknown
 keys are errors. Limits are in mD, percentages in percent of the valid region.
@@ -69,7 +69,7 @@ from .stats import format_limit, valid_percent
 
 __all__ = [
     "Criterion", "Protocol", "Pane", "Zone", "WorstRegions", "Figures", "Spec", "Check", "Verdict", "ResolvedProtocol",
-    "load_spec", "as_spec", "spec_verdict", "spec_channels", "spec_limits", "resolve_protocol", "check_capture", "px_per_period",
+    "LoadedSpec", "load_spec", "as_spec", "spec_verdict", "spec_channels", "spec_limits", "resolve_protocol", "check_capture", "px_per_period",
 ]
 
 _SYMBOL = {"phi_eff": "phi_eff", "phi_shear": "phi_shear", "phi_total": "phi_total",
@@ -101,7 +101,7 @@ class Criterion(BaseModel):
 
     @property
     def stat_key(self):
-        """Key of the statistic in :func:`glassdist.report.stats.channel_statistics`'s dict."""
+        """Key of the statistic in :func:`glassdist.acceptance.stats.acceptance_statistics`'s dict."""
         return format_limit(self.threshold_mD) if self.statistic == "area_over" else self.statistic
 
     def describe(self):
@@ -232,7 +232,7 @@ class Zone(BaseModel):
 
 
 class WorstRegions(BaseModel):
-    """Settings of the worst-region list (see :mod:`glassdist.report.regions`)."""
+    """Settings of the worst-region list (see :mod:`glassdist.acceptance.regions`)."""
 
     model_config = MODEL_CONFIG
 
@@ -357,8 +357,39 @@ class Verdict:
         }
 
 
-def load_spec(path):
-    """Read and validate a specification JSON file.
+@dataclass(frozen=True)
+class LoadedSpec:
+    """A specification as one run uses it: the model, the file it came from and what is derived from it, once.
+
+    Attributes
+    ----------
+    spec : Spec
+    sha256 : str
+        SHA-256 of the file's bytes as read (``""`` for a Spec or a dict given in Python);
+        recorded with every verdict.
+    path : str
+        The file (``""`` when none).
+    limits : dict
+        :func:`spec_limits`: ``{channel: sorted limits, mD}`` (one threshold mask each).
+    """
+
+    spec: Spec
+    sha256: str = ""
+    path: str = ""
+    limits: dict = None
+
+    def __post_init__(self):
+        if self.limits is None:
+            object.__setattr__(self, "limits", spec_limits(self.spec))
+
+    @property
+    def label(self) -> str:
+        """How messages name it: ``the specification 'PATH'`` (or ``the specification``)."""
+        return f"the specification '{self.path}'" if self.path else "the specification"
+
+
+def load_spec(path) -> LoadedSpec:
+    """Read and validate a specification JSON file (read once: its SHA-256 is of the bytes parsed).
 
     Parameters
     ----------
@@ -367,9 +398,8 @@ def load_spec(path):
 
     Returns
     -------
-    spec : Spec
-    sha256 : str
-        SHA-256 of the file's bytes (recorded with every verdict).
+    LoadedSpec
+        ``.spec``, ``.sha256`` (recorded with every verdict), ``.path``, ``.limits``.
 
     Raises
     ------
@@ -377,37 +407,34 @@ def load_spec(path):
         Missing file, invalid JSON, unknown key, missing or out-of-range limit.
     """
     p = check_input_file(path, "specification file", option="--spec")
-    data = load_mapping(p, "specification file", option="--spec", fmt="json", expect="'name' and 'criteria'")
+    digest = hashlib.sha256()
+    data = load_mapping(p, "specification file", option="--spec", fmt="json", expect="'name' and 'criteria'",
+                        digest=digest)
     spec = validate_model(Spec, data, "specification", f"'{safe_text(p)}'", "see docs/industrial_workflow.md for the format")
-    raw = p.read_bytes()
-    return spec, hashlib.sha256(raw).hexdigest()
+    return LoadedSpec(spec, digest.hexdigest(), str(path))
 
 
-def as_spec(spec):
-    """A :class:`Spec` from a Spec, a dict of its JSON form, or a JSON file.
-
-    Returns
-    -------
-    spec : Spec
-    sha256 : str
-        SHA-256 of the file (``""`` for a Spec or a dict).
+def as_spec(spec) -> LoadedSpec:
+    """A :class:`LoadedSpec` from a LoadedSpec, a Spec, a dict of its JSON form, or a JSON file.
 
     Raises
     ------
     InputError
         Invalid specification (one line).
     """
+    if isinstance(spec, LoadedSpec):
+        return spec
     if isinstance(spec, Spec):
-        return spec, ""
+        return LoadedSpec(spec)
     if isinstance(spec, dict):
         data = {k: v for k, v in spec.items() if k != "$comment"}
-        return validate_model(Spec, data, "specification", "the given mapping",
-                              "see docs/industrial_workflow.md for the format"), ""
+        return LoadedSpec(validate_model(Spec, data, "specification", "the given mapping",
+                                         "see docs/industrial_workflow.md for the format"))
     return load_spec(spec)
 
 
 def spec_channels(spec):
-    """Channels the criteria of ``spec`` judge (those of :data:`glassdist.report.stats.STATISTIC_FIELDS`), in order."""
+    """Channels the criteria of ``spec`` judge (those of :data:`glassdist.acceptance.stats.STATISTIC_FIELDS`), in order."""
     return tuple(dict.fromkeys(c.channel for c in spec.criteria))
 
 
@@ -747,7 +774,7 @@ def _protocol_checks(protocol, result):
 def spec_verdict(spec, stats, result, *, spec_path="", spec_sha256="", zones=None, coverage_percent=None):
     """Check every criterion of ``spec`` against an analysis whose statistics are already computed.
 
-    The engine under :func:`glassdist.report.acceptance.assess`; from a result alone use
+    The engine under :func:`glassdist.acceptance.assess.assess`; from a result alone use
     the public ``glassdist.evaluate_spec(result, spec)``, which computes the statistics,
     zones and coverage first.
 
@@ -755,7 +782,7 @@ def spec_verdict(spec, stats, result, *, spec_path="", spec_sha256="", zones=Non
     ----------
     spec : Spec
     stats : dict
-        ``{channel: statistics}`` from :func:`glassdist.report.stats.result_statistics`,
+        ``{channel: statistics}`` from :func:`glassdist.acceptance.stats.result_statistics`,
         computed with ``over_limits_mD=spec_limits(spec)``.
     result : AnalysisResult
         For ``valid`` (coverage) and the protocol fields ``method``, ``sigma_mm``,
@@ -764,7 +791,7 @@ def spec_verdict(spec, stats, result, *, spec_path="", spec_sha256="", zones=Non
         Recorded in the verdict.
     zones : dict, optional
         ``{zone name: {"statistics": {channel: statistics}, "coverage_percent": float}}``
-        (see :func:`glassdist.report.zones.zone_statistics`); needed when a criterion
+        (see :func:`glassdist.acceptance.zones.zone_statistics`); needed when a criterion
         or a zone limit names a zone.
     coverage_percent : float, optional
         Analysed share (percent) that ``min_valid_percent`` is checked against; default
@@ -774,12 +801,9 @@ def spec_verdict(spec, stats, result, *, spec_path="", spec_sha256="", zones=Non
     -------
     Verdict
 
-    Raises
-    ------
-    InputError
-        The capture violates the protocol's capture limits (:func:`check_capture`).
+    The capture is checked beforehand (:func:`check_capture`, once per run, by
+    :func:`glassdist.acceptance.assess.assess`).
     """
-    check_capture(spec.protocol, result)
     zones = zones or {}
     checks = _protocol_checks(spec.protocol, result)
     if spec.min_valid_percent is not None:

@@ -36,8 +36,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy import ndimage
 
-from ..analyzer.captures import sample_field
-from ..analyzer.metrics import derivative
+from .analyzer.captures import sample_field
+from .analyzer.metrics import derivative
 
 __all__ = [
     "RollWave",
@@ -56,7 +56,6 @@ __all__ = [
     "standard_measures",
     "reflected_roll_wave",
     "REFLECTION_MEANING",
-    "measures_rows",
     "ARCMIN_PER_RAD",
     "EQUIVALENT_POWER_CONVENTION",
 ]
@@ -492,7 +491,7 @@ def result_profile(result, name: str, *, start_mm, end_mm, frame=None, spacing_m
     start_mm, end_mm : (float, float)
         End points ``(u, v)``, mm: in the pane frame ``frame``, or without one on the backdrop
         with the image's top-left pixel centre at (0, 0) (``x = column * mm_per_px``).
-    frame : glassdist.report.zones.PaneFrame, optional
+    frame : glassdist.acceptance.zones.PaneFrame, optional
         Its ``px_to_mm`` homography maps pixels to the frame's millimetres.
     spacing_mm : float, optional
         Default: the analysis grid step in mm.
@@ -881,52 +880,3 @@ def standard_measures(result, *, gauge_mm: float = 4.0, directions_deg=(0.0, 90.
         ),
         reflection=None if optics is None else reflected_roll_wave(rw, optics),
     )
-
-
-def _g(v, unit: str = "", digits: int = 3) -> str:
-    if v is None or (isinstance(v, float) and not np.isfinite(v)):
-        return "—" if not (isinstance(v, float) and np.isinf(v)) else "∞"
-    return f"{float(v):.{digits}g}{unit}"
-
-
-def _direction(v) -> str:
-    """A direction modulo 180 degrees, one decimal, in (-90, 90] after rounding."""
-    if v is None or not np.isfinite(v):
-        return "—"
-    r = round(float(v), 1)
-    return f"{90.0 if r <= -90.0 else r:g}°"
-
-
-def measures_rows(measures: dict) -> list[tuple[str, str]]:
-    """``(label, text)`` rows of a :meth:`StandardMeasures.to_dict` for a report (plain text, units stated)."""
-    rw, ad = measures["roll_wave"], measures["angular_deviation"]
-    gl, ep = measures["grid_line_slope"], measures["equivalent_power"]
-    slopes = ", ".join(f"1 in {_g(n)} (lines at {_g(d, '°')})" for d, n in zip(gl["directions_deg"], gl["one_in_n"]))
-    if "reflected_roll_wave" in measures:  # reflection: the pane's roll wave, and what the others mean there
-        r, mean = measures["reflected_roll_wave"], measures["reflection_meaning"]
-        return [
-            ("reflected roll wave", f"period {_g(r['period_mm'], ' mm', 4)} along {_direction(r['direction_deg'])}; "
-             f"reflective power amplitude {_g(r['power_amplitude_mD'], ' mD')} (peak-to-valley {_g(r['power_pv_mD'], ' mD')}); "
-             f"surface peak-to-valley {_g(r['surface_pv_mm'], ' mm')} ({r['assumptions']})"),
-            ("deviation of the reflected ray", f"max {_g(ad['angle_max_arcmin'], ' arcmin')}, p95 {_g(ad['angle_p95_arcmin'], ' arcmin')}; "
-             f"change over {_g(ad['gauge_mm'], ' mm')}: p95 {_g(ad['rate_p95_arcmin'], ' arcmin')} ({mean['angular_deviation']})"),
-            ("grid-line slope of the reflected board", slopes),
-            ("sphere-equivalent power of the pane as a mirror P = −φ_eff/2",
-             f"mean {_g(ep['mean_mD'], ' mD')}, p95 |P| {_g(ep['p95_abs_mD'], ' mD')} ({mean['equivalent_power']})"),
-            ("field measured", str(measures["field"])),
-        ]
-    return [
-        ("roll wave (ASTM C1651 quantities)",
-         f"period {_g(rw['period_mm'], ' mm', 4)} along {_direction(rw['direction_deg'])}; amplitude {_g(rw['amplitude_mm'], ' mm')} "
-         f"= {_g(rw['power_amplitude_mD'], ' mD')} along the roll direction (peak-to-valley {_g(rw['displacement_pv_mm'], ' mm')}, "
-         f"{_g(rw['power_pv_mD'], ' mD')}); the wave explains {_g(100 * rw['explained_fraction'], ' %', 2)} of the "
-         "displacement along it"),
-        ("angular deviation (ECE R43 / ISO 3538)",
-         f"max {_g(ad['angle_max_arcmin'], ' arcmin')}, p95 {_g(ad['angle_p95_arcmin'], ' arcmin')}; change over "
-         f"{_g(ad['gauge_mm'], ' mm')}: max {_g(ad['rate_max_arcmin'], ' arcmin')}, p95 {_g(ad['rate_p95_arcmin'], ' arcmin')}"),
-        ("grid-line slope (ASTM F2156)", slopes),
-        ("sphere-equivalent power P = −φ_eff/2",
-         f"mean {_g(ep['mean_mD'], ' mD')}, min {_g(ep['min_mD'], ' mD')}, max {_g(ep['max_mD'], ' mD')}, "
-         f"p95 |P| {_g(ep['p95_abs_mD'], ' mD')}. {ep['convention']}"),
-        ("field measured", str(measures["field"])),
-    ]

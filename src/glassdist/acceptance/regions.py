@@ -2,7 +2,7 @@
 
 A worst region is a connected set (8-neighbourhood) of analysed pixels where
 ``|phi| > T`` mD. For each region, with ``a(x, y)`` the pixel's area in the frame
-(mm^2, see :class:`glassdist.report.zones.PaneFrame`) and ``(u, v)`` its frame
+(mm^2, see :class:`glassdist.acceptance.zones.PaneFrame`) and ``(u, v)`` its frame
 coordinates (mm):
 
 * ``area_mm2 = sum a``;
@@ -75,7 +75,7 @@ def worst_regions(field, valid, frame, threshold_mD, *, channel="phi_eff", max_c
     valid : ndarray of bool, shape (H, W)
         Region the search is restricted to (analysed pixels, or those of a zone).
     frame : PaneFrame
-        Pixel-to-millimetre map (:mod:`glassdist.report.zones`).
+        Pixel-to-millimetre map (:mod:`glassdist.acceptance.zones`).
     threshold_mD : float
         Threshold on ``|field|``, mD.
     channel : str
@@ -92,7 +92,7 @@ def worst_regions(field, valid, frame, threshold_mD, *, channel="phi_eff", max_c
 
     Examples
     --------
-    >>> from glassdist.report.zones import pane_frame_from_region
+    >>> from glassdist.acceptance.zones import pane_frame_from_region
     >>> f = np.zeros((40, 60)); f[10:20, 30:50] = 7.0
     >>> frame = pane_frame_from_region(np.ones(f.shape, bool), 0.5)
     >>> (r,) = worst_regions(f, np.ones(f.shape, bool), frame, 5.0)
@@ -154,11 +154,12 @@ def _regions_of(over, signed, frame, threshold_mD, *, channel, max_count, min_ar
     return tuple(out)
 
 
-def region_thresholds(result, spec=None, channels=REGION_CHANNELS, *, statistics=None):
+def region_thresholds(result, spec=None, channels=REGION_CHANNELS, *, statistics=None, limits=None):
     """Threshold (mD) per channel: the specification's, else the 95th percentile of ``|phi|``.
 
     ``statistics``, the channels' statistics over the analysed region already computed
-    (``{channel: {"p95_abs": ...}}``), saves taking the percentile again.
+    (``{channel: {"p95_abs": ...}}``), saves taking the percentile again; ``limits``,
+    :func:`~glassdist.acceptance.spec.spec_limits` of ``spec`` already computed.
 
     Returns
     -------
@@ -170,7 +171,8 @@ def region_thresholds(result, spec=None, channels=REGION_CHANNELS, *, statistics
 
     from .zones import measured_region
 
-    limits = spec_limits(spec) if spec is not None else {}
+    if limits is None:
+        limits = spec_limits(spec) if spec is not None else {}
     given = dict(spec.worst_regions.threshold_mD) if spec is not None else {}
     valid = measured_region(result)
     out = {}
@@ -188,10 +190,10 @@ def region_thresholds(result, spec=None, channels=REGION_CHANNELS, *, statistics
     return out
 
 
-def all_worst_regions(result, frame, spec=None, *, channels=REGION_CHANNELS, statistics=None):
+def all_worst_regions(result, frame, spec=None, *, channels=REGION_CHANNELS, statistics=None, limits=None):
     """Worst regions of each channel over the analysed region, with the thresholds used.
 
-    ``statistics`` as for :func:`region_thresholds`.
+    ``statistics``, ``limits`` as for :func:`region_thresholds`.
 
     Returns
     -------
@@ -204,7 +206,7 @@ def all_worst_regions(result, frame, spec=None, *, channels=REGION_CHANNELS, sta
     valid = measured_region(result)
     out = {}
     kw = dict(max_count=settings.max_count if settings else 10, min_area_mm2=settings.min_area_mm2 if settings else 0.0)
-    for ch, (t, source) in region_thresholds(result, spec, channels, statistics=statistics).items():
+    for ch, (t, source) in region_thresholds(result, spec, channels, statistics=statistics, limits=limits).items():
         regions = () if not np.isfinite(t) else _regions_of(*_over_threshold(result, CHANNEL_FIELDS[ch], valid, t),
                                                              frame, t, channel=ch, **kw)
         out[ch] = {"threshold_mD": t, "threshold_source": source, "regions": regions}

@@ -1,4 +1,4 @@
-"""``glassdist batch``: analyse many panes from a manifest CSV or a folder (see :mod:`glassdist.report.batch`)."""
+"""``glassdist batch``: analyse many panes from a manifest CSV or a folder (see :mod:`glassdist.jobs.batch`)."""
 
 from __future__ import annotations
 
@@ -70,7 +70,7 @@ def _history_db(args):
 
 
 def run(args):
-    """Run the batch; returns the exit status (see :mod:`glassdist.report.batch`)."""
+    """Run the batch; returns the exit status (see :mod:`glassdist.jobs.batch`)."""
     from ..errors import InputError
 
     defaults = pane_defaults(

@@ -21,7 +21,8 @@ __all__ = [
     "UNCERTAINTY_FIELDS",
     "STATISTIC_FIELDS",
     "STATISTICS",
-    "channel_statistics",
+    "shared_limit",
+    "acceptance_statistics",
     "area_over_percent",
     "result_statistics",
     "regions_statistics",
@@ -79,8 +80,8 @@ def area_over_percent(field, valid=None, limit_mD=0.0):
     return float(100.0 * np.count_nonzero(np.abs(v) > limit_mD) / v.size)
 
 
-def channel_statistics(field, valid=None, *, over_limits_mD=()):
-    """Statistics of one channel over the valid region.
+def acceptance_statistics(field, valid=None, *, over_limits_mD=()):
+    """Statistics of one channel over the valid region, as the acceptance reports them (``area_over_<T>`` keys).
 
     Parameters
     ----------
@@ -124,7 +125,7 @@ def result_statistics(result, *, over_limits_mD=None):
     Returns
     -------
     dict
-        ``{channel: channel_statistics(...)}`` for each channel present.
+        ``{channel: acceptance_statistics(...)}`` for each channel present.
     """
     over_limits_mD = over_limits_mD or {}
     stats = {}
@@ -132,7 +133,7 @@ def result_statistics(result, *, over_limits_mD=None):
         field = getattr(result, attr, None)
         if field is None:
             continue
-        stats[name] = channel_statistics(field, result.valid, over_limits_mD=over_limits_mD.get(name, ()))
+        stats[name] = acceptance_statistics(field, result.valid, over_limits_mD=over_limits_mD.get(name, ()))
     return stats
 
 
@@ -200,7 +201,7 @@ def regions_statistics(result, regions, *, channels=tuple(CHANNEL_FIELDS), over_
     Returns
     -------
     dict
-        ``{key: {channel: statistics}}``, each as :func:`channel_statistics`: the same
+        ``{key: {channel: statistics}}``, each as :func:`acceptance_statistics`: the same
         values (the mean and standard deviation summed in float64 block by block, the
         percentile exact), without a full-size copy of any field.
     """
@@ -220,3 +221,31 @@ def regions_statistics(result, regions, *, channels=tuple(CHANNEL_FIELDS), over_
                 st["p95_abs"] = percentile(np.abs(f[np.asarray(regions[key], bool) & np.isfinite(f)]), 95.0)
             st.update({format_limit(t): pct for t, pct in st.pop("over_percent", {}).items()})
     return out
+
+
+def shared_limit(*fields, valid=None, percentile=99.0):
+    """Colour limit ``V`` (mD) shared by several channels.
+
+    Parameters
+    ----------
+    *fields : ndarray, shape (H, W)
+        Channel fields in mD (NaN where invalid).
+    valid : ndarray of bool, shape (H, W), optional
+        Region the limit is computed on.
+    percentile : float
+        Percentile of ``|field|`` used (robust to a few outlier pixels).
+
+    Returns
+    -------
+    float
+        The largest of the fields' ``percentile`` of ``|value|``, in mD; 1.0 when
+        no field has a finite valid value (so that a blank plot still draws).
+    """
+    best = 0.0
+    for f in fields:
+        ok = np.isfinite(np.asarray(f, dtype=np.float64))
+        if valid is not None:
+            ok &= np.asarray(valid, dtype=bool)
+        if ok.any():
+            best = max(best, float(np.percentile(np.abs(np.asarray(f)[ok]), percentile)))
+    return best if best > 0 else 1.0

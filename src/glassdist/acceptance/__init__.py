@@ -1,0 +1,14 @@
+"""Acceptance of one analysis against a specification (no file I/O, no drawing).
+
+* :mod:`~glassdist.acceptance.spec`: the specification schema, its loaded form, protocol
+  resolution and capture checks, verdicts;
+* :mod:`~glassdist.acceptance.stats`: statistics over the trusted pixels;
+* :mod:`~glassdist.acceptance.zones`: the pane's millimetre frame and its zones;
+* :mod:`~glassdist.acceptance.regions`: the worst regions;
+* :mod:`~glassdist.acceptance.assess`: :func:`assess`, all of them for one result.
+"""
+
+from .assess import METADATA_KEYS, Acceptance, assess
+from .spec import Spec, load_spec
+
+__all__ = ["METADATA_KEYS", "Acceptance", "Spec", "assess", "load_spec"]

@@ -1,0 +1,188 @@
+"""Acceptance record of one analysis: protocol, pane and zones, worst regions, verdict, pane metadata.
+
+:func:`assess` gathers what a specification asks of an analysis into one
+:class:`Acceptance` (no file read or written, nothing drawn); the storage writes its
+:meth:`~Acceptance.summary` into ``summary.json`` and :meth:`~Acceptance.regions_csv`
+as ``worst_regions.csv``; :mod:`glassdist.report.maps` draws its zones and numbered
+worst regions on the heatmaps.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .regions import REGION_CHANNELS, all_worst_regions, regions_csv
+from .spec import as_spec, check_capture, spec_channels, spec_limits, spec_verdict
+from .stats import CHANNEL_FIELDS, regions_statistics, shared_limit, valid_percent
+from .zones import measured_region, pane_frame, zone_masks, zone_statistics
+
+__all__ = ["Acceptance", "assess", "colour_limits", "METADATA_KEYS"]
+
+#: pane facts a report states (given on the command line, in a batch manifest or to the API)
+METADATA_KEYS = ("pane_id", "site", "operator")
+
+
+@dataclass(frozen=True)
+class Acceptance:
+    """What a specification asks of one analysis (see :func:`assess`).
+
+    Attributes
+    ----------
+    stats : dict
+        ``{channel: statistics}`` over the analysed region (the result's trusted pixels,
+        :func:`~glassdist.acceptance.zones.measured_region`; with the spec's area-over values).
+    frame : PaneFrame
+        The pane and its millimetre frame.
+    zones : dict
+        ``{name: {"definition", "area_mm2", "analysed_area_mm2", "coverage_percent", "statistics"}}``.
+    masks : dict
+        ``{name: bool (H, W)}`` of each zone.
+    regions : dict
+        ``{channel: {"threshold_mD", "threshold_source", "regions"}}``.
+    verdict : Verdict or None
+    coverage_percent : float
+        Analysed share (percent) of the region to analyse (the mask's, else the image).
+    protocol : dict or None
+        :meth:`ResolvedProtocol.to_dict` with the values the analysis used.
+    metadata : dict
+        Pane ID, site, operator (given) and camera (EXIF).
+    colour_limits : dict
+        ``{channel: mD}`` of the heatmaps.
+    warnings : tuple of str
+    """
+
+    stats: dict
+    frame: object
+    zones: dict
+    masks: dict
+    regions: dict
+    verdict: object
+    coverage_percent: float
+    protocol: dict | None
+    metadata: dict
+    colour_limits: dict
+    warnings: tuple = field(default=())
+
+    def summary(self):
+        """Additions to ``summary.json``: ``protocol``, ``pane``, ``zones``, ``worst_regions``, ``metadata``."""
+        return {
+            "protocol": self.protocol,
+            "pane": self.frame.to_dict(),
+            "zones": self.zones,
+            "worst_regions": {ch: {"threshold_mD": e["threshold_mD"], "threshold_source": e["threshold_source"],
+                                   "units": self.frame.units, "regions": [r.to_dict() for r in e["regions"]]}
+                              for ch, e in self.regions.items()},
+            "metadata": self.metadata,
+            "coverage_percent": self.coverage_percent,
+            "colour_limits_mD": self.colour_limits,
+        }
+
+    def regions_csv(self):
+        """``worst_regions.csv`` text."""
+        return regions_csv(self.regions)
+
+
+def colour_limits(result, spec=None, channels=("phi_eff", "phi_shear"), *, limits=None):
+    """Colour limit (mD) of each heatmap: the spec's choice (``figures.colour_limit``), else a shared p99.
+
+    The shared p99 is taken where the heatmaps are drawn from: the trusted samples of the
+    analysis grid.
+
+    ``limits``: :func:`~glassdist.acceptance.spec.spec_limits` of ``spec`` when already
+    computed (:attr:`LoadedSpec.limits <glassdist.acceptance.spec.LoadedSpec>`).
+
+    Returns
+    -------
+    dict
+        ``{channel: vmax_mD}``.
+    """
+    maps = [result.grid_field(CHANNEL_FIELDS[c]) for c in channels]
+    valid = np.asarray(result.grid_valid, bool) & np.asarray(result.grid_trusted, bool)
+    shared = shared_limit(*maps, valid=valid)
+    choice = spec.figures.colour_limit if spec is not None else "auto"
+    if choice == "auto":
+        return {c: shared for c in channels}
+    if choice != "spec":
+        return {c: float(choice) for c in channels}
+    limits = spec_limits(spec) if limits is None else limits
+    return {c: float(min(limits[c])) if limits.get(c) else shared for c in channels}
+
+
+def assess(result, spec=None, *, protocol=None, mask=None, metadata=None, camera=False):
+    """Capture check, statistics, pane frame, zones, worst regions and verdict of one analysis.
+
+    Parameters
+    ----------
+    result : AnalysisResult
+    spec : LoadedSpec, Spec, dict or path, optional
+        The specification (:func:`~glassdist.acceptance.spec.as_spec`; its path and
+        SHA-256 are recorded in the verdict). Without one: whole-region statistics, the
+        pane found in the image, worst regions over the default threshold, no verdict.
+    protocol : ResolvedProtocol, optional
+        The settings resolved from the options and the spec (recorded).
+    mask : ndarray of bool, shape (H, W), optional
+        The user's region to analyse: coverage is the analysed share of it.
+    metadata : dict, optional
+        ``pane_id``, ``site``, ``operator`` (None values left out).
+    camera : dict or None, optional
+        The camera facts of the photograph's EXIF (:func:`glassdist.io.camera_metadata`;
+        None: the photo has none), recorded with the metadata; left out when no photo
+        is known.
+
+    Returns
+    -------
+    Acceptance
+
+    Raises
+    ------
+    InputError
+        The capture violates the protocol's capture limits.
+    """
+    loaded = as_spec(spec) if spec is not None else None
+    spec = loaded.spec if loaded is not None else None
+    limits = loaded.limits if loaded is not None else {}
+    if loaded is not None:  # a capture outside the protocol is not judged (exit 2)
+        check_capture(spec.protocol, result, spec_label=loaded.label)
+    # the power channels always; the uncertainty channels where a criterion judges them
+    channels = tuple(dict.fromkeys((*CHANNEL_FIELDS, *(spec_channels(spec) if spec is not None else ()))))
+    measured = measured_region(result)
+    frame = pane_frame(result, spec.pane if spec is not None else None)
+    zones_def = spec.zones if spec is not None else ()
+    masks = zone_masks(frame, zones_def)
+    # the whole region and every zone in one pass over the pixel grid
+    regions = {None: measured, **{z.name: measured & masks[z.name] for z in zones_def}}
+    per_region = regions_statistics(result, regions, over_limits_mD=limits, channels=channels)
+    stats = per_region.pop(None)
+    zones = zone_statistics(result, frame, zones_def, over_limits_mD=limits, masks=masks, channels=channels,
+                            statistics=per_region)
+    if mask is not None:
+        m = np.asarray(mask, dtype=bool)
+        coverage = 100.0 * np.count_nonzero(measured & m) / max(np.count_nonzero(m), 1)
+    else:
+        coverage = valid_percent(measured)
+    verdict = None
+    if spec is not None:
+        verdict = spec_verdict(spec, stats, result, spec_path=loaded.path, spec_sha256=loaded.sha256, zones=zones,
+                                coverage_percent=None if mask is None else coverage)
+    regions = all_worst_regions(result, frame, spec, channels=REGION_CHANNELS, statistics=stats, limits=limits)
+    meta = {k: v for k, v in (metadata or {}).items() if v is not None}
+    if camera is not False:
+        meta["camera"] = camera
+    proto = None
+    if protocol is not None:
+        proto = protocol.to_dict()
+    if proto is not None or spec is not None:
+        proto = proto or {"pinned": spec.protocol.model_dump(exclude_none=True)}
+        from .spec import px_per_period
+
+        proto["used"] = {"method": result.method, "pitch_mm": result.pitch_mm, "distance_m": result.distance_m,
+                         "pattern": getattr(getattr(result, "params", None), "pattern", None),
+                         "sigma_mm": result.sigma_mm, "detrend_degree": result.detrend_degree,
+                         "px_per_period": px_per_period(result)}
+    warnings = (frame.warning,) if frame.warning and zones_def else ()
+    return Acceptance(stats, frame, zones, masks, regions, verdict, float(coverage), proto, meta,
+                      colour_limits(result, spec, limits=limits), warnings)
+
+

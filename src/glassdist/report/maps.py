@@ -1,0 +1,273 @@
+"""The maps and histograms of one run, drawn from its analysis grid (rendering only: no file is written).
+
+:func:`run_figures` returns every figure of ``glassdist analyze`` as ``(stem, caption,
+PNG bytes)``: the input with the analysed region, the channel heatmaps with the
+acceptance overlays (:func:`draw_overlays`: zones, numbered worst regions) on millimetre
+axes (:func:`heatmap_axes`), the axis, quality and uncertainty maps, a threshold mask per
+specification limit and the histograms.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from ..acceptance.stats import shared_limit
+from . import figures as F
+
+__all__ = ["draw_overlays", "describe_clipping", "heatmap_axes", "preview", "run_figures"]
+
+def preview(image, max_px: int = 1200) -> np.ndarray:
+    """``image`` reduced by area averaging so that its longer side is at most ``max_px`` (float32)."""
+    import cv2
+
+    img = np.asarray(image, dtype=np.float32)
+    k = max(img.shape) / max_px
+    if k <= 1:
+        return img
+    size = (max(1, round(img.shape[1] / k)), max(1, round(img.shape[0] / k)))
+    return cv2.resize(img, size, interpolation=cv2.INTER_AREA)
+
+
+def _map_of(result, attr):
+    """Field ``attr`` on the result's analysis grid (what every figure draws), NaN outside the region."""
+    f = np.array(result.grid_field(attr), dtype=np.float64)
+    f[~result.grid_valid] = np.nan
+    return f
+
+
+def _heatmap(result, name, field, gv, v, chosen, axes, acceptance):
+    """``(stem, caption, png)`` of one channel's heatmap (analysis grid), with the acceptance overlays."""
+    extent, to_axes, units, px_axis = axes
+    _, label, cmap, signed = F.CHANNEL_STYLES[name]
+    fig, ax = F.plot_channel(field, gv, signed=signed, vmax=v, cmap=cmap, title=f"{label}, mD", extent=extent,
+                             axis_units=units, px_axis=px_axis)
+    span = f"[-{v:.3g}, {v:.3g}]" if signed else f"[0, {v:.3g}]"
+    caption = f"{name} in mD; colour limits {span} mD" + ("." if chosen else " shared by both channels.")
+    if acceptance is not None:
+        draw_overlays(ax, acceptance, name, to_axes, extent)
+        # the maximum and the clipped share over the trusted samples, as the statistics
+        clip = describe_clipping(field, gv & np.asarray(result.grid_trusted, bool), v,
+                                 acceptance.stats.get(name, {}).get("max_abs"))
+        F.map_title(ax, f"{label}, mD\n{clip}", fontsize="medium")
+        n = len(acceptance.regions.get(name, {}).get("regions", ()))
+        caption += (f" Axes in {units}. {clip} (trusted pixels). Dashed: zones; numbers: the "
+                    f"{n} worst regions (worst_regions.csv).")
+    return name, caption + " Grey: not analysed.", F.figure_png(fig)
+
+
+def _quality_figures(result, gv, axes, max_px=900):
+    """The quality map (labels, reduced by striding to at most ``max_px`` a side) and the phi_eff uncertainty map.
+
+    ``axes``: ``(extent, units, px_axis)`` of every map (:func:`_map_axes`).
+    """
+    extent, units, px_axis = axes
+    held = {f.name for f in result.field_specs()}
+    out = []
+    if "quality" in held:
+        q = np.asarray(result.quality)
+        k = max(1, -(-max(q.shape) // max_px))
+        fig, _ = F.plot_quality(q[::k, ::k], counts=result.quality_counts(), title="Quality labels", extent=extent,
+                                axis_units=units, px_axis=px_axis)
+        out.append(("quality", "Quality map: every pixel's label (README, quality labels). Statistics, verdicts and "
+                               "the maximum use label 0 only; label 6 is reported but not trusted.", F.figure_png(fig)))
+    if "phi_eff_sigma_mD" in held:
+        sig = _map_of(result, "phi_eff_sigma_mD")
+        trusted = gv & np.asarray(result.grid_trusted, bool)
+        floor = result.noise_floor()["phi_eff_sigma_mD"]["median"]
+        fig, _ = F.plot_channel(sig, gv, signed=False, vmax=shared_limit(sig, valid=trusted), cmap="magma",
+                                title=f"standard uncertainty of $\\phi_{{eff}}$, mD\nnoise floor {floor:.3g} mD",
+                                extent=extent, axis_units=units, px_axis=px_axis)
+        out.append(("uncertainty", f"Standard uncertainty of phi_eff from the image noise (phi_eff_sigma_mD), mD; "
+                                   f"noise floor (median over the trusted pixels) {floor:.3g} mD. Values of |phi_eff| "
+                                   "within about 2 of it are not distinguishable from noise.", F.figure_png(fig)))
+    return out
+
+
+def run_figures(result, image=None, limits=None, *, heatmaps=True, acceptance=None):
+    """Render the figures of a run, from its analysis grid.
+
+    Every map is drawn from the fields on the analysis grid (``result.grid_field``), placed
+    over the photo's pixels (or millimetres) by its extent: at camera resolution,
+    resampling the pixel-grid fields for a 600 px figure cost more than the analysis.
+
+    Parameters
+    ----------
+    result : AnalysisResult
+    image : ndarray, shape (h, w), optional
+        The analysed photograph (grey, [0, 1]), any size (reduced by :func:`preview`), for
+        the region outline.
+    limits : dict, optional
+        ``{channel: [limit_mD, ...]}``: a threshold mask per limit, and limit lines
+        on the histograms.
+    heatmaps : bool
+        Include the channel and axis heatmaps (ids ``phi_eff``, ``phi_shear``, ``axis``).
+    acceptance : Acceptance, optional
+        Zones and numbered worst regions drawn on the heatmaps, which then have
+        millimetre axes and the colour limits it chose
+        (:mod:`glassdist.acceptance`).
+
+    Returns
+    -------
+    list of (str, str, bytes)
+        ``(file stem, caption, PNG bytes)`` in report order.
+    """
+    limits = limits or {}
+    H, W = result.valid.shape
+    gv = np.asarray(result.grid_valid, dtype=bool)
+    trusted = gv & np.asarray(result.grid_trusted, dtype=bool)  # the statistics' pixels
+    sy, sx = result.analysis_grid.step
+    maps = {name: _map_of(result, F.CHANNEL_STYLES[name][0]) for name in ("phi_eff", "phi_shear")}
+    out = []
+    vmax = shared_limit(*maps.values(), valid=trusted)
+    vmaxes = dict(acceptance.colour_limits) if acceptance is not None else {}
+    extent, to_axes, units, px_axis = _map_axes(result, acceptance)
+    if image is not None:
+        import cv2
+
+        small = preview(image)
+        region = cv2.resize(np.asarray(result.valid, np.uint8), small.shape[::-1], interpolation=cv2.INTER_NEAREST)
+        fig, _ = F.plot_input(small, region.astype(bool), extent=extent, axis_units=units, px_axis=px_axis)
+        out.append(("input_region", "Input photograph; the analysed region is outlined in orange.", F.figure_png(fig)))
+    for name in ("phi_eff", "phi_shear") if heatmaps else ():
+        out.append(_heatmap(result, name, maps[name], gv, vmaxes.get(name, vmax), bool(vmaxes),
+                            (extent, to_axes, units, px_axis), acceptance))
+    if heatmaps and any(f.name == "axis_deg" for f in result.field_specs()):
+        fig, _ = F.plot_axis(_map_of(result, "axis_deg"), maps["phi_shear"], gv, extent=extent, axis_units=units,
+                             px_axis=px_axis)
+        out.append(("axis", "Astigmatism axis (direction of largest stretch), degrees from +x towards +y (down); "
+                            "grey where phi_shear is too small for the axis to be meaningful.", F.figure_png(fig)))
+    out += _quality_figures(result, gv, (extent, units, px_axis))
+    for name, lims in ((n, v) for n, v in limits.items() if n in F.CHANNEL_STYLES):  # masks of the power channels
+        field = maps[name] if name in maps else _map_of(result, F.CHANNEL_STYLES[name][0])
+        for lim in lims:
+            fig, _ = F.plot_threshold_mask(field, gv, limit_mD=lim, name=name, extent=extent, axis_units=units,
+                                           px_axis=px_axis)
+            out.append((f"mask_{name}_{lim:g}mD", f"{name}: pixels with |{name}| > {lim:g} mD in red.",
+                        F.figure_png(fig)))
+    stats = acceptance.stats if acceptance is not None else {}
+    fig = Figure(figsize=(10, 3.8))
+    fig.subplots_adjust(left=0.09, right=0.98, bottom=0.14, top=0.9, wspace=0.3)
+    for ax, name in zip(fig.subplots(1, 2), ("phi_eff", "phi_shear")):
+        _, label, _, signed = F.CHANNEL_STYLES[name]
+        F.plot_histogram(maps[name], trusted, signed=signed, limits_mD=limits.get(name, ()), ax=ax, title=label,
+                         weight=sy * sx, max_abs_mD=stats.get(name, {}).get("max_abs"))
+    out.append(("histograms", "Histograms over the trusted pixels (quality label 0, the statistics' pixels; "
+                              "analysis-grid samples weighted by their cells); axis range: the statistics' largest "
+                              "|value| (or a specification limit beyond it, dashed red).", F.figure_png(fig)))
+    return out
+
+
+def _map_axes(result, acceptance):
+    """``(extent, to_axes, units, px_axis)`` shared by every map: millimetres, and the photo's px along the top.
+
+    The pane's (or the backdrop's) mm of the acceptance frame when there is one
+    (:func:`heatmap_axes`), else backdrop mm from the photo's
+    top-left corner (``mm_per_px``). ``px_axis`` = ``(scale, offset)`` with column px =
+    scale * x_mm + offset (both frames are axis-aligned scalings of the pixel grid).
+    """
+    H, W = result.valid.shape
+    s = float(result.mm_per_px)
+    if acceptance is not None:
+        extent, to_axes, units = heatmap_axes(acceptance.frame, s, (H, W))
+    else:
+        def to_axes(x, y):
+            return (np.asarray(x, dtype=float) + 0.5) * s, (np.asarray(y, dtype=float) + 0.5) * s
+        extent, units = (0.0, W * s, H * s, 0.0), "backdrop mm from the photo's top-left"
+    (x0, x1), _ = to_axes(np.array([0.0, 1.0]), np.array([0.0, 0.0]))
+    scale = 1.0 / float(x1 - x0)
+    return extent, to_axes, units, (scale, -float(x0) * scale)
+
+
+def heatmap_axes(frame, mm_per_px, shape):
+    """Millimetre axes of the heatmaps.
+
+    In the pane frame when it is axis-aligned with the photo (the outline found in the
+    image: frame mm = image px scaled, shifted); otherwise (a pane given by corners
+    seen in perspective) in backdrop mm from the photo's top-left corner.
+
+    Returns
+    -------
+    extent : (float, float, float, float)
+        ``imshow`` extent ``(left, right, bottom, top)``, mm.
+    to_axes : callable
+        ``(x_px, y_px) -> (X_mm, Y_mm)``.
+    label : str
+        What the axes measure.
+    """
+    H = frame.px_to_mm
+    h, w = shape
+    if abs(H[0, 1]) < 1e-12 and abs(H[1, 0]) < 1e-12 and abs(H[2, 0]) < 1e-12 and abs(H[2, 1]) < 1e-12:
+        def to_axes(x, y):
+            return frame.to_mm(x, y)
+        where = "pane" if frame.units == "pane_mm" else "backdrop"
+        label = f"{where} mm"
+    else:
+        s = float(mm_per_px)
+
+        def to_axes(x, y):
+            return (np.asarray(x, dtype=float) + 0.5) * s, (np.asarray(y, dtype=float) + 0.5) * s
+        label = "backdrop mm from the photo's top-left"
+    (x0, x1), (y0, y1) = (np.asarray(c) for c in to_axes(np.array([-0.5, w - 0.5]), np.array([-0.5, h - 0.5])))
+    return (float(x0), float(x1), float(y1), float(y0)), to_axes, label
+
+
+_ZONE_COLOURS = ("black", "tab:orange", "tab:purple", "tab:brown", "tab:pink", "tab:olive")
+
+
+def draw_overlays(ax, acc, channel, to_axes, extent):
+    """Draw the zones (outlined, named) and the channel's numbered worst regions on a heatmap.
+
+    Parameters
+    ----------
+    ax : matplotlib Axes
+    acc : Acceptance
+    channel : str
+        Whose worst regions are numbered.
+    to_axes, extent
+        From :func:`heatmap_axes`.
+    """
+    import matplotlib.patheffects as pe
+
+    halo = [pe.withStroke(linewidth=2.5, foreground="white")]
+    h, w = acc.frame.shape
+    step = max(1, int(max(h, w) // 1000))  # contours of a decimated mask: enough for a figure
+    for i, (name, m) in enumerate(acc.masks.items()):
+        if not m.any():
+            continue
+        colour = _ZONE_COLOURS[i % len(_ZONE_COLOURS)]
+        sub = m[::step, ::step].astype(float)
+        X, Y = to_axes(*np.meshgrid(np.arange(0, w, step), np.arange(0, h, step)))
+        ax.contour(X, Y, sub, levels=[0.5], colors=[colour], linewidths=1.2, linestyles="--")
+        yy, xx = np.nonzero(m[::step, ::step])
+        k = np.argmin(yy * w + xx)  # label at the zone's top-left-most pixel
+        tx, ty = to_axes(xx[k] * step, yy[k] * step)
+        ax.text(float(tx), float(ty), f" {name}", color=colour, fontsize="small", va="top", ha="left",
+                path_effects=halo)
+    entry = acc.regions.get(channel)
+    for r in entry["regions"] if entry else ():
+        tx, ty = to_axes(*r.centroid_px)
+        ax.text(float(tx), float(ty), str(r.number), color="black", fontsize="small", fontweight="bold",
+                ha="center", va="center", path_effects=halo)
+    ax.set_xlim(extent[0], extent[1])
+    ax.set_ylim(extent[2], extent[3])
+
+
+def describe_clipping(field, valid, vmax, top=None):
+    """Caption text: the largest ``|phi|`` and whether the colour scale clips it.
+
+    ``valid``: the samples the caption speaks of (the trusted ones); ``top``: their largest
+    ``|phi|`` when known (the statistics' ``max_abs``, over the trusted pixels), else taken
+    from ``field``.
+    """
+    f = np.asarray(field, dtype=np.float64)
+    ok = np.asarray(valid, dtype=bool) & np.isfinite(f)
+    if not ok.any():
+        return ""
+    top = float(np.abs(f[ok]).max()) if top is None or not math.isfinite(top) else float(top)
+    share = 100.0 * np.count_nonzero(np.abs(f[ok]) > vmax) / np.count_nonzero(ok)
+    if top <= vmax or math.isclose(top, vmax):
+        return f"max |phi| {top:.3g} mD"
+    return f"max |phi| {top:.3g} mD; colours clipped at {vmax:.3g} mD ({share:.2g} % of the region beyond)"

@@ -1,0 +1,27 @@
+"""A run on disk: its folder, its files and its summary.
+
+* :mod:`~glassdist.storage.folder`: the run folder, planned and taken before the analysis
+  (checks, lock, leftovers of a killed run, an earlier run's files);
+* :mod:`~glassdist.storage.fields`: ``result.npz`` in both layouts (written and read back
+  by :func:`load_result`), ``statistics.csv`` and the exports;
+* :mod:`~glassdist.storage.writer`: every file of ``glassdist analyze``, for the command
+  line, ``glassdist batch`` and the Python API alike (:func:`write_outputs`).
+"""
+
+from .fields import FIELD_LAYOUTS, GRID_KEYS, SUMMARY_NAME, StoredResult, load_result
+from .folder import OutputFolder, open_output_folder, plan_outputs
+from .writer import EXIT_OK, EXIT_SPEC_FAIL, write_outputs
+
+__all__ = [
+    "EXIT_OK",
+    "EXIT_SPEC_FAIL",
+    "FIELD_LAYOUTS",
+    "GRID_KEYS",
+    "SUMMARY_NAME",
+    "OutputFolder",
+    "StoredResult",
+    "load_result",
+    "open_output_folder",
+    "plan_outputs",
+    "write_outputs",
+]

@@ -1,0 +1,218 @@
+"""One run, typed: what was asked, what was read, what was found; built once, written once.
+
+A run of ``glassdist analyze`` (the command line, a pane of ``glassdist batch``, a job
+of the web app) or of :func:`glassdist.write_outputs` is one straight line::
+
+    request  = RunRequest(...)                  # 1. from the options (or the API's arguments)
+    inputs   = read_inputs(...)                 # 2. each file read once, hashed from its bytes
+    folder   = open_output_folder(...)          # 3. taken before any work
+    result   = analyze(...)                     # 4.
+    record   = build_record(request, inputs, result)   # 5-7. capture checked once, assessed, measured
+    summary  = write_run(record, folder)        # 8. every file, summary.json last and once
+    lines    = run_lines(record)                # 9. the console lines, from the record
+    return record.exit_code                     # 10.
+
+:class:`RunRecord` holds the request, the input digests, the result, the acceptance and
+the standard measures; :meth:`RunRecord.summary` is the ``summary.json`` schema (less the
+``outputs`` the writer adds once the files are written).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..acceptance.assess import Acceptance, assess
+from ..acceptance.spec import LoadedSpec
+from ..acceptance.stats import STATISTIC_FIELDS
+from ..acceptance.stats import valid_percent
+from ..errors import InputError
+from ..fs import file_sha256
+from ..io import read_photo
+from .fields import FIELD_LAYOUTS, GRID_KEYS
+
+__all__ = ["EXIT_OK", "EXIT_SPEC_FAIL", "InputFile", "RunInputs", "RunRecord", "RunRequest", "build_record", "read_inputs"]
+
+EXIT_OK = 0
+#: exit status of ``glassdist analyze --spec`` when the analysis ran but the specification failed
+EXIT_SPEC_FAIL = 3
+
+
+@dataclass(frozen=True)
+class RunRequest:
+    """What one run was asked to do (the options of ``glassdist analyze``, or the API's arguments).
+
+    Attributes
+    ----------
+    fields : {'analysis', 'pixel'}
+        Layout of ``result.npz``.
+    report, export : bool
+        Also ``report.html``; ``fields.npz`` and ``tiff/``.
+    spec : LoadedSpec or None
+        The acceptance specification, loaded once (spec, SHA-256, path, limits).
+    protocol : ResolvedProtocol or None
+        The settings resolved from the options and the specification.
+    mask : ndarray of bool (H, W) or None
+        The region the analysis was asked for (coverage is of it).
+    metadata : dict
+        ``pane_id``, ``lot``, ``site``, ``operator``.
+    history : Recording, False or None
+        How the run is recorded in the results history (None: the default recording of
+        the API; False: not recorded).
+    """
+
+    fields: str = "analysis"
+    report: bool = False
+    export: bool = False
+    spec: LoadedSpec | None = None
+    protocol: object = None
+    mask: np.ndarray | None = None
+    metadata: dict = field(default_factory=dict)
+    history: object = None
+
+    def __post_init__(self):
+        if self.fields not in FIELD_LAYOUTS:
+            raise InputError(f"fields must be one of {', '.join(FIELD_LAYOUTS)}, got '{self.fields}'")
+
+    @property
+    def limits(self) -> dict:
+        """``{channel: [limit_mD, ...]}`` of the specification (one threshold mask each)."""
+        return self.spec.limits if self.spec is not None else {}
+
+
+@dataclass(frozen=True)
+class InputFile:
+    """An input file as the run read it: its path and the SHA-256 of the bytes read."""
+
+    path: str
+    sha256: str
+
+
+@dataclass(frozen=True)
+class RunInputs:
+    """The input files of a run, each read once (see :func:`read_inputs`).
+
+    Attributes
+    ----------
+    image, reference : InputFile or None
+    mask : str or None
+        Path of the mask file.
+    captures : tuple of InputFile
+        Every photo when several captures were averaged (the first is ``image``).
+    camera : dict, None or False
+        The photo's EXIF camera facts (None: it has none; False: no photo known).
+    preview : ndarray or None
+        The photo reduced for the figure of the analysed region
+        (:func:`glassdist.report.maps.preview`).
+    """
+
+    image: InputFile | None = None
+    reference: InputFile | None = None
+    mask: str | None = None
+    captures: tuple = ()
+    camera: object = False
+    preview: np.ndarray | None = None
+
+    @property
+    def paths(self) -> tuple:
+        """Every input path (never overwritten by an output)."""
+        return tuple(Path(f.path) for f in (self.image, self.reference, *self.captures) if f is not None) + \
+            ((Path(self.mask),) if self.mask is not None else ())
+
+
+def read_inputs(image_path=None, reference_path=None, mask_path=None, *, image=None) -> RunInputs:
+    """The :class:`RunInputs` of a result analysed elsewhere (the Python API): each file read once.
+
+    The photo is read once for its preview, SHA-256 and EXIF (:func:`glassdist.io.read_photo`);
+    the reference is hashed. ``image``: the photo's pixels when no ``image_path`` is given
+    (drawn, not recorded).
+    """
+    from ..report.maps import preview
+
+    photo_file, camera, small = None, False, None if image is None else preview(image)
+    if image_path is not None:
+        photo = read_photo(image_path, dtype=np.float32)
+        photo_file, camera, small = InputFile(str(image_path), photo.sha256), photo.camera, preview(photo.image)
+    reference = None if reference_path is None else InputFile(str(reference_path), file_sha256(reference_path))
+    return RunInputs(image=photo_file, reference=reference, mask=None if mask_path is None else str(mask_path),
+                     camera=camera, preview=small)
+
+
+@dataclass(frozen=True)
+class RunRecord:
+    """One run: request, input digests, result, acceptance and standard measures (see :func:`build_record`).
+
+    Attributes
+    ----------
+    request : RunRequest
+    inputs : RunInputs
+    result : AnalysisResult
+    acceptance : Acceptance
+    measures : dict
+        :meth:`glassdist.measures.StandardMeasures.to_dict`.
+    """
+
+    request: RunRequest
+    inputs: RunInputs
+    result: object
+    acceptance: Acceptance
+    measures: dict
+
+    @property
+    def exit_code(self) -> int:
+        """:data:`EXIT_SPEC_FAIL` when a specification failed, else :data:`EXIT_OK`."""
+        verdict = self.acceptance.verdict
+        return EXIT_SPEC_FAIL if verdict is not None and not verdict.passed else EXIT_OK
+
+    def described_inputs(self) -> dict:
+        """``{"image", "reference"}``: name, path, SHA-256 and size of each photo (None when not given)."""
+        h, w = self.result.valid.shape
+        return {role: None if f is None else {"name": Path(f.path).name, "path": f.path, "sha256": f.sha256,
+                                             "size": f"{w} x {h} px"}
+                for role, f in (("image", self.inputs.image), ("reference", self.inputs.reference))}
+
+    def summary(self, files=()) -> dict:
+        """The ``summary.json`` of the run, less ``outputs`` (the writer adds it with the files' digests).
+
+        ``files``: the names the run wrote besides ``result.npz`` and ``summary.json``.
+        """
+        result, acc, inputs = self.result, self.acceptance, self.inputs
+        # the acceptance statistics are over the same trusted pixels: one pass over them for both
+        summary = result.summary(statistics={STATISTIC_FIELDS[ch]: s for ch, s in acc.stats.items()})
+        image, reference = inputs.image, inputs.reference
+        summary["inputs"] = {
+            "image": None if image is None else image.path,
+            "image_sha256": None if image is None else image.sha256,
+            "reference": None if reference is None else reference.path,
+            "reference_sha256": None if reference is None else reference.sha256,
+            "mask": inputs.mask,
+        }
+        if len(inputs.captures) > 1:
+            summary["inputs"]["captures"] = [{"image": c.path, "sha256": c.sha256} for c in inputs.captures]
+        layout = self.request.fields
+        summary["fields"] = {"layout": layout, "file": "result.npz", "keys": [f.name for f in result.field_specs()]
+                             + (list(GRID_KEYS) if layout == "analysis" else ["valid"])}
+        summary.update({
+            "verdict": acc.verdict.to_dict() if acc.verdict else None,
+            "a4": {"statistics": acc.stats, "valid_percent": valid_percent(result.valid), "files": list(files),
+                   "inputs": self.described_inputs()},
+            **acc.summary(), "measures": self.measures,
+        })
+        return summary
+
+
+def build_record(request: RunRequest, inputs: RunInputs, result) -> RunRecord:
+    """Assess the result (the capture checked once against the protocol, then judged) and measure it: the run's record.
+
+    Raises
+    ------
+    InputError
+        The capture violates the protocol's capture limits (nothing is judged, nothing written).
+    """
+    from ..measures import standard_measures
+
+    acc = assess(result, request.spec, protocol=request.protocol, mask=request.mask, metadata=request.metadata,
+                 camera=inputs.camera)
+    return RunRecord(request, inputs, result, acc, standard_measures(result).to_dict())
