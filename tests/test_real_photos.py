@@ -40,11 +40,12 @@ def test_comparative_and_direct_agree_on_waves(real_data):
     v = c.trusted & d.trusted  # compared where statistics are taken (outside the guard band)
     assert v.mean() > 0.4
     # README ("Accuracy"): correlation 0.997 / 0.998 (measured 0.9972 / 0.9980); mean |phi| of the
-    # Direct Method 2.8 % above the Comparative on phi_eff (measured 1.0277) and 1.2 % on phi_shear
-    # (1.0118), with F5 (1.7 % / 0.04 % before it). Both runs are
+    # Direct Method 3.3 % above the Comparative on phi_eff (measured 1.0330) and 1.7 % on phi_shear
+    # (1.0169), the Comparative's A1 Jacobian through the lens Block I fits on the glass-less reference
+    # (2.8 % / 1.2 % with a pinhole's, 1.7 % / 0.04 % before F5). Both runs are
     # deterministic on the same photo; the margins (0.3 points) allow for platform differences of
     # the FFT and the unwrapper, not for a change of method (re-measure and update the README).
-    for ch, ratio in (("phi_eff_mD", 1.0277), ("phi_shear_mD", 1.0118)):
+    for ch, ratio in (("phi_eff_mD", 1.0330), ("phi_shear_mD", 1.0169)):
         a, b = getattr(c, ch)[v], getattr(d, ch)[v]
         assert np.corrcoef(a, b)[0, 1] > 0.996, ch
         assert np.mean(np.abs(b)) / np.mean(np.abs(a)) == pytest.approx(ratio, abs=0.003), ch
