@@ -315,15 +315,15 @@ def radial_profile_discrepancy(a: BrownDistortion, b: BrownDistortion, radius: n
     """How far two radial distortion profiles differ, modulo the scale a homography absorbs.
 
     The radial shift of a Brown model at normalised radius ``r`` is
-    :math:`\delta(r) = r\,(k_1 r^2 + k_2 r^4)`. A homography fitted with it takes any
+    :math:`\\delta(r) = r\\,(k_1 r^2 + k_2 r^4)`. A homography fitted with it takes any
     term linear in ``r`` (a uniform scale), so profiles are compared after removing their
     least-squares ``c r`` part, over the radii ``radius`` (normalised) of the fitted samples:
 
     .. math::
 
-       d = \frac{\lVert (\delta_a - \delta_b)_\perp \rVert}{\lVert (\delta_a)_\perp \rVert},
+       d = \\frac{\\lVert (\\delta_a - \\delta_b)_\\perp \\rVert}{\\lVert (\\delta_a)_\\perp \\rVert},
 
-    with :math:`(\cdot)_\perp` the part orthogonal to ``r``. 0: the same lens; 1: a profile
+    with :math:`(\\cdot)_\\perp` the part orthogonal to ``r``. 0: the same lens; 1: a profile
     as different from ``a`` as ``a`` is from no lens.
     """
     r = np.asarray(radius, float)
@@ -345,7 +345,8 @@ def radial_consistency(src: np.ndarray, dst: np.ndarray, H: np.ndarray, lens: Le
     a glass feature's is local. The joint fit (:func:`fit_lens_homography`) is repeated with
     parts of the fitted samples left out: the inner disc (radius below ``inner`` times the
     samples' 95th-percentile radius about the principal point: a feature centred on the optical
-    axis) and each quadrant about the principal point in turn (an off-centre feature). Each
+    axis) and each quadrant about the principal point in turn (an off-centre feature), with the
+    principal point held at the full fit's (the profiles are compared about one centre). Each
     refit's radial profile is compared with the full fit's
     (:func:`radial_profile_discrepancy`, over the full fit's sample radii).
 
@@ -360,7 +361,8 @@ def radial_consistency(src: np.ndarray, dst: np.ndarray, H: np.ndarray, lens: Le
     max_points : int
         The refits use at most this many samples (a regular subsample).
     **opts
-        ``scale_px``, ``tangential``, ``principal_point`` as for :func:`fit_lens_homography`.
+        ``scale_px``, ``tangential`` as for :func:`fit_lens_homography` (``principal_point`` is
+        ignored: the refits keep the full fit's).
 
     Returns
     -------
@@ -386,7 +388,8 @@ def radial_consistency(src: np.ndarray, dst: np.ndarray, H: np.ndarray, lens: Le
         if keep.sum() < 50 or np.percentile(rho[keep], 95) < 0.7 * r95:
             out[name] = float("nan")
             continue
-        _, lk, _, _ = fit_lens_homography(src[keep], dst[keep], H, center_px=lens.center_px, start=lens.distortion, **opts)
+        _, lk, _, _ = fit_lens_homography(src[keep], dst[keep], H, center_px=lens.center_px, start=lens.distortion,
+                                          **{**opts, "principal_point": False})
         out[name] = radial_profile_discrepancy(lens.distortion, lk.distortion, r_eval)
     q = [out[f"q{i}"] for i in range(4) if np.isfinite(out[f"q{i}"])]
     return {"inner": out["inner"], "quadrants": max(q) if q else float("nan")}
