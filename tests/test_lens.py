@@ -271,11 +271,15 @@ def test_calibration_photo_and_camera_file_agree(tmp_path):
 
 
 def _bulk_truth(sc, res):
-    """Mean strain of the degree-N polynomial fitted to the exact landing displacement over the reported
-    glass pixels, plain least squares on the pixel grid, centred differences, the glass-less Jacobian."""
+    """Mean strain of the degree-N polynomial fitted to the exact landing displacement over the region the
+    bulk channel documents (the reported glass pixels farther than its ``guard_px`` from the region's
+    border), plain least squares on the pixel grid, centred differences, the glass-less Jacobian."""
+    from scipy import ndimage
+
     land = landing_points(sc)
     d, J = land.displacement_mm, landing_jacobian(sc)
     ok = res.valid & np.all(np.isfinite(d), -1) & (land.status == 1)
+    ok &= ndimage.distance_transform_edt(np.pad(ok, 1))[1:-1, 1:-1] > res.bulk.region["guard_px"]
     h, w = ok.shape
     yy, xx = np.mgrid[0:h, 0:w].astype(float)
     xs, ys = (xx - w / 2) / w, (yy - h / 2) / h
@@ -293,10 +297,11 @@ def _bulk_truth(sc, res):
 
 @pytest.mark.slow
 def test_bulk_channel_of_the_pillowed_igu():
-    """Comparative: the pane-level sphere of the pillowed IGU within 5% of the truth (measured -0.813 vs
-    -0.845 mD, 3.8%; cylinder 0.181 vs 0.172); flat glass within 3 sigma of its truth (measured
-    -0.093 +- 0.009 vs -0.110 mD: the thick slab seen obliquely has a bulk power of its own). The Direct
-    Method says why it does not report it."""
+    """Comparative: the pane-level sphere of the pillowed IGU within 3% of the truth on the region the
+    channel documents (its trusted interior; measured -0.883 vs -0.897 mD, 1.7%; over the whole region,
+    guard band included, it read -0.813 vs -0.845, 3.8%); flat glass within 3 sigma of its truth
+    (measured -0.1097 +- 0.0010 vs -0.1096 mD: the thick slab seen obliquely has a bulk power of its
+    own). The Direct Method says why it does not report it."""
     for flat in (False, True):
         sc = load_scene(SCENES / "pillowed_igu.yaml")
         sc = sc.with_changes(**FLAT) if flat else sc
@@ -309,7 +314,7 @@ def test_bulk_channel_of_the_pillowed_igu():
         if flat:
             assert abs(b.phi_eff_mD - eff) < 3 * b.phi_eff_sigma_mD
         else:
-            assert b.phi_eff_mD == pytest.approx(eff, rel=0.05)
+            assert b.phi_eff_mD == pytest.approx(eff, rel=0.03)
             assert b.phi_shear_mD == pytest.approx(shear, abs=0.03)
             assert res.summary()["bulk"]["phi_eff_mD"] == b.phi_eff_mD
     direct = glassdist.analyze(img, pitch_mm=sc.backdrop.pitch_mm, distance_m=sc.backdrop.distance_m,
