@@ -429,7 +429,12 @@ def refit_with_lens(
     the fit's own residual and ``_AMBIGUITY_FLOOR_PERIODS``), a warning says that a centred
     radially symmetric feature cannot be told from the lens: it is kept as glass and the lens
     is not applied. The lens is applied only where it removes ``_LENS_MIN_GAIN`` of the
-    mean squared residual a bare homography leaves on the same samples.
+    mean squared residual a bare homography leaves on the same samples, and where it is
+    global: refitted without the inner disc of the view or without any quadrant about the
+    principal point (:func:`~glassdist.analyzer.lens.radial_consistency`), its radial profile
+    moves by at most ``_LENS_LOCAL``; otherwise a warning says that a centred radially
+    symmetric feature cannot be told from the lens, or that a local feature carries the
+    radial term, and the lens is not applied.
     """
     warn = [] if warn is None else warn
     S = _strain_samples(U, V, y, x, valid, step_px, period_px)

@@ -23,7 +23,11 @@ distortion is told apart from it only by its growth with radius, which needs fit
 points spread from the centre out towards the corners. A radially symmetric glass
 feature centred on the optical axis has the lens's own form: where the fitted part of
 the view leaves such a feature (its residual is radially symmetric about ``c``), the
-Analyzer says so (:func:`radial_ambiguity`) and keeps it as glass.
+Analyzer says so (:func:`radial_ambiguity`) and keeps it as glass. A lens's profile is
+global: refitted without the inner disc of the view, or without one quadrant about ``c``,
+it must stay the same (:func:`radial_consistency`); a glass feature the fit took for the
+lens moves it (a centred one when the inner disc is left out, an off-centre one with its
+quadrant), and Block I then keeps the glass as glass and says why.
 
 References
 ----------
