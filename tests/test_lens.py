@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import glassdist
-from glassdist.analyzer.lens import LensModel, fit_lens_homography, logical_jacobian, radial_ambiguity
+from glassdist.analyzer.lens import LensModel, fit_lens_homography, logical_jacobian, radial_ambiguity, radial_consistency
 from glassdist.brown import BrownDistortion
 from glassdist.experiments.transfer import independent_phi_eff
 from glassdist.render import landing_points, render_scene
@@ -69,7 +69,7 @@ def _render(name, flat=False):
 def _direct(sc, N=2):
     img = render_scene(sc)
     return glassdist.analyze(img, pitch_mm=sc.backdrop.pitch_mm, distance_m=sc.backdrop.distance_m,
-                             params={"detrend_degree": N, "pattern": sc.backdrop.pattern, "lens_model": "radial"})
+                             params={"detrend_degree": N, "pattern": sc.backdrop.pattern})  # lens_model: the default, "radial"
 
 
 def _truth(sc, res, N):
@@ -155,6 +155,31 @@ def test_radial_ambiguity_measure():
     assert radial_ambiguity(rng.normal(0, 0.001, p.shape), p, c, 320.0, noise_px=0.01) == (0.0, 0.0)
 
 
+def test_radial_consistency_tells_a_camera_lens_from_a_local_feature():
+    """Leave-out refits: a camera lens (k1 = -0.04) moves by nothing when the inner disc or a quadrant is left
+    out; with an off-centre local bump (3 px) by 0.13 at most (below the 0.2 at which Block I refuses it);
+    a bump centred on the optical axis without any camera lens, which the joint fit takes for a lens, by 0.84."""
+    U, V = np.meshgrid(np.arange(-30, 31, 1.0), np.arange(-22, 23, 1.0))
+    src = np.c_[U.ravel(), V.ravel()]
+    H = np.array([[8.0, 0.0, 255.5], [0.0, 8.0, 191.5], [0, 0, 1.0]])
+    c, s = (255.5, 191.5), 320.0
+    q = src @ H[:2, :2].T + H[:2, 2]
+
+    def view(k1, centre, amp_px, width_px=50.0):  # a radial bump about ``centre``, then the camera lens
+        v = q - np.asarray(centre)
+        pu = q + amp_px * np.exp(-np.sum(v**2, 1) / (2 * width_px**2))[:, None] * v / width_px
+        return np.stack(LensModel(BrownDistortion(k1), c, s).distort_px(pu[:, 0], pu[:, 1]), 1)
+
+    out = {}
+    for name, dst in (("lens", view(-0.04, c, 0.0)), ("lens+bump", view(-0.04, (390, 110), 3.0)),
+                      ("centred", view(0.0, c, 6.0))):
+        Hf, lf, _, _ = fit_lens_homography(src, dst, H, center_px=c, scale_px=s)
+        out[name] = radial_consistency(src, dst, Hf, lf, scale_px=s)
+    assert max(out["lens"].values()) < 1e-6
+    assert max(out["lens+bump"].values()) < 0.15
+    assert out["centred"]["inner"] > 0.6 and out["centred"]["quadrants"] < 0.1
+
+
 @pytest.mark.slow
 def test_centred_radially_symmetric_defect_is_said():
     """A lens-shaped defect centred on the optical axis (no camera lens): the ambiguity warning fires,
@@ -168,6 +193,32 @@ def test_centred_radially_symmetric_defect_is_said():
     truth = _truth(sc, res, 2)
     ok = res.trusted & np.isfinite(truth)
     assert np.mean(np.abs(res.phi_eff_mD[ok])) / np.mean(np.abs(truth[ok])) == pytest.approx(1.0, abs=0.02)
+
+
+def test_centred_glass_lens_in_a_pinhole_view_is_not_taken_for_the_camera_lens():
+    """The pitch experiment's slanted biconvex lens (96.9 mm grid), quarter size: with the default
+    self-calibration the radial fit refitted without the inner disc moves by 0.29 (measured; camera
+    lenses of the lens scenes <= 0.09), so the lens is not applied and the ambiguity is said; the
+    Direct Method then reads as a pinhole's and within 3% of the Comparative on phi_eff and phi_shear
+    (measured 0.997 / 1.019 at half size; with the radial fit applied it read 0.38 / 0.47)."""
+    from glassdist.experiments._common import RunOptions, analysis_params, evaluate
+    from glassdist.experiments.pitch import SCENES, SIGMA_MM
+
+    opt = RunOptions(scale=0.25, spp=2)
+    inp = opt.render(opt.prepare(load_scene(SCENES["coarse"])), reference=True)
+    params = analysis_params(inp.scene, detrend_degree=2, sigma_mm=SIGMA_MM)
+    assert params.lens_model == "radial"
+    d = evaluate(inp, method="direct", params=params).analysis
+    c = evaluate(inp, method="comparative", params=params).analysis
+    cal = d.homography_fit.lens
+    assert cal is not None and not cal.identifiable and cal.consistency["inner"] > 0.2
+    assert any("cannot tell the two apart" in w for w in d.warnings)
+    pin = evaluate(inp, method="direct", params=params.model_copy(update={"lens_model": "none"})).analysis
+    assert np.allclose(d.phi_eff_mD, pin.phi_eff_mD, equal_nan=True, atol=1e-4)
+    ok = d.trusted & c.trusted
+    for ch in ("phi_eff_mD", "phi_shear_mD"):
+        ratio = np.mean(np.abs(getattr(d, ch)[ok])) / np.mean(np.abs(getattr(c, ch)[ok]))
+        assert ratio == pytest.approx(1.0, abs=0.03), (ch, ratio)
 
 
 @pytest.mark.slow
@@ -220,11 +271,15 @@ def test_calibration_photo_and_camera_file_agree(tmp_path):
 
 
 def _bulk_truth(sc, res):
-    """Mean strain of the degree-N polynomial fitted to the exact landing displacement over the reported
-    glass pixels, plain least squares on the pixel grid, centred differences, the glass-less Jacobian."""
+    """Mean strain of the degree-N polynomial fitted to the exact landing displacement over the region the
+    bulk channel documents (the reported glass pixels farther than its ``guard_px`` from the region's
+    border), plain least squares on the pixel grid, centred differences, the glass-less Jacobian."""
+    from scipy import ndimage
+
     land = landing_points(sc)
     d, J = land.displacement_mm, landing_jacobian(sc)
     ok = res.valid & np.all(np.isfinite(d), -1) & (land.status == 1)
+    ok &= ndimage.distance_transform_edt(np.pad(ok, 1))[1:-1, 1:-1] > res.bulk.region["guard_px"]
     h, w = ok.shape
     yy, xx = np.mgrid[0:h, 0:w].astype(float)
     xs, ys = (xx - w / 2) / w, (yy - h / 2) / h
@@ -242,10 +297,11 @@ def _bulk_truth(sc, res):
 
 @pytest.mark.slow
 def test_bulk_channel_of_the_pillowed_igu():
-    """Comparative: the pane-level sphere of the pillowed IGU within 5% of the truth (measured -0.813 vs
-    -0.845 mD, 3.8%; cylinder 0.181 vs 0.172); flat glass within 3 sigma of its truth (measured
-    -0.093 +- 0.009 vs -0.110 mD: the thick slab seen obliquely has a bulk power of its own). The Direct
-    Method says why it does not report it."""
+    """Comparative: the pane-level sphere of the pillowed IGU within 3% of the truth on the region the
+    channel documents (its trusted interior; measured -0.883 vs -0.897 mD, 1.7%; over the whole region,
+    guard band included, it read -0.813 vs -0.845, 3.8%); flat glass within 3 sigma of its truth
+    (measured -0.1097 +- 0.0010 vs -0.1096 mD: the thick slab seen obliquely has a bulk power of its
+    own). The Direct Method says why it does not report it."""
     for flat in (False, True):
         sc = load_scene(SCENES / "pillowed_igu.yaml")
         sc = sc.with_changes(**FLAT) if flat else sc
@@ -258,7 +314,7 @@ def test_bulk_channel_of_the_pillowed_igu():
         if flat:
             assert abs(b.phi_eff_mD - eff) < 3 * b.phi_eff_sigma_mD
         else:
-            assert b.phi_eff_mD == pytest.approx(eff, rel=0.05)
+            assert b.phi_eff_mD == pytest.approx(eff, rel=0.03)
             assert b.phi_shear_mD == pytest.approx(shear, abs=0.03)
             assert res.summary()["bulk"]["phi_eff_mD"] == b.phi_eff_mD
     direct = glassdist.analyze(img, pitch_mm=sc.backdrop.pitch_mm, distance_m=sc.backdrop.distance_m,
@@ -274,7 +330,7 @@ def test_full_view_ripple_at_n1():
     sc = load_scene(SCENES / "full_view_ripple.yaml")
     img = render_scene(sc)
     res = glassdist.analyze(img, pitch_mm=sc.backdrop.pitch_mm, distance_m=sc.backdrop.distance_m,
-                            params={"detrend_degree": 1, "sigma_mm": 48.4, "lens_model": "radial"})
+                            params={"detrend_degree": 1, "sigma_mm": 48.4})
     truth = _truth(sc, res, 1)
     ok = res.trusted & np.isfinite(truth)
     m, t = res.phi_eff_mD[ok], truth[ok]

@@ -64,7 +64,8 @@ class BulkChannel:
 
 
 def bulk_channel(delta_mm: np.ndarray, valid: np.ndarray, labels: np.ndarray, *, degree: int, step_px, jacobian,
-                 frame_rotation, distance_m: float, sigma_px: float, xx: np.ndarray, yy: np.ndarray) -> BulkChannel:
+                 frame_rotation, distance_m: float, sigma_px: float, xx: np.ndarray, yy: np.ndarray,
+                 guard_px: float = 0.0) -> BulkChannel:
     """The bulk channel of a displacement on the analysis grid (module docstring).
 
     Parameters
@@ -87,11 +88,22 @@ def bulk_channel(delta_mm: np.ndarray, valid: np.ndarray, labels: np.ndarray, *,
         Reporting smoothing scale, px.
     xx, yy : ndarray (h, w)
         Pixel coordinates of the samples (the region's extent is reported).
+    guard_px : float
+        The polynomial is fitted on the samples farther than this from the region's border
+        (the guard band of the trusted pixels): within it the smoothing kernel is cut by the
+        border and the displacement is biased (on the ray-traced pillowed IGU the displacement
+        over the whole region carries a sphere 4.7 % below the exact one, over the trusted
+        pixels 0.2 %). Samples at ``guard_px`` and closer are left out when enough remain.
     """
+    from scipy import ndimage
+
     ok = valid & np.all(np.isfinite(delta_mm), axis=-1) & (labels > 0)
+    if guard_px > 0:
+        inner = ok & (ndimage.distance_transform_edt(np.pad(ok, 1), sampling=step_px)[1:-1, 1:-1] > guard_px)
+        ok = inner if inner.sum() >= 16 else ok
     if ok.any():  # the pane: the largest part of the region (a frame or mullion splits it)
         ok &= labels == np.argmax(np.bincount(labels[ok].ravel()))
-    region = {"samples": int(ok.sum()), "share_of_grid": float(ok.mean())}
+    region = {"samples": int(ok.sum()), "share_of_grid": float(ok.mean()), "guard_px": float(guard_px)}
     if ok.sum() < 16:
         return BulkChannel(None, None, None, None, None, degree, region, "too few samples")
     region.update({"x_px": [float(xx[ok].min()), float(xx[ok].max())], "y_px": [float(yy[ok].min()), float(yy[ok].max())]})

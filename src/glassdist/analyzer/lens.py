@@ -23,7 +23,11 @@ distortion is told apart from it only by its growth with radius, which needs fit
 points spread from the centre out towards the corners. A radially symmetric glass
 feature centred on the optical axis has the lens's own form: where the fitted part of
 the view leaves such a feature (its residual is radially symmetric about ``c``), the
-Analyzer says so (:func:`radial_ambiguity`) and keeps it as glass.
+Analyzer says so (:func:`radial_ambiguity`) and keeps it as glass. A lens's profile is
+global: refitted without the inner disc of the view, or without one quadrant about ``c``,
+it must stay the same (:func:`radial_consistency`); a glass feature the fit took for the
+lens moves it (a centred one when the inner disc is left out, an off-centre one with its
+quadrant), and Block I then keeps the glass as glass and says why.
 
 References
 ----------
@@ -48,6 +52,8 @@ __all__ = [
     "logical_coordinates",
     "logical_jacobian",
     "radial_ambiguity",
+    "radial_profile_discrepancy",
+    "radial_consistency",
     "read_camera_file",
     "calibration_from_camera_file",
     "calibrate_from_photo",
@@ -120,6 +126,10 @@ class LensCalibration:
         Focal length in px where known (camera file), for OpenCV's coefficients.
     note : str
         Why the model is not identifiable, or ``""``.
+    consistency : dict
+        Self-calibration only: how far the radial profile moves when the fit leaves out the
+        inner disc (``"inner"``) or the worst quadrant (``"quadrants"``) of the view
+        (:func:`radial_consistency`; a camera lens's distortion is global).
     """
 
     model: LensModel
@@ -130,11 +140,14 @@ class LensCalibration:
     rms_px: float = float("nan")
     focal_px: float | None = None
     note: str = ""
+    consistency: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         d = {"source": self.source, "model": self.model.to_dict(), "sigma": dict(self.sigma),
              "identifiable": self.identifiable, "fit_fraction": self.fit_fraction, "rms_px": self.rms_px,
              "corner_shift_px": self.model.corner_shift_px(), "note": self.note}
+        if self.consistency:
+            d["consistency"] = dict(self.consistency)
         if self.focal_px is not None:
             d["focal_px"] = self.focal_px
             d["opencv"] = self.model.opencv(self.focal_px).to_dict()
@@ -300,6 +313,90 @@ def radial_ambiguity(residual_px: np.ndarray, dst: np.ndarray, center_px, scale_
     if total <= 0 or rms < noise_px:
         return 0.0, 0.0
     return sym / total, rms
+
+
+def radial_profile_discrepancy(a: BrownDistortion, b: BrownDistortion, radius: np.ndarray) -> float:
+    """How far two radial distortion profiles differ, modulo the scale a homography absorbs.
+
+    The radial shift of a Brown model at normalised radius ``r`` is
+    :math:`\\delta(r) = r\\,(k_1 r^2 + k_2 r^4)`. A homography fitted with it takes any
+    term linear in ``r`` (a uniform scale), so profiles are compared after removing their
+    least-squares ``c r`` part, over the radii ``radius`` (normalised) of the fitted samples:
+
+    .. math::
+
+       d = \\frac{\\lVert (\\delta_a - \\delta_b)_\\perp \\rVert}{\\lVert (\\delta_a)_\\perp \\rVert},
+
+    with :math:`(\\cdot)_\\perp` the part orthogonal to ``r``. 0: the same lens; 1: a profile
+    as different from ``a`` as ``a`` is from no lens.
+    """
+    r = np.asarray(radius, float)
+
+    def perp(d):
+        return d - r * (np.sum(d * r) / max(float(np.sum(r * r)), 1e-300))
+
+    da = perp(r * (a.k1 * r**2 + a.k2 * r**4))
+    db = perp(r * (b.k1 * r**2 + b.k2 * r**4))
+    na = float(np.linalg.norm(da))
+    return float(np.linalg.norm(da - db) / na) if na > 0 else 0.0
+
+
+def radial_consistency(src: np.ndarray, dst: np.ndarray, H: np.ndarray, lens: LensModel, *, inner: float = 0.5,
+                       max_points: int = 1500, **opts) -> dict:
+    """Whether the fitted lens is a global radial form or the trace of a local feature (leave-out refits).
+
+    A camera lens's distortion is the same function of the radius in every part of the view;
+    a glass feature's is local. The joint fit (:func:`fit_lens_homography`) is repeated with
+    parts of the fitted samples left out: the inner disc (radius below ``inner`` times the
+    samples' 95th-percentile radius about the principal point: a feature centred on the optical
+    axis) and each quadrant about the principal point in turn (an off-centre feature), with the
+    principal point held at the full fit's (the profiles are compared about one centre). Each
+    refit's radial profile is compared with the full fit's
+    (:func:`radial_profile_discrepancy`, over the full fit's sample radii).
+
+    Parameters
+    ----------
+    src, dst : ndarray (n, 2)
+        The fitted samples (logical grid, pixel).
+    H, lens :
+        The full fit (starting point of the refits).
+    inner : float
+        Radius of the left-out disc, share of the samples' 95th-percentile radius.
+    max_points : int
+        The refits use at most this many samples (a regular subsample).
+    **opts
+        ``scale_px``, ``tangential`` as for :func:`fit_lens_homography` (``principal_point`` is
+        ignored: the refits keep the full fit's).
+
+    Returns
+    -------
+    dict
+        ``"inner"``: the discrepancy without the inner disc; ``"quadrants"``: the largest
+        without one quadrant (NaN where too few samples are left).
+    """
+    src = np.asarray(src, float)
+    dst = np.asarray(dst, float)
+    if len(src) > max_points:
+        k = np.arange(0, len(src), int(np.ceil(len(src) / max_points)))
+        src, dst = src[k], dst[k]
+    c = np.asarray(lens.center_px, float)
+    v = dst - c
+    rho = np.linalg.norm(v, axis=1)
+    r_eval = rho / lens.scale_px
+    r95 = float(np.percentile(rho, 95))
+    subsets = {"inner": rho >= inner * r95}
+    quad = (v[:, 0] >= 0).astype(int) + 2 * (v[:, 1] >= 0).astype(int)
+    subsets.update({f"q{q}": quad != q for q in range(4)})
+    out = {}
+    for name, keep in subsets.items():
+        if keep.sum() < 50 or np.percentile(rho[keep], 95) < 0.7 * r95:
+            out[name] = float("nan")
+            continue
+        _, lk, _, _ = fit_lens_homography(src[keep], dst[keep], H, center_px=lens.center_px, start=lens.distortion,
+                                          **{**opts, "principal_point": False})
+        out[name] = radial_profile_discrepancy(lens.distortion, lk.distortion, r_eval)
+    q = [out[f"q{i}"] for i in range(4) if np.isfinite(out[f"q{i}"])]
+    return {"inner": out["inner"], "quadrants": max(q) if q else float("nan")}
 
 
 def read_camera_file(path) -> tuple[np.ndarray, BrownDistortion, tuple[int, int] | None]:

@@ -40,11 +40,11 @@ class AnalyzerParams(BaseModel):
     )
     detrend_degree: int = Field(2, ge=0, le=8, description="A2: total degree N of the polynomial detrend")
     lens_model: Literal["none", "radial", "radial+center", "radial+tangential", "radial+tangential+center"] = Field(
-        "none",
+        "radial",
         description="Block I (Direct): camera lens distortion fitted with the homography from the grid itself: "
-        "'radial' (Brown k1, k2), with 'tangential' p1, p2, with 'center' the principal point; 'none' = pinhole "
-        "(the default: on a slanted view of a glass lens the radial fit takes part of the glass for the camera's "
-        "lens, docs/lens_calibration.md)",
+        "'radial' (Brown k1, k2; the default), with 'tangential' p1, p2, with 'center' the principal point; "
+        "'none' = pinhole. The fit is applied only where it stands out of the glass's own distortion and is "
+        "global (refits without the inner disc or any quadrant agree), docs/lens_calibration.md",
     )
     sigma_mm: float | None = Field(
         None,

@@ -1030,7 +1030,8 @@ def _bulk(meas: _Measurement, ag: _AnalysisGrid, fields: dict) -> BulkChannel:
     else:
         J, R = np.broadcast_to(meas.mm_per_px * np.eye(2), xx.shape + (2, 2)), None
     return bulk_channel(delta, ag.valid, ag.labels, degree=p.detrend_degree, step_px=ag.grid.step, jacobian=J,
-                        frame_rotation=R, distance_m=meas.distance_m, sigma_px=meas.sigma_mm / meas.mm_per_px, xx=xx, yy=yy)
+                        frame_rotation=R, distance_m=meas.distance_m, sigma_px=meas.sigma_mm / meas.mm_per_px, xx=xx, yy=yy,
+                        guard_px=meas.guard_px)
 
 
 # Share of the requested region below which the trusted pixels (quality label 0) are called few.
