@@ -1,7 +1,7 @@
 """Mutation testing of the core: do the tests notice when the code is changed a little?
 
 Each mutant changes one operator or constant of one function of a core module (Block F
-``analyzer/fourier.py``, the unwrapping ``analyzer/unwrap.py``, Block I
+``analyzer/fourier.py`` and its F5 deformation ``analyzer/deform.py``, the unwrapping ``analyzer/unwrap.py``, Block I
 ``analyzer/homography.py``, Block A ``analyzer/metrics.py``, the acceptance checks
 ``acceptance/assess.py`` and ``acceptance/spec.py``). It is written into a scratch copy of
 ``src/`` and the module's targeted tests run against it (``PYTHONPATH``, first failure
@@ -17,11 +17,12 @@ messages are not mutated.
 
 Usage::
 
-    python scripts/mutation.py [--per-module 25] [--seed 0] [--modules metrics,acceptance:10]
-                               [--out mutation.json] [--python PYTHON]
+    python scripts/mutation.py [--per-module 25 | --total 200] [--seed 0] [--modules metrics,acceptance:10]
+                               [--jobs 1] [--timeout-factor 3] [--out mutation.json] [--python PYTHON]
 
 Writes a JSON record (every mutant: module, line, the changed source line, the outcome)
-and prints the kill rate per module and each surviving mutant. It need not run in CI:
+and prints the kill rate per module, each surviving mutant, and the overall kill rate with
+its 95 % Wilson interval (the sample's binomial uncertainty). It need not run in CI:
 a full sample takes about 40 minutes on two cores (docs/testing.md).
 """
 
@@ -32,12 +33,15 @@ import ast
 import copy
 import json
 import os
+import queue
 import random
 import shutil
 import subprocess
 import sys
 import tempfile
+import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
@@ -46,6 +50,7 @@ REPO = Path(__file__).resolve().parents[1]
 MODULES = {
     "fourier": ("analyzer/fourier.py", ["tests/test_analyzer_fourier.py", "tests/test_accuracy_truth.py",
                                        "tests/test_adversarial_limits.py::test_a_grid_finer_than_3_px_is_refused"]),
+    "deform": ("analyzer/deform.py", ["tests/test_analyzer_deform.py", "tests/test_accuracy_truth.py"]),
     "unwrap": ("analyzer/unwrap.py", ["tests/test_analyzer_unwrap.py", "tests/test_accuracy_truth.py"]),
     "homography": ("analyzer/homography.py", ["tests/test_analyzer_homography.py", "tests/test_homography_refit.py",
                                              "tests/test_accuracy_truth.py"]),
@@ -153,54 +158,122 @@ def _run_tests(python: str, src: Path, tests: list[str], timeout_s: float) -> tu
     return f"killed (pytest exit {r.returncode})", dt  # e.g. an import error of the mutant
 
 
+def _stratified(counts: dict[str, int], total: int) -> dict[str, int]:
+    """``total`` mutants shared among the modules in proportion to their mutants (largest remainder, >= 1 each)."""
+    n = sum(counts.values())
+    share = {k: total * c / n for k, c in counts.items()}
+    out = {k: max(1, int(v)) for k, v in share.items()}
+    for k in sorted(share, key=lambda k: share[k] - int(share[k]), reverse=True):
+        if sum(out.values()) >= total:
+            break
+        out[k] += 1
+    return {k: min(v, counts[k]) for k, v in out.items()}
+
+
+def wilson_interval(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
+    """The Wilson score interval (95 % by default) of a binomial proportion ``k / n``."""
+    if n == 0:
+        return 0.0, 1.0
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * ((p * (1 - p) / n + z * z / (4 * n * n)) ** 0.5) / (1 + z * z / n)
+    return centre - half, centre + half
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--per-module", type=int, default=25, help="mutants sampled per module (0: all)")
+    ap.add_argument("--total", type=int, default=None,
+                    help="a stratified sample: this many mutants in all, shared among the modules in proportion "
+                         "to their number of mutants (overrides --per-module)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--modules", default=",".join(MODULES),
                     help="comma-separated subset of " + ", ".join(MODULES) + "; NAME:N samples N mutants of that one")
     ap.add_argument("--out", type=Path, default=Path("mutation.json"))
     ap.add_argument("--python", default=sys.executable)
+    ap.add_argument("--jobs", type=int, default=1, help="mutants tested at once (each in its own scratch copy)")
     ap.add_argument("--timeout-factor", type=float, default=3.0,
                     help="a mutant whose tests run longer than this many times the unchanged run is killed (timeout)")
+    ap.add_argument("--stop-after-min", type=float, default=None,
+                    help="start no mutant after this many minutes (the record keeps those tested)")
     args = ap.parse_args(argv)
+    stop_at = time.monotonic() + 60 * args.stop_after_min if args.stop_after_min else float("inf")
     rng = random.Random(args.seed)
-    record = {"seed": args.seed, "per_module": args.per_module, "modules": {}}
+    record = {"seed": args.seed, "per_module": args.per_module, "total": args.total, "modules": {}}
+    items = [item.partition(":") for item in args.modules.split(",")]
+    trees = {name: ast.parse((REPO / "src" / "glassdist" / MODULES[name][0]).read_text()) for name, _, _ in items}
+    counts = {name: len(_points(trees[name])) for name in trees}
+    if args.total is not None:
+        sizes = _stratified(counts, args.total)
+    else:
+        sizes = {name: int(count) if count else args.per_module for name, _, count in items}
     with tempfile.TemporaryDirectory(prefix="glassdist-mutation-") as tmp:
-        src = Path(tmp) / "src"
-        shutil.copytree(REPO / "src", src, ignore=shutil.ignore_patterns("__pycache__"))
-        for item in args.modules.split(","):
-            name, _, count = item.partition(":")
-            per_module = int(count) if count else args.per_module
+        copies = queue.Queue()
+        for j in range(max(1, args.jobs)):
+            src = Path(tmp) / f"src{j}"
+            shutil.copytree(REPO / "src", src, ignore=shutil.ignore_patterns("__pycache__"))
+            copies.put(src)
+        names = [name for name, _, _ in items]
+        originals = {name: (REPO / "src" / "glassdist" / MODULES[name][0]).read_text() for name in names}
+
+        def baseline(name):
+            src = copies.get()
+            try:
+                return _run_tests(args.python, src, MODULES[name][1], 1200)
+            finally:
+                copies.put(src)
+
+        with ThreadPoolExecutor(max_workers=max(1, args.jobs)) as pool:
+            base = dict(zip(names, pool.map(baseline, names)))
+        chosen = []
+        for name in names:
+            if base[name][0] != "survived":
+                raise SystemExit(f"{name}: the targeted tests fail on the unchanged code ({base[name][0]})")
+            points = _points(trees[name])
+            picked = sorted(rng.sample(points, min(len(points), sizes[name])) if sizes[name] else points)
+            chosen += [(name, index, kind) for index, kind in picked]
+            record["modules"][name] = []
+            print(f"## {name}: {len(picked)} of {len(points)} mutants, tests {base[name][1]:.0f} s unchanged", flush=True)
+        # all modules' mutants in one shuffled queue: a run stopped early has tested a random part of the sample
+        rng.shuffle(chosen)
+        lock = threading.Lock()
+
+        def one(point):
+            name, index, kind = point
+            if time.monotonic() > stop_at:
+                return None
             rel, tests = MODULES[name]
+            tree, original = trees[name], originals[name]
+            mutant, line = _mutate(tree, index)
+            src = copies.get()
             path = src / "glassdist" / rel
-            original = path.read_text()
-            base, base_s = _run_tests(args.python, src, tests, 1200)
-            if base != "survived":
-                raise SystemExit(f"{name}: the targeted tests fail on the unchanged code ({base})")
-            tree = ast.parse(original)
-            points = _points(tree)
-            chosen = sorted(rng.sample(points, min(len(points), per_module)) if per_module else points)
-            lines = original.splitlines()
-            results = []
-            print(f"## {name}: {len(chosen)} of {len(points)} mutants, tests {base_s:.0f} s unchanged", flush=True)
-            for index, kind in chosen:
-                mutant, line = _mutate(tree, index)
+            try:
                 path.write_text(ast.unparse(mutant))
-                outcome, dt = _run_tests(args.python, src, tests, max(60.0, args.timeout_factor * base_s))
-                after = ast.unparse(mutant).splitlines()
-                results.append({"line": line, "kind": kind, "source": lines[line - 1].strip(), "outcome": outcome,
-                                "seconds": round(dt, 1), "mutant_context": _changed(ast.unparse(tree), after)})
-                print(f"  {outcome:<22} {rel}:{line} [{kind}] {lines[line - 1].strip()[:90]}", flush=True)
-                args.out.write_text(json.dumps(record | {"modules": record["modules"] | {name: results}}, indent=1))
-            path.write_text(original)
+                outcome, dt = _run_tests(args.python, src, tests, max(60.0, args.timeout_factor * base[name][1]))
+            finally:
+                path.write_text(original)
+                copies.put(src)
+            source = original.splitlines()[line - 1].strip()
+            print(f"  {outcome:<22} {rel}:{line} [{kind}] {source[:90]}", flush=True)
+            result = {"line": line, "kind": kind, "source": source, "outcome": outcome, "seconds": round(dt, 1),
+                      "mutant_context": _changed(ast.unparse(tree), ast.unparse(mutant).splitlines())}
+            with lock:  # the record so far, written after each mutant (a stopped run keeps what it did)
+                record["modules"][name].append(result)
+                args.out.write_text(json.dumps(record, indent=1))
+            return result
+
+        with ThreadPoolExecutor(max_workers=max(1, args.jobs)) as pool:
+            list(pool.map(one, chosen))
+        for name in names:
+            results = record["modules"][name]
             killed = sum(r["outcome"].startswith("killed") for r in results)
-            record["modules"][name] = results
             print(f"   {name}: {killed} of {len(results)} killed", flush=True)
     args.out.write_text(json.dumps(record, indent=1))
     total = sum(len(v) for v in record["modules"].values())
     killed = sum(r["outcome"].startswith("killed") for v in record["modules"].values() for r in v)
-    print(f"killed {killed} of {total} ({100 * killed / max(total, 1):.1f} %)")
+    lo, hi = wilson_interval(killed, total)
+    print(f"killed {killed} of {total} ({100 * killed / max(total, 1):.1f} %, 95 % interval "
+          f"{100 * lo:.1f}-{100 * hi:.1f} %)")
     return 0
 
 

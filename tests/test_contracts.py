@@ -34,8 +34,11 @@ ENV = dict(os.environ, PYTHONPATH=os.pathsep.join([str(Path(glassdist.__file__).
                                                    os.environ.get("PYTHONPATH", "")]))
 
 #: Runs the command line with the analysis replaced (argv[1]: "raise" or "wait"), then its arguments.
+# SIGINT's default action restored first: a suite started in the background (``cmd &`` in a
+# non-interactive shell) hands its children SIGINT ignored, which a Ctrl-C at a terminal never is.
 WRAPPER = """
-import sys, time
+import signal, sys, time
+signal.signal(signal.SIGINT, signal.default_int_handler)
 import glassdist.analyzer as A
 mode = sys.argv[1]
 def fake(*a, **k):

@@ -447,7 +447,7 @@ def _tiny_panes(root, n, lot):
 def test_concurrent_batches_and_dask_workers_record_every_pane_exactly_once(db, tmp_path, monkeypatch):
     pytest.importorskip("distributed", reason="the Dask batch needs glassdist[distributed]")
     monkeypatch.setenv("GLASSDIST_DB_TIMEOUT_S", "60")
-    jobs = {"one": (8, []), "two": (8, []), "dask": (4, ["--workers", "2"])}
+    jobs = {"one": (4, []), "two": (4, []), "dask": (2, ["--workers", "2"])}
     procs = {}
     for name, (n, extra) in jobs.items():
         manifest = _tiny_panes(tmp_path / f"in-{name}", n, name)
