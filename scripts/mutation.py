@@ -53,7 +53,7 @@ MODULES = {
     "deform": ("analyzer/deform.py", ["tests/test_analyzer_deform.py", "tests/test_accuracy_truth.py"]),
     "unwrap": ("analyzer/unwrap.py", ["tests/test_analyzer_unwrap.py", "tests/test_accuracy_truth.py"]),
     "homography": ("analyzer/homography.py", ["tests/test_analyzer_homography.py", "tests/test_homography_refit.py",
-                                             "tests/test_accuracy_truth.py"]),
+                                             "tests/test_accuracy_truth.py", "tests/test_lens.py"]),
     "metrics": ("analyzer/metrics.py", ["tests/test_analyzer_metrics.py", "tests/test_streamed_statistics.py",
                                        "tests/test_accuracy_truth.py"]),
     "acceptance": ("acceptance/assess.py", ["tests/test_acceptance.py"]),
