@@ -92,12 +92,10 @@ def test_one_name_and_one_number_for_each_share(batch, pane, of):
     # console: the run line, the spec's area check and the zone line
     console = consoles[pane]
     assert f"measured {_g4(measured)} %, trusted {_g4(trusted)} % of {of}" in console
-    where = "the image" if pane == "whole" else "the region to analyse"
-    assert f"trusted area >= 10 % of {where}  (value {_g4(trusted)} %)" in console
+    assert f"trusted area >= 10 % of {of}  (value {_g4(trusted)} %)" in console
     zone = summary["zones"]["vision"]["trusted_percent"]
     assert f"zone vision: trusted {_g4(zone)} % of the zone" in console
-    check = next(c for c in summary["verdict"]["checks"] if c["criterion"].startswith("trusted area >= 10 % of "
-                                                                                        + where))
+    check = next(c for c in summary["verdict"]["checks"] if c["criterion"] == f"trusted area >= 10 % of {of}")
     assert check["value"] == trusted
 
     # report.html: the capture-geometry rows and the embedded data

@@ -130,7 +130,7 @@ def assess(result, spec=None, *, protocol=None, mask=None, metadata=None, camera
     protocol : ResolvedProtocol, optional
         The settings resolved from the options and the spec (recorded).
     mask : ndarray of bool, shape (H, W), optional
-        The user's region to analyse: coverage is the analysed share of it.
+        The user's region to analyse: ``measured_percent`` and ``trusted_percent`` are shares of it.
     metadata : dict, optional
         ``pane_id``, ``site``, ``operator`` (None values left out).
     camera : dict or None, optional

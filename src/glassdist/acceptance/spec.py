@@ -814,7 +814,7 @@ def spec_verdict(spec, stats, result, *, spec_path="", spec_sha256="", zones=Non
             cov = share_percent(measured_region(result))
         else:
             cov = float(trusted_percent)
-        where = "the image" if trusted_percent is None else "the region to analyse"
+        where = "the image" if trusted_percent is None else "the mask"
         checks.append(Check(f"trusted area >= {spec.min_valid_percent:g} % of {where}", cov,
                             spec.min_valid_percent, "%", ">=", cov >= spec.min_valid_percent))
     for z in spec.zones:
