@@ -60,9 +60,9 @@ def synthetic_summary(rng, i, n_lots):
                      "operator": "op"},
         "inputs": {"image": f"/data/P{i:05d}.png", "image_sha256": f"{i:064x}"},
         "method": "comparative", "pattern": "lines", "pitch_mm": 5.0, "distance_m": 1.0, "sigma_mm": 10.0,
-        "detrend_degree": 2, "a4": {"statistics": block(1.2), "valid_percent": 95.0},
-        "zones": {"vision": {"statistics": vision, "coverage_percent": 97.0},
-                  "edge": {"statistics": edge, "coverage_percent": 80.0}},
+        "detrend_degree": 2, "a4": {"statistics": block(1.2)}, "measured_percent": 95.0, "trusted_percent": 90.0,
+        "zones": {"vision": {"statistics": vision, "trusted_percent": 97.0},
+                  "edge": {"statistics": edge, "trusted_percent": 80.0}},
         "verdict": {"result": "PASS" if passed else "FAIL", "spec_name": "line spec", "checks": [
             {"criterion": "p95 |phi_eff| in zone 'vision' <= 45 mD", "value": vision["phi_eff"]["p95_abs"],
              "limit": 45.0, "unit": "mD", "passed": passed},

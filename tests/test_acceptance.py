@@ -185,10 +185,10 @@ def test_per_zone_statistics_and_coverage_against_the_zone():
     m = zone_masks(frame, zones)
     res.valid = m["vision"].copy()
     zs = zone_statistics(res, frame, zones)
-    assert zs["vision"]["coverage_percent"] == pytest.approx(100.0)
+    assert zs["vision"]["trusted_percent"] == pytest.approx(100.0)
     # pane x < 200 mm is image x < 120.5 px: all at 10 mD
     assert zs["left"]["statistics"]["phi_eff"]["mean_abs"] == pytest.approx(10.0)
-    assert zs["left"]["coverage_percent"] == pytest.approx(100 * 150 * 200 / (200 * 300), rel=0.03)
+    assert zs["left"]["trusted_percent"] == pytest.approx(100 * 150 * 200 / (200 * 300), rel=0.03)
     spec = Spec(name="z", zones=zones, criteria=[
         {"channel": "phi_eff", "statistic": "max_abs", "max_mD": 5, "zone": "vision"},
         {"channel": "phi_eff", "statistic": "mean_abs", "max_mD": 9.9, "zone": "left"}])
@@ -210,7 +210,7 @@ def test_zone_coverage_limit_and_unknown_zone():
     zs = zone_statistics(res, frame, zones)
     spec = Spec(name="z", zones=zones, criteria=[{"channel": "phi_eff", "statistic": "max_abs", "max_mD": 50}])
     v = spec_verdict(spec, result_statistics(res), res, zones=zs)
-    assert v.checks[0].criterion == "analysed area >= 90 % of zone 'vision'" and not v.checks[0].passed
+    assert v.checks[0].criterion == "trusted area >= 90 % of zone 'vision'" and not v.checks[0].passed
 
 
 # ----------------------------------------------------------------- worst regions
@@ -389,7 +389,8 @@ def test_statistics_and_regions_use_the_trusted_pixels():
     acc = assess(res, Spec(name="t", criteria=[{"channel": "phi_eff", "statistic": "max_abs", "max_mD": 20}]))
     assert acc.stats["phi_eff"]["max_abs"] == pytest.approx(10.0) and acc.verdict.passed
     assert all(r.peak_mD < 500 for r in acc.regions["phi_eff"]["regions"])
-    assert acc.coverage_percent == pytest.approx(100.0 * 240 / 260)
+    assert acc.trusted_percent == pytest.approx(100.0 * 240 / 260)
+    assert acc.measured_percent == pytest.approx(100.0)  # the guard band is measured, not trusted
 
 
 def test_api_write_report_from_arrays_and_with_a_spec(lens_photos, tmp_path):
@@ -436,8 +437,10 @@ def test_coverage_is_of_the_mask_asked_for():
     res.valid[:, :65] = False  # a quarter of the image not measured
     mask = np.zeros(res.valid.shape, bool)
     mask[:, :130] = True  # the left half asked for: half of it measured
-    assert assess(res, None, mask=mask).coverage_percent == pytest.approx(50.0)
-    assert assess(res, None).coverage_percent == pytest.approx(75.0)
+    assert assess(res, None, mask=mask).trusted_percent == pytest.approx(50.0)
+    assert assess(res, None).trusted_percent == pytest.approx(75.0)
+    # every measured pixel is trusted here: the measured share is the same number
+    assert assess(res, None, mask=mask).measured_percent == pytest.approx(50.0)
 
 
 def test_caption_says_clipped_only_beyond_the_colour_limit():

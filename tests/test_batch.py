@@ -85,11 +85,13 @@ def test_resume_after_interruption_keeps_finished_panes(tmp_path):
     idx = _index(out)
     assert sorted(idx) == ["a", "b", "c"] and {r["status"] for r in idx.values()} == {"done"}
     # the index's statistics are the real summary's
-    real = json.loads((FakeRunner.outputs["none"] / "summary.json").read_text())["a4"]
+    real_summary = json.loads((FakeRunner.outputs["none"] / "summary.json").read_text())
+    real = real_summary["a4"]
     for ch in ("phi_eff", "phi_shear"):
         for stat in ("mean_abs", "p95_abs", "max_abs"):
             assert float(idx["a"][f"{ch}_{stat}_mD"]) == pytest.approx(real["statistics"][ch][stat], rel=1e-3)
-    assert float(idx["a"]["valid_percent"]) == pytest.approx(real["valid_percent"], rel=1e-3)
+    for share in ("measured_percent", "trusted_percent"):
+        assert float(idx["a"][share]) == pytest.approx(real_summary[share], rel=1e-3)
     assert idx["a"]["method"] == "comparative" and float(idx["a"]["sigma_mm"]) > 0
     assert not [p for p in (out / "panes").iterdir() if p.name.startswith(".tmp")]
     html = (out / "index.html").read_text()

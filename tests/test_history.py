@@ -150,7 +150,7 @@ def test_a_run_is_recorded_once_with_its_ids_hashes_protocol_verdict_and_zones(p
             for name, v in values.items():
                 if v is not None:
                     assert stats[(zone, ch, name)] == pytest.approx(v)
-        assert stats[(zone, "region", "coverage_percent")] == pytest.approx(z["coverage_percent"])
+        assert stats[(zone, "region", "coverage_percent")] == pytest.approx(z["trusted_percent"])
     assert stats[(REGION, "phi_eff", "p95_abs")] == pytest.approx(s["a4"]["statistics"]["phi_eff"]["p95_abs"])
 
 

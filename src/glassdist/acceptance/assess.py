@@ -15,7 +15,7 @@ import numpy as np
 
 from .regions import REGION_CHANNELS, all_worst_regions, regions_csv
 from .spec import as_spec, check_capture, spec_channels, spec_limits, spec_verdict
-from .stats import CHANNEL_FIELDS, regions_statistics, shared_limit, valid_percent
+from .stats import CHANNEL_FIELDS, regions_statistics, share_percent, shared_limit
 from .zones import measured_region, pane_frame, zone_masks, zone_statistics
 
 __all__ = ["Acceptance", "assess", "colour_limits", "METADATA_KEYS"]
@@ -36,14 +36,18 @@ class Acceptance:
     frame : PaneFrame
         The pane and its millimetre frame.
     zones : dict
-        ``{name: {"definition", "area_mm2", "analysed_area_mm2", "coverage_percent", "statistics"}}``.
+        ``{name: {"definition", "area_mm2", "analysed_area_mm2", "trusted_percent", "statistics"}}``.
     masks : dict
         ``{name: bool (H, W)}`` of each zone.
     regions : dict
         ``{channel: {"threshold_mD", "threshold_source", "regions"}}``.
     verdict : Verdict or None
-    coverage_percent : float
-        Analysed share (percent) of the region to analyse (the mask's, else the image).
+    measured_percent : float
+        Share (percent) of the region asked for (the mask, else the image) that carries a
+        measurement (the result's ``valid`` pixels).
+    trusted_percent : float
+        Share (percent) of the region asked for that is trusted (quality label 0): the pixels
+        every statistic and verdict covers (:func:`~glassdist.acceptance.zones.measured_region`).
     protocol : dict or None
         :meth:`ResolvedProtocol.to_dict` with the values the analysis used.
     metadata : dict
@@ -59,14 +63,16 @@ class Acceptance:
     masks: dict
     regions: dict
     verdict: object
-    coverage_percent: float
+    measured_percent: float
+    trusted_percent: float
     protocol: dict | None
     metadata: dict
     colour_limits: dict
     warnings: tuple = field(default=())
 
     def summary(self):
-        """Additions to ``summary.json``: ``protocol``, ``pane``, ``zones``, ``worst_regions``, ``metadata``."""
+        """Additions to ``summary.json``: ``protocol``, ``pane``, ``zones``, ``worst_regions``, ``metadata``,
+        ``measured_percent``, ``trusted_percent``, ``colour_limits_mD``."""
         return {
             "protocol": self.protocol,
             "pane": self.frame.to_dict(),
@@ -75,7 +81,8 @@ class Acceptance:
                                    "units": self.frame.units, "regions": [r.to_dict() for r in e["regions"]]}
                               for ch, e in self.regions.items()},
             "metadata": self.metadata,
-            "coverage_percent": self.coverage_percent,
+            "measured_percent": self.measured_percent,
+            "trusted_percent": self.trusted_percent,
             "colour_limits_mD": self.colour_limits,
         }
 
@@ -123,7 +130,7 @@ def assess(result, spec=None, *, protocol=None, mask=None, metadata=None, camera
     protocol : ResolvedProtocol, optional
         The settings resolved from the options and the spec (recorded).
     mask : ndarray of bool, shape (H, W), optional
-        The user's region to analyse: coverage is the analysed share of it.
+        The user's region to analyse: ``measured_percent`` and ``trusted_percent`` are shares of it.
     metadata : dict, optional
         ``pane_id``, ``site``, ``operator`` (None values left out).
     camera : dict or None, optional
@@ -157,15 +164,12 @@ def assess(result, spec=None, *, protocol=None, mask=None, metadata=None, camera
     stats = per_region.pop(None)
     zones = zone_statistics(result, frame, zones_def, over_limits_mD=limits, masks=masks, channels=channels,
                             statistics=per_region)
-    if mask is not None:
-        m = np.asarray(mask, dtype=bool)
-        coverage = 100.0 * np.count_nonzero(measured & m) / max(np.count_nonzero(m), 1)
-    else:
-        coverage = valid_percent(measured)
+    trusted = share_percent(measured, mask)
+    measured_share = share_percent(result.valid, mask)
     verdict = None
     if spec is not None:
         verdict = spec_verdict(spec, stats, result, spec_path=loaded.path, spec_sha256=loaded.sha256, zones=zones,
-                                coverage_percent=None if mask is None else coverage)
+                                trusted_percent=None if mask is None else trusted)
     regions = all_worst_regions(result, frame, spec, channels=REGION_CHANNELS, statistics=stats, limits=limits)
     meta = {k: v for k, v in (metadata or {}).items() if v is not None}
     if camera is not False:
@@ -182,7 +186,7 @@ def assess(result, spec=None, *, protocol=None, mask=None, metadata=None, camera
                          "sigma_mm": result.sigma_mm, "detrend_degree": result.detrend_degree,
                          "px_per_period": px_per_period(result)}
     warnings = (frame.warning,) if frame.warning and zones_def else ()
-    return Acceptance(stats, frame, zones, masks, regions, verdict, float(coverage), proto, meta,
+    return Acceptance(stats, frame, zones, masks, regions, verdict, measured_share, trusted, proto, meta,
                       colour_limits(result, spec, limits=limits), warnings)
 
 

@@ -31,7 +31,8 @@ Criteria
   image noise): e.g. ``{"channel": "phi_eff_sigma", "statistic": "p95_abs", "max_mD": 5}``
   requires a measurement precise enough for the limits it is judged against (a noisy
   capture then fails rather than passing or failing on noise).
-* ``min_valid_percent`` (optional): the analysed region must cover at least this
+* ``min_valid_percent`` (optional): the trusted area (quality label 0, the pixels every
+  statistic covers; ``trusted_percent`` of ``summary.json``) must cover at least this
   percentage of the image (of the user's mask when one is given), so a pane cannot
   pass because little of it was measured; a zone's ``min_valid_percent`` is of the zone.
 * ``protocol`` (optional, :class:`Protocol`): the capture and analysis the limits were
@@ -65,7 +66,7 @@ from pydantic import BaseModel, Field, field_validator, model_validator
 
 from ..errors import InputError
 from ..validation import MODEL_CONFIG, SIGMA_MM, check_input_file, load_mapping, safe_text, validate_model
-from .stats import format_limit, valid_percent
+from .stats import format_limit, share_percent
 
 __all__ = [
     "Criterion", "Protocol", "Pane", "Zone", "WorstRegions", "Figures", "Spec", "Check", "Verdict", "ResolvedProtocol",
@@ -198,8 +199,8 @@ class Zone(BaseModel):
     * ``inset_mm``: the pane minus a border of this width (0: the whole pane);
     * ``polygon_mm``: a polygon ``[[x, y], ...]`` in the pane frame (mm).
 
-    ``min_valid_percent`` (optional): the analysed region must cover at least this
-    share of the zone.
+    ``min_valid_percent`` (optional): the trusted area must cover at least this
+    share of the zone (its ``trusted_percent``).
     """
 
     model_config = MODEL_CONFIG
@@ -771,7 +772,7 @@ def _protocol_checks(protocol, result):
     return checks
 
 
-def spec_verdict(spec, stats, result, *, spec_path="", spec_sha256="", zones=None, coverage_percent=None):
+def spec_verdict(spec, stats, result, *, spec_path="", spec_sha256="", zones=None, trusted_percent=None):
     """Check every criterion of ``spec`` against an analysis whose statistics are already computed.
 
     The engine under :func:`glassdist.acceptance.assess.assess`; from a result alone use
@@ -790,11 +791,11 @@ def spec_verdict(spec, stats, result, *, spec_path="", spec_sha256="", zones=Non
     spec_path, spec_sha256 : str
         Recorded in the verdict.
     zones : dict, optional
-        ``{zone name: {"statistics": {channel: statistics}, "coverage_percent": float}}``
+        ``{zone name: {"statistics": {channel: statistics}, "trusted_percent": float}}``
         (see :func:`glassdist.acceptance.zones.zone_statistics`); needed when a criterion
         or a zone limit names a zone.
-    coverage_percent : float, optional
-        Analysed share (percent) that ``min_valid_percent`` is checked against; default
+    trusted_percent : float, optional
+        Trusted share (percent) that ``min_valid_percent`` is checked against; default
         the share of the image (give the share of the user's mask when one was used).
 
     Returns
@@ -807,20 +808,20 @@ def spec_verdict(spec, stats, result, *, spec_path="", spec_sha256="", zones=Non
     zones = zones or {}
     checks = _protocol_checks(spec.protocol, result)
     if spec.min_valid_percent is not None:
-        if coverage_percent is None:
+        if trusted_percent is None:
             from .zones import measured_region
 
-            cov = valid_percent(measured_region(result))
+            cov = share_percent(measured_region(result))
         else:
-            cov = float(coverage_percent)
-        where = "the image" if coverage_percent is None else "the region to analyse"
-        checks.append(Check(f"analysed area >= {spec.min_valid_percent:g} % of {where}", cov,
+            cov = float(trusted_percent)
+        where = "the image" if trusted_percent is None else "the mask"
+        checks.append(Check(f"trusted area >= {spec.min_valid_percent:g} % of {where}", cov,
                             spec.min_valid_percent, "%", ">=", cov >= spec.min_valid_percent))
     for z in spec.zones:
         if z.min_valid_percent is not None:
-            cov = float((zones.get(z.name) or {}).get("coverage_percent", float("nan")))
+            cov = float((zones.get(z.name) or {}).get("trusted_percent", float("nan")))
             ok = (not math.isnan(cov)) and cov >= z.min_valid_percent
-            checks.append(Check(f"analysed area >= {z.min_valid_percent:g} % of zone '{z.name}'", cov,
+            checks.append(Check(f"trusted area >= {z.min_valid_percent:g} % of zone '{z.name}'", cov,
                                 z.min_valid_percent, "%", ">=", ok, "zone not in the photo" if math.isnan(cov) else ""))
     for c in spec.criteria:
         source = stats if c.zone is None else (zones.get(c.zone) or {}).get("statistics", {})

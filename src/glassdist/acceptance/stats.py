@@ -27,7 +27,7 @@ __all__ = [
     "result_statistics",
     "regions_statistics",
     "pixel_blocks",
-    "valid_percent",
+    "share_percent",
     "format_limit",
 ]
 
@@ -106,10 +106,25 @@ def acceptance_statistics(field, valid=None, *, over_limits_mD=()):
     return out
 
 
-def valid_percent(valid):
-    """Percentage of the image inside the valid analysis region."""
-    valid = np.asarray(valid, dtype=bool)
-    return float(100.0 * np.count_nonzero(valid) / max(valid.size, 1))
+def share_percent(region, asked=None):
+    """Share (percent) of the region asked for that ``region`` covers.
+
+    The one definition behind ``measured_percent`` (``region``: the valid pixels) and
+    ``trusted_percent`` (``region``: the trusted pixels, quality label 0) of ``summary.json``,
+    the console, the report, the web page and the batch index:
+    ``100 * |region & asked| / |asked|``.
+
+    Parameters
+    ----------
+    region : array_like of bool, shape (H, W)
+    asked : array_like of bool, shape (H, W), optional
+        The region asked for (the user mask); default the whole image.
+    """
+    region = np.asarray(region, dtype=bool)
+    if asked is None:
+        return float(100.0 * np.count_nonzero(region) / max(region.size, 1))
+    asked = np.asarray(asked, dtype=bool)
+    return float(100.0 * np.count_nonzero(region & asked) / max(np.count_nonzero(asked), 1))
 
 
 def result_statistics(result, *, over_limits_mD=None):

@@ -403,8 +403,8 @@ def zone_statistics(result, frame, zones, *, over_limits_mD=None, masks=None, ch
     Returns
     -------
     dict
-        ``{name: {"definition", "area_mm2", "analysed_area_mm2", "coverage_percent",
-        "statistics": {channel: statistics}}}``; ``coverage_percent`` is the analysed
+        ``{name: {"definition", "area_mm2", "analysed_area_mm2", "trusted_percent",
+        "statistics": {channel: statistics}}}``; ``trusted_percent`` is the trusted (analysed)
         share of the zone's area (NaN for a zone outside the photo), the statistics are
         over the analysed pixels of the zone (see :mod:`glassdist.acceptance.stats`); analysed
         pixels are those of :func:`measured_region`.
@@ -422,6 +422,6 @@ def zone_statistics(result, frame, zones, *, over_limits_mD=None, masks=None, ch
         stats = statistics[z.name]
         out[z.name] = {
             "definition": z.describe(), "area_mm2": area, "analysed_area_mm2": analysed,
-            "coverage_percent": 100.0 * analysed / area if area > 0 else math.nan, "statistics": stats,
+            "trusted_percent": 100.0 * analysed / area if area > 0 else math.nan, "statistics": stats,
         }
     return out

@@ -357,8 +357,9 @@ class AnalysisResult:
             "carriers": self.carriers.to_dict(),
             "homography": None if self.homography_fit is None else self.homography_fit.to_dict(),
             "bulk": None if self.bulk is None else self.bulk.to_dict(),
-            "valid_fraction": self.valid_fraction,
-            "trusted_fraction": self.trusted_fraction,
+            # percent of the region asked for (the mask, else the image): measured, and trusted (quality 0)
+            "measured_percent": 100.0 * self.valid_fraction,
+            "trusted_percent": 100.0 * self.trusted_fraction,
             "quality_counts": self.quality_counts(),
             "noise_floor_mD": self.noise_floor(),
             "margin_px": {"excluded_areas": self.margin_px[0], "image_edge": self.margin_px[1]},

@@ -336,7 +336,8 @@ def run_rows(summary: dict, *, exit_code: int, out_dir, recording: Recording = R
         Columns of :class:`~glassdist.history.models.CheckRow` and
         :class:`~glassdist.history.models.StatisticRow` (without ``run_id``); statistics of
         the whole analysed region under zone :data:`~glassdist.history.models.REGION`, a
-        zone's coverage as channel ``region``, statistic ``coverage_percent``.
+        zone's ``trusted_percent`` as channel ``region``, statistic ``coverage_percent`` (the
+        database's names are kept: ``valid_percent`` holds the summary's ``measured_percent``).
     """
     from .. import __version__
     from .models import REGION
@@ -363,7 +364,7 @@ def run_rows(summary: dict, *, exit_code: int, out_dir, recording: Recording = R
         "sigma_mm": _finite(summary.get("sigma_mm")), "detrend_degree": summary.get("detrend_degree"),
         "protocol": summary.get("protocol"), "verdict": verdict.get("result"), "spec_name": verdict.get("spec_name"),
         "spec_sha256": verdict.get("spec_sha256") or None, "exit_code": int(exit_code),
-        "valid_percent": _finite(a4.get("valid_percent")), "measures": summary.get("measures"),
+        "valid_percent": _finite(summary.get("measured_percent")), "measures": summary.get("measures"),
         "warnings": warnings, "out_dir": recording.out_dir or _path(out_dir, cwd),
         "glassdist_version": summary.get("glassdist_version") or __version__,
     }
@@ -376,7 +377,7 @@ def run_rows(summary: dict, *, exit_code: int, out_dir, recording: Recording = R
     stats = _stat_rows(REGION, a4.get("statistics"))
     for name, z in (summary.get("zones") or {}).items():
         stats += _stat_rows(str(name), z.get("statistics"))
-        cov = _finite(z.get("coverage_percent"))
+        cov = _finite(z.get("trusted_percent"))
         if cov is not None:
             stats.append({"zone": str(name), "channel": "region", "statistic": "coverage_percent", "value": cov})
     return run, checks, stats

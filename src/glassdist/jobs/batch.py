@@ -527,7 +527,7 @@ def _index_rows(panes, out):
                     "spec": Path(pane.spec).stem if pane.spec else "", "spec_name": "", "detrend_degree": "",
                     "sigma_mm": ""})
         row.update({f"{c}_{s}_mD": "" for c, s in _INDEX_STATS})
-        row.update({"valid_percent": "", "seconds": "", "report": "", "error": ""})
+        row.update({"measured_percent": "", "trusted_percent": "", "seconds": "", "report": "", "error": ""})
         done = read_json(out / "panes" / pane.id / "pane.json")
         failed = read_json(out / "failed" / f"{pane.id}.json")
         if done:
@@ -535,7 +535,8 @@ def _index_rows(panes, out):
             a4 = summary.get("a4") or {}
             stats = a4.get("statistics") or {}
             row.update(status="done", verdict=done.get("verdict") or "", method=summary.get("method", ""),
-                       seconds=done.get("seconds", ""), valid_percent=_round(a4.get("valid_percent")))
+                       seconds=done.get("seconds", ""), measured_percent=_round(summary.get("measured_percent")),
+                       trusted_percent=_round(summary.get("trusted_percent")))
             row.update({f"{c}_{s}_mD": _round(stats.get(c, {}).get(s)) for c, s in _INDEX_STATS})
             row.update(spec_name=(summary.get("verdict") or {}).get("spec_name", ""),
                        detrend_degree=summary.get("detrend_degree", ""), sigma_mm=_round(summary.get("sigma_mm")),
@@ -607,7 +608,7 @@ def _index_html(rows, out, *, figures=True):
     top = "".join(f'<th rowspan="2">{h}</th>' for h in ("pane",) + (("lot",) if with_lot else ())
                   + ("status", "verdict", "spec", "method", "N", "σ mm"))
     top += "".join(f'<th colspan="{sum(c == ch for c, _ in _INDEX_STATS)}">|{escape(ch)}| (mD)</th>' for ch in channels)
-    top += "".join(f'<th rowspan="2">{h}</th>' for h in ("analysed %", "s", "heatmap"))
+    top += "".join(f'<th rowspan="2">{h}</th>' for h in ("measured %", "trusted %", "s", "heatmap"))
     sub = "".join(f"<th>{escape(s.removesuffix('_abs'))}</th>" for _, s in _INDEX_STATS)
     body = ""
     for r in rows:
@@ -626,7 +627,7 @@ def _index_html(rows, out, *, figures=True):
                                                                     escape(r["method"]), escape(str(r["detrend_degree"])),
                                                                     escape(str(r["sigma_mm"]))]
         cells += [escape(str(r[f"{c}_{s}_mD"])) for c, s in _INDEX_STATS]
-        cells += [escape(str(r["valid_percent"])), escape(str(r["seconds"])), thumb]
+        cells += [escape(str(r["measured_percent"])), escape(str(r["trusted_percent"])), escape(str(r["seconds"])), thumb]
         body += f'<tr class="{escape(cls)}" id="pane-{pid}">' + "".join(f"<td>{c}</td>" for c in cells) + "</tr>\n"
     stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M:%S")
     scale = ""

@@ -15,7 +15,7 @@ def acceptance_lines(acc, report_path=None) -> list[str]:
     lines = list(acc.verdict.lines()) if acc.verdict is not None else []
     for name, z in acc.zones.items():
         eff, shear = z["statistics"].get("phi_eff", {}), z["statistics"].get("phi_shear", {})
-        lines.append(f"zone {name}: {z['coverage_percent']:.1f} % analysed, p95 |phi_eff| "
+        lines.append(f"zone {name}: trusted {z['trusted_percent']:.4g} % of the zone, p95 |phi_eff| "
                      f"{eff.get('p95_abs', float('nan')):.4g} mD, p95 |phi_shear| {shear.get('p95_abs', float('nan')):.4g} mD")
     if report_path is not None:
         lines.append(f"report: {report_path}")
@@ -39,7 +39,8 @@ def run_lines(record, summary, out_dir, removed=()) -> list[str]:
         return "n/a" if v is None else f"{v:.3g} mD"
 
     lines.append(
-        f"{optics}{result.method} method: valid {100 * result.valid_fraction:.1f}% of the image, "
+        f"{optics}{result.method} method: measured {summary['measured_percent']:.4g} %, "
+        f"trusted {summary['trusted_percent']:.4g} % of {'the mask' if record.request.mask is not None else 'the image'}, "
         f"mean |phi_eff| {mD(s['phi_eff_mD']['mean_abs'])}, p95 |phi_eff| {mD(s['phi_eff_mD']['p95_abs'])}, "
         f"mean phi_shear {mD(s['phi_shear_mD']['mean_abs'])}"
     )

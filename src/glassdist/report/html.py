@@ -156,9 +156,9 @@ def _acceptance_sections(acc):
     for name, z in acc.zones.items():
         e, s_ = z["statistics"].get("phi_eff", {}), z["statistics"].get("phi_shear", {})
         zrows += (f"<tr><th>{escape(name)}</th><td>{escape(z['definition'])}</td><td class='num'>{_num(z['area_mm2'])}</td>"
-                  f"<td class='num'>{_num(z['coverage_percent'])}</td><td class='num'>{_num(e.get('mean_abs'))}</td>"
+                  f"<td class='num'>{_num(z['trusted_percent'])}</td><td class='num'>{_num(e.get('mean_abs'))}</td>"
                   f"<td class='num'>{_num(e.get('p95_abs'))}</td><td class='num'>{_num(s_.get('p95_abs'))}</td></tr>")
-    zones = ('<table id="zones"><tr><th>zone</th><th>definition</th><th>area (mm²)</th><th>analysed (% of zone)</th>'
+    zones = ('<table id="zones"><tr><th>zone</th><th>definition</th><th>area (mm²)</th><th>trusted (% of zone)</th>'
              f"<th>mean |φ_eff| (mD)</th><th>p95 |φ_eff| (mD)</th><th>p95 φ_shear (mD)</th></tr>{zrows}</table>"
              if zrows else "<p>No zones in the specification: statistics are over the whole analysed region.</p>")
     rrows = ""
@@ -193,7 +193,7 @@ def _fit_facts(result):
     return {"inlier_fraction": fit.inlier_fraction, "n_points": fit.n_points, "rms_inlier_px": fit.rms_inlier_px}
 
 
-def _geometry_rows(result, params, valid_percent, fit_facts):
+def _geometry_rows(result, params, shares, fit_facts):
     """Rows of the capture-geometry table (the homography and its fit for the Direct method)."""
     optics = getattr(result, "optics", None)
     where = "the grid plane" if optics is None else "the pane"
@@ -204,8 +204,12 @@ def _geometry_rows(result, params, valid_percent, fit_facts):
         (f"scale on {where}", f"{_num(result.mm_per_px)} mm per px"),
         (f"smoothing scale σ (on {where})", f"{_num(result.sigma_mm)} mm"),
         ("detrend degree N", _num(result.detrend_degree)),
-        ("analysed area", f"{_num(valid_percent)} % of the image" if valid_percent is not None else "—"),
     ]
+    if shares is not None:  # the two shares of the region asked for, as summary.json states them
+        of = escape(shares["of"])
+        geometry += [("measured area", f'<span id="measured-percent">{_num(shares["measured_percent"])}</span> % of {of}'),
+                     ("trusted area (statistics cover it)",
+                      f'<span id="trusted-percent">{_num(shares["trusted_percent"])}</span> % of {of}')]
     if optics is not None:
         geometry.insert(2, ("optics", escape(
             f"reflection: φ in reflective power on the pane (Coddington); camera at {_num(optics['camera_distance_m'])} m, "
@@ -222,13 +226,14 @@ def _geometry_rows(result, params, valid_percent, fit_facts):
     return geometry
 
 
-def _report_data(result, generated, inputs, valid_percent, verdict, stats, params, acceptance, measures):
+def _report_data(result, generated, inputs, shares, verdict, stats, params, acceptance, measures):
     """The report's key facts, embedded as JSON (``glassdist-report-data``)."""
     data = {
         "glassdist_version": str(result.version), "method": str(result.method),
         "generated_utc": generated.isoformat(timespec="seconds"), "inputs": inputs, "pitch_mm": result.pitch_mm,
         "distance_m": result.distance_m, "mm_per_px": result.mm_per_px, "sigma_mm": result.sigma_mm,
-        "detrend_degree": result.detrend_degree, "valid_percent": valid_percent,
+        "detrend_degree": result.detrend_degree,
+        **({} if shares is None else {k: shares[k] for k in ("measured_percent", "trusted_percent")}),
         "verdict": verdict.to_dict() if verdict is not None else None, "statistics": stats, "parameters": params,
         "homography_fit": _fit_facts(result), "warnings": list(result.warnings),
     }
@@ -239,8 +244,8 @@ def _report_data(result, generated, inputs, valid_percent, verdict, stats, param
     return data
 
 
-def render_report(result, *, stats, figures, inputs, verdict=None, valid_percent=None, generated=None,
-                  acceptance=None, measures=None):
+def render_report(result, *, stats, figures, inputs, verdict=None, generated=None, acceptance=None, measures=None,
+                  mask_given=False):
     """HTML text of the report.
 
     Parameters
@@ -253,16 +258,16 @@ def render_report(result, *, stats, figures, inputs, verdict=None, valid_percent
     inputs : dict
         ``{"image": {"name", "sha256", "size"}, "reference": {...} or None}``.
     verdict : Verdict, optional
-    valid_percent : float, optional
-        Analysed area, percent of the image.
     generated : datetime, optional
         Time stamp written in the report (default: now, UTC).
     acceptance : Acceptance, optional
-        Pane metadata, protocol, zones and worst regions
+        Pane metadata, protocol, zones, worst regions and the measured and trusted shares
         (:func:`glassdist.acceptance.assess.assess`).
     measures : dict, optional
         :meth:`glassdist.measures.StandardMeasures.to_dict` (roll wave, angular
         deviation, grid-line slope, P = -phi_eff/2), shown under the results.
+    mask_given : bool
+        Whether the shares are of a user mask (else of the image).
 
     Returns
     -------
@@ -280,8 +285,11 @@ def render_report(result, *, stats, figures, inputs, verdict=None, valid_percent
     pane_id = (acceptance.metadata.get("pane_id") if acceptance is not None else None)
     if pane_id:
         title = f"Glass distortion report: pane {pane_id} ({image_name})"
-    geometry = _geometry_rows(result, params, valid_percent, fit_facts)
-    data = _report_data(result, generated, inputs, valid_percent, verdict, stats, params, acceptance, measures)
+    shares = None if acceptance is None else {"measured_percent": acceptance.measured_percent,
+                                              "trusted_percent": acceptance.trusted_percent,
+                                              "of": "the mask" if mask_given else "the image"}
+    geometry = _geometry_rows(result, params, shares, fit_facts)
+    data = _report_data(result, generated, inputs, shares, verdict, stats, params, acceptance, measures)
     meta_html, proto_html, zones_html = _acceptance_sections(acceptance) if acceptance is not None else ("", "", "")
     measures_html = "" if measures is None else _measures_section(measures)
     data_json = json.dumps(to_jsonable(data), allow_nan=False).replace("</", "<\\/")

@@ -27,7 +27,6 @@ import numpy as np
 from ..acceptance.assess import Acceptance, assess
 from ..acceptance.spec import LoadedSpec
 from ..acceptance.stats import STATISTIC_FIELDS
-from ..acceptance.stats import valid_percent
 from ..errors import InputError
 from ..fs import file_sha256
 from ..io import read_photo
@@ -196,8 +195,9 @@ class RunRecord:
                              + (list(GRID_KEYS) if layout == "analysis" else ["valid"])}
         summary.update({
             "verdict": acc.verdict.to_dict() if acc.verdict else None,
-            "a4": {"statistics": acc.stats, "valid_percent": valid_percent(result.valid), "files": list(files),
+            "a4": {"statistics": acc.stats, "files": list(files),
                    "inputs": self.described_inputs()},
+            # with the shares the verdict judged (measured_percent, trusted_percent: one number each)
             **acc.summary(), "measures": self.measures,
         })
         return summary

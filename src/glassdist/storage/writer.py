@@ -27,7 +27,6 @@ import shutil
 from pathlib import Path
 
 from ..acceptance.spec import as_spec
-from ..acceptance.stats import valid_percent
 from ..errors import InputError
 from ..fs import atomic_write, atomic_write_bytes, atomic_write_text
 from ..io import to_jsonable
@@ -164,7 +163,7 @@ def _write_files(record, folder) -> dict:
                   *write_fields_tiff(result, out / "tiff", digests=digests)]
     if request.report:
         html = render_report(result, stats=acc.stats, figures=figs, inputs=record.described_inputs(),
-                             verdict=acc.verdict, valid_percent=valid_percent(result.valid), acceptance=acc,
+                             verdict=acc.verdict, acceptance=acc, mask_given=request.mask is not None,
                              measures=record.measures)
         files.append(atomic_write_text(out / "report.html", html, digests=digests))
     summary = to_jsonable(record.summary(files=[str(p.relative_to(out)) for p in files]))
