@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 import glassdist
-from glassdist.analyzer.lens import LensModel, fit_lens_homography, logical_jacobian, radial_ambiguity, radial_consistency
+from glassdist.analyzer.homography import logical_coordinates, logical_jacobian
+from glassdist.analyzer.lens import LensModel, fit_lens_homography, radial_ambiguity, radial_consistency
 from glassdist.brown import BrownDistortion
 from glassdist.experiments.transfer import independent_phi_eff
 from glassdist.render import landing_points, render_scene
@@ -136,7 +137,6 @@ def test_joint_fit_recovers_lens_and_homography():
     x, y = dst[:5, 0], dst[:5, 1]
     h = 1e-4
     J = logical_jacobian(Hf, lf, x, y)
-    from glassdist.analyzer.lens import logical_coordinates
 
     du = (np.array(logical_coordinates(Hf, lf, x + h, y)) - np.array(logical_coordinates(Hf, lf, x - h, y))) / (2 * h)
     assert np.allclose(J[:, :, 0], du.T, rtol=1e-5, atol=1e-9)
@@ -230,7 +230,8 @@ def test_calibration_photo_and_camera_file_agree(tmp_path):
     import subprocess
     import sys
 
-    from glassdist.analyzer.lens import calibrate_from_photo, calibration_from_camera_file
+    from glassdist.analyzer.lens import calibration_from_camera_file
+    from glassdist.analyzer.pipeline import calibrate_from_photo
     from glassdist.io import write_png16
 
     sc = _render("lens_moustache_24mm").with_changes(render={"samples_per_pixel": 4})

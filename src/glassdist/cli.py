@@ -264,7 +264,8 @@ def _pattern_from_photo(protocol, protocol_with, photo):
 def _lens_source(args, pinned, protocol, params, images):
     """The camera lens from ``--camera-file`` or ``--lens-photo`` (Direct Method), or None; ``pinned``: the spec's protocol."""
     from .acceptance.spec import check_lens_source
-    from .analyzer.lens import calibrate_from_photo, calibration_from_camera_file
+    from .analyzer.lens import calibration_from_camera_file
+    from .analyzer.pipeline import calibrate_from_photo
     from .io import read_image
 
     check_lens_source(pinned, lens_photo=args.lens_photo is not None,

@@ -40,8 +40,7 @@ import numpy as np
 from scipy import ndimage
 
 from ..errors import InputError
-from .homography import apply_inverse, fit_homography, logical_grid_points
-from .lens import logical_coordinates
+from .homography import apply_inverse, fit_homography, logical_coordinates, logical_grid_points
 from .metrics import masked_gaussian, polynomial_detrend
 from .params import AnalyzerParams
 from .pipeline import (

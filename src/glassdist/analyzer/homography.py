@@ -20,7 +20,7 @@ import numpy as np
 
 from ..errors import AnalysisError
 from . import fourier as F
-from .lens import LensCalibration, LensModel, fit_lens_homography, logical_jacobian, radial_ambiguity, radial_consistency
+from .lens import LensCalibration, LensModel, fit_lens_homography, radial_ambiguity, radial_consistency
 from .params import AnalyzerParams
 from .region import erode
 
@@ -33,6 +33,8 @@ __all__ = [
     "refit_with_lens",
     "apply_inverse",
     "inverse_jacobian",
+    "logical_coordinates",
+    "logical_jacobian",
 ]
 
 
@@ -579,6 +581,30 @@ def inverse_jacobian(H: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     J[..., 1, 0] = (G[1, 0] - v * G[2, 0]) / w
     J[..., 1, 1] = (G[1, 1] - v * G[2, 1]) / w
     return J
+
+
+def logical_coordinates(H: np.ndarray, lens: LensModel | None, x, y):
+    """``(U, V)`` of the photo's pixels ``(x, y)``: ``H^{-1}`` of their undistorted position, carrier periods."""
+    if lens is not None:
+        x, y = lens.undistort_px(x, y)
+    return apply_inverse(H, x, y)
+
+
+def logical_jacobian(H: np.ndarray, lens: LensModel | None, x, y) -> np.ndarray:
+    """Jacobian ``d(U, V) / d(x, y)`` of :func:`logical_coordinates` (carrier periods per px), ``(..., 2, 2)``.
+
+    With a lens, the chain rule through the undistortion, whose Jacobian is the inverse of
+    the distortion's at the undistorted point.
+    """
+    if lens is None:
+        return inverse_jacobian(H, x, y)
+    xu, yu = lens.undistort_px(x, y)
+    s = lens.scale_px
+    a, b, c, d = lens.distortion.jacobian((xu - lens.center_px[0]) / s, (yu - lens.center_px[1]) / s)
+    det = a * d - b * c
+    Ju = np.empty(np.shape(xu) + (2, 2))
+    Ju[..., 0, 0], Ju[..., 0, 1], Ju[..., 1, 0], Ju[..., 1, 1] = d / det, -b / det, -c / det, a / det
+    return inverse_jacobian(H, xu, yu) @ Ju
 
 
 def _points_spacing(carriers: F.CarrierPair, grid: F.SamplingGrid) -> int:

@@ -49,14 +49,11 @@ __all__ = [
     "LensModel",
     "LensCalibration",
     "fit_lens_homography",
-    "logical_coordinates",
-    "logical_jacobian",
     "radial_ambiguity",
     "radial_profile_discrepancy",
     "radial_consistency",
     "read_camera_file",
     "calibration_from_camera_file",
-    "calibrate_from_photo",
 ]
 
 
@@ -252,34 +249,6 @@ def fit_lens_homography(
     except np.linalg.LinAlgError:
         sigma = {n: float("inf") for n in names}
     return H, lens, sigma, err
-
-
-def logical_coordinates(H: np.ndarray, lens: LensModel | None, x, y):
-    """``(U, V)`` of the photo's pixels ``(x, y)``: ``H^{-1}`` of their undistorted position, carrier periods."""
-    from .homography import apply_inverse
-
-    if lens is not None:
-        x, y = lens.undistort_px(x, y)
-    return apply_inverse(H, x, y)
-
-
-def logical_jacobian(H: np.ndarray, lens: LensModel | None, x, y) -> np.ndarray:
-    """Jacobian ``d(U, V) / d(x, y)`` of :func:`logical_coordinates` (carrier periods per px), ``(..., 2, 2)``.
-
-    With a lens, the chain rule through the undistortion, whose Jacobian is the inverse of
-    the distortion's at the undistorted point.
-    """
-    from .homography import inverse_jacobian
-
-    if lens is None:
-        return inverse_jacobian(H, x, y)
-    xu, yu = lens.undistort_px(x, y)
-    s = lens.scale_px
-    a, b, c, d = lens.distortion.jacobian((xu - lens.center_px[0]) / s, (yu - lens.center_px[1]) / s)
-    det = a * d - b * c
-    Ju = np.empty(np.shape(xu) + (2, 2))
-    Ju[..., 0, 0], Ju[..., 0, 1], Ju[..., 1, 0], Ju[..., 1, 1] = d / det, -b / det, -c / det, a / det
-    return inverse_jacobian(H, xu, yu) @ Ju
 
 
 def radial_ambiguity(residual_px: np.ndarray, dst: np.ndarray, center_px, scale_px: float, noise_px: float,
@@ -495,36 +464,3 @@ def calibration_from_camera_file(path, image_shape: tuple[int, int]) -> LensCali
         )
     f = float(K[0, 0])
     return LensCalibration(LensModel(dist, (float(K[0, 2]), float(K[1, 2])), f), "file", focal_px=f)
-
-
-def calibrate_from_photo(image, *, pitch_mm: float, pattern: str | None = None, params=None,
-                         image_shape: tuple[int, int] | None = None) -> LensCalibration:
-    """The lens from a calibration photo: the same grid without glass, same camera and focus, any pose.
-
-    Block I's self-calibration on a photo without glass, where the whole view is unstrained
-    (:func:`glassdist.analyzer.homography.refit_with_lens`); the ``params.lens_model`` terms
-    are fitted ("radial" when it is "none").
-
-    Raises
-    ------
-    InputError
-        When the photo's size differs from ``image_shape`` (the photos to analyse), or the
-        photo does not pin the lens (its grid does not reach out towards the corners).
-    """
-    from .params import AnalyzerParams, load_params
-    from .pipeline import analyze
-
-    if image_shape is not None and tuple(np.shape(image)[:2]) != tuple(image_shape):
-        h, w = np.shape(image)[:2]
-        raise InputError(f"the calibration photo is {w}x{h} px but the photo is {image_shape[1]}x{image_shape[0]} px; "
-                         "take it with the same camera at the same resolution")
-    p = params if isinstance(params, AnalyzerParams) else load_params(params)
-    if p.lens_model == "none":
-        p = p.model_copy(update={"lens_model": "radial"})
-    res = analyze(image, pitch_mm=pitch_mm, distance_m=1.0, params=p, pattern=pattern)
-    cal = res.homography_fit.lens if res.homography_fit is not None else None
-    if cal is None or not cal.identifiable:
-        why = "too few grid points" if cal is None else cal.note
-        raise InputError(f"the calibration photo does not pin the lens ({why}); photograph the grid filling the view, "
-                         "without glass")
-    return LensCalibration(cal.model, "photo", cal.sigma, True, cal.fit_fraction, cal.rms_px, None, "")

@@ -30,8 +30,8 @@ from ..validation import DISTANCE_M, PITCH_MM, check_number
 from . import deform as D
 from . import fourier as F
 from .bulk import DIRECT_BULK_REASON, BulkChannel, bulk_channel
-from .homography import HomographyFit, fit_grid_homography
-from .lens import LensCalibration, logical_coordinates, logical_jacobian
+from .homography import HomographyFit, fit_grid_homography, logical_coordinates, logical_jacobian
+from .lens import LensCalibration
 from .metrics import (
     detrend_increment, evaluate_displacement, inverse_2x2, masked_gaussian, polynomial_detrend, strain_tensor,
 )
@@ -47,7 +47,7 @@ from .result import AnalysisResult
 from .uncertainty import channel_uncertainty, displacement_sigma, gradient_covariance, noise_std, phase_variance
 from .unwrap import unwrap
 
-__all__ = ["AnalysisResult", "ReferenceModel", "analyze", "prepare_reference"]
+__all__ = ["AnalysisResult", "ReferenceModel", "analyze", "calibrate_from_photo", "prepare_reference"]
 
 log = logging.getLogger(__name__)
 
@@ -831,7 +831,7 @@ def analyze(
         Overrides ``params.sigma_mm``: reporting smoothing scale on the backdrop, mm.
     lens : LensCalibration, optional
         Direct Method: the camera lens's distortion, known beforehand (a calibration photo,
-        :func:`~glassdist.analyzer.lens.calibrate_from_photo`, or a camera file,
+        :func:`calibrate_from_photo`, or a camera file,
         :func:`~glassdist.analyzer.lens.calibration_from_camera_file`); Block I then fits the
         homography through it. None: the lens is fitted from the photo (``params.lens_model``).
 
@@ -1084,3 +1084,33 @@ def _result(meas: _Measurement, evaluated, warn: list[str], *, extra_fields: dic
                    "fit_valid": np.ascontiguousarray(ag.valid),
                    "label_grid": meas.label_grid, "mask": meas.inputs.mask},
     )
+
+
+def calibrate_from_photo(image, *, pitch_mm: float, pattern: str | None = None, params=None,
+                         image_shape: tuple[int, int] | None = None) -> LensCalibration:
+    """The lens from a calibration photo: the same grid without glass, same camera and focus, any pose.
+
+    Block I's self-calibration on a photo without glass, where the whole view is unstrained
+    (:func:`glassdist.analyzer.homography.refit_with_lens`); the ``params.lens_model`` terms
+    are fitted ("radial" when it is "none").
+
+    Raises
+    ------
+    InputError
+        When the photo's size differs from ``image_shape`` (the photos to analyse), or the
+        photo does not pin the lens (its grid does not reach out towards the corners).
+    """
+    if image_shape is not None and tuple(np.shape(image)[:2]) != tuple(image_shape):
+        h, w = np.shape(image)[:2]
+        raise InputError(f"the calibration photo is {w}x{h} px but the photo is {image_shape[1]}x{image_shape[0]} px; "
+                         "take it with the same camera at the same resolution")
+    p = params if isinstance(params, AnalyzerParams) else load_params(params)
+    if p.lens_model == "none":
+        p = p.model_copy(update={"lens_model": "radial"})
+    res = analyze(image, pitch_mm=pitch_mm, distance_m=1.0, params=p, pattern=pattern)
+    cal = res.homography_fit.lens if res.homography_fit is not None else None
+    if cal is None or not cal.identifiable:
+        why = "too few grid points" if cal is None else cal.note
+        raise InputError(f"the calibration photo does not pin the lens ({why}); photograph the grid filling the view, "
+                         "without glass")
+    return LensCalibration(cal.model, "photo", cal.sigma, True, cal.fit_fraction, cal.rms_px, None, "")
