@@ -641,8 +641,8 @@ def _index_html(rows, out, *, figures=True):
                       f'<img id="trend" src="{trend}" alt="per-lot trend" style="max-width:100%">')
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>glassdist batch index</title><style>
-body{{font-family:system-ui,Arial,sans-serif;margin:1.5em}}table{{border-collapse:collapse;max-width:100%}}
-td,th{{border:1px solid #ccc;padding:.2em .4em;text-align:left;vertical-align:middle;font-size:.92em}}
+body{{font-family:system-ui,Arial,sans-serif;margin:1em}}table{{border-collapse:collapse;max-width:100%}}
+td,th{{border:1px solid #ccc;padding:.2em .35em;text-align:left;vertical-align:middle;font-size:.86em}}
 th{{background:#f2f2f2}}td:nth-child(-n+2){{overflow-wrap:anywhere;min-width:7em}}
 img.thumb{{display:block;width:96px;max-width:100%;height:auto}}
 tr.PASS td{{background:#f3fbf4}}tr.FAIL td{{background:#fff0ef}}tr.pending td{{color:#888}}
