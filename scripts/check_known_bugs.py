@@ -41,9 +41,10 @@ BUGS = {
          "det = polynomial_detrend(displacement_mm, labels, max(detrend_degree - 1, 0), step_px)"),
     ],
     "displacement 1.5 % too large": [
-        ("analyzer/pipeline.py", "delta = ag.phases * (p_c / (2 * np.pi))  # grid-frame components, exact",
-         "delta = ag.phases * (1.015 * p_c / (2 * np.pi))"),
-        ("analyzer/pipeline.py", "delta_cam = d_px * mm_per_px", "delta_cam = d_px * (1.015 * mm_per_px)"),
+        ("analyzer/pipeline.py", "return ag.phases * (p_c / (2 * np.pi)), p_c * logical_jacobian(",
+         "return ag.phases * (1.015 * p_c / (2 * np.pi)), p_c * logical_jacobian("),
+        ("analyzer/pipeline.py", "return (proj_px @ np.linalg.inv(M)) * mm_per_px, None",
+         "return (proj_px @ np.linalg.inv(M)) * (1.015 * mm_per_px), None"),
     ],
     "reporting smoothing 25 % wider": [
         ("analyzer/metrics.py", "outs = _smoothed_components(det, labels, sigma_mm / mm_per_px,",
