@@ -441,6 +441,12 @@ def test_coverage_is_of_the_mask_asked_for():
     assert assess(res, None).trusted_percent == pytest.approx(75.0)
     # every measured pixel is trusted here: the measured share is the same number
     assert assess(res, None, mask=mask).measured_percent == pytest.approx(50.0)
+    # the specification's area check judges that same share and names what it is of
+    spec = Spec(name="cover", min_valid_percent=60,
+                criteria=[{"channel": "phi_eff", "statistic": "max_abs", "max_mD": 1e6}])
+    for asked, share, where in ((mask, 50.0, "the mask"), (None, 75.0, "the image")):
+        (check,) = [c for c in assess(res, spec, mask=asked).verdict.checks if c.criterion.startswith("trusted area")]
+        assert check.criterion == f"trusted area >= 60 % of {where}" and check.value == pytest.approx(share)
 
 
 def test_caption_says_clipped_only_beyond_the_colour_limit():

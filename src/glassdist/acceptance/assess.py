@@ -169,7 +169,7 @@ def assess(result, spec=None, *, protocol=None, mask=None, metadata=None, camera
     verdict = None
     if spec is not None:
         verdict = spec_verdict(spec, stats, result, spec_path=loaded.path, spec_sha256=loaded.sha256, zones=zones,
-                                trusted_percent=None if mask is None else trusted)
+                                trusted_percent=trusted, of_mask=mask is not None)
     regions = all_worst_regions(result, frame, spec, channels=REGION_CHANNELS, statistics=stats, limits=limits)
     meta = {k: v for k, v in (metadata or {}).items() if v is not None}
     if camera is not False:

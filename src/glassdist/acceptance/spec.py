@@ -772,7 +772,8 @@ def _protocol_checks(protocol, result):
     return checks
 
 
-def spec_verdict(spec, stats, result, *, spec_path="", spec_sha256="", zones=None, trusted_percent=None):
+def spec_verdict(spec, stats, result, *, spec_path="", spec_sha256="", zones=None, trusted_percent=None,
+                 of_mask=False):
     """Check every criterion of ``spec`` against an analysis whose statistics are already computed.
 
     The engine under :func:`glassdist.acceptance.assess.assess`; from a result alone use
@@ -795,8 +796,12 @@ def spec_verdict(spec, stats, result, *, spec_path="", spec_sha256="", zones=Non
         (see :func:`glassdist.acceptance.zones.zone_statistics`); needed when a criterion
         or a zone limit names a zone.
     trusted_percent : float, optional
-        Trusted share (percent) that ``min_valid_percent`` is checked against; default
-        the share of the image (give the share of the user's mask when one was used).
+        Trusted share (percent) that ``min_valid_percent`` is checked against, as
+        :func:`~glassdist.acceptance.assess.assess` computed it; default the share of the
+        image, computed here.
+    of_mask : bool
+        ``trusted_percent`` is a share of the user's mask (named so in the check), not of
+        the image.
 
     Returns
     -------
@@ -814,7 +819,7 @@ def spec_verdict(spec, stats, result, *, spec_path="", spec_sha256="", zones=Non
             cov = share_percent(measured_region(result))
         else:
             cov = float(trusted_percent)
-        where = "the image" if trusted_percent is None else "the mask"
+        where = "the mask" if of_mask else "the image"
         checks.append(Check(f"trusted area >= {spec.min_valid_percent:g} % of {where}", cov,
                             spec.min_valid_percent, "%", ">=", cov >= spec.min_valid_percent))
     for z in spec.zones:

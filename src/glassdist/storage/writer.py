@@ -94,7 +94,8 @@ def write_outputs(result, out_dir, *, fields="analysis", report=False, export=Fa
     >>> glassdist.write_outputs(res, "out/pane", report=True)           # doctest: +SKIP
     0
     """
-    loaded = as_spec(spec if spec is not None else spec_path) if spec is not None or spec_path is not None else None
+    given = spec if spec is not None else spec_path
+    loaded = as_spec(given) if given is not None else None
     request = RunRequest(fields=fields, report=report, export=export, spec=loaded, protocol=protocol, mask=mask,
                          metadata=dict(metadata or {}), history=history)
     inputs = read_inputs(image_path, reference_path, mask_path, image=image)
