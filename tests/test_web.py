@@ -107,6 +107,20 @@ def _browser(exe):
             browser.close()
 
 
+def _submit(page, url, files: dict, fields: dict, options: dict = ()) -> None:
+    """Open the form at ``url``, attach ``files``, fill ``fields``, pick ``options`` (``{id: value}``), submit, and
+    wait for the verdict."""
+    page.goto(url)
+    for key, path in files.items():
+        page.set_input_files(f"#{key}", str(path))
+    for key, value in fields.items():
+        page.fill(f"#{key}", value)
+    for key, value in dict(options).items():
+        page.select_option(f"#{key}", value)
+    page.click("#submit")
+    page.wait_for_selector("#verdict", timeout=240_000)
+
+
 def test_upload_result_and_report_in_headless_chromium(server, tmp_path):
     exe = _chromium()  # skips without chromium or playwright: checked before anything is imported
     url, _ = server
@@ -204,15 +218,8 @@ def test_reflection_in_headless_chromium(server, tmp_path):
     url, _ = server
     with _browser(exe) as browser:
         page = browser.new_page()
-        page.goto(url)
-        page.set_input_files("#image", str(tmp_path / "pane.png"))
-        page.set_input_files("#reference", str(tmp_path / "flat.png"))
-        page.fill("#pitch_mm", "12")
-        page.fill("#distance_m", "1.997")
-        page.fill("#detrend_degree", "0")
-        page.select_option("#optics", "reflection")
-        page.click("#submit")
-        page.wait_for_selector("#verdict", timeout=240_000)
+        _submit(page, url, {"image": tmp_path / "pane.png", "reference": tmp_path / "flat.png"},
+                {"pitch_mm": "12", "distance_m": "1.997", "detrend_degree": "0"}, {"optics": "reflection"})
         assert "reflective power on the pane" in page.inner_text("#optics")
         summary = page.request.get(page.url + "/files/summary.json").json()
         assert summary["optics"]["optics"] == "reflection"
@@ -282,15 +289,8 @@ def test_history_page_filters_by_lot_shows_the_chart_and_links_kept_jobs(server,
     pane = write_lens_pair(tmp_path)
     with _browser(exe) as browser:
         page = browser.new_page(viewport={"width": 1280, "height": 1000})
-        page.goto(url)
-        page.set_input_files("#image", str(pane / "pane.png"))
-        page.set_input_files("#reference", str(pane / "reference.png"))
-        page.fill("#pitch_mm", "2")
-        page.fill("#distance_m", "1")
-        page.fill("#pane_id", "W-1")
-        page.fill("#lot", "A")
-        page.click("#submit")
-        page.wait_for_selector("#verdict", timeout=240_000)
+        _submit(page, url, {"image": pane / "pane.png", "reference": pane / "reference.png"},
+                {"pitch_mm": "2", "distance_m": "1", "pane_id": "W-1", "lot": "A"})
         job_url = page.url
         page.click("#nav-history")
         assert "9 run(s)" in page.inner_text("#history-count")
