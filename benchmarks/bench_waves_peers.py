@@ -110,15 +110,14 @@ def matched(u: np.ndarray, res) -> np.ndarray:
     """
     import scipy.fft as sfft
 
-    from glassdist.analyzer import deform as D, fourier as F
+    from glassdist.analyzer import deform as D
     from glassdist.analyzer.pipeline import _covariances, _demodulation_blur_px2
     from glassdist.analyzer.transfer import InstrumentTransfer
 
     ks = res.carriers
     blur = _demodulation_blur_px2(ks, _covariances(ks, res.params), res.params)
-    # the demodulation grid's step (B), from the decimation the analysis used
-    fine = F.sampling_grid(u.shape[:2], list(_covariances(ks, res.params)), res.params.decimation)
-    tr = InstrumentTransfer(blur, fine_step_px=fine.step, passes=res.demodulations)
+    # the step (B) of the demodulation grid the analysis measured on (F5 may refine the one pass's)
+    tr = InstrumentTransfer(blur, fine_step_px=res.demodulation_step_px, passes=res.demodulations)
     ph = D.displacement_to_phase(u, ks)
     h, w = u.shape[:2]
     pad = 64

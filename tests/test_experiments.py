@@ -22,9 +22,9 @@ DOCS = REPO / "docs" / "experiments"
 REDUCED = {"scale": 0.5, "spp": 4}
 
 
-def _failed(record: dict, known=()) -> list[str]:
-    """Bounds not met, less the ``known`` ones (keys of ``record["bounds"]``)."""
-    return [f"{b['what']}: {b['value']:.4g}" for k, b in record["bounds"].items() if not b["met"] and k not in known]
+def _failed(record: dict) -> list[str]:
+    """Bounds not met (``record["bounds"]``)."""
+    return [f"{b['what']}: {b['value']:.4g}" for b in record["bounds"].values() if not b["met"]]
 
 
 #: What the reduced runs measured (docs/experiments/README.md, "Reduced versions"): the tests hold
@@ -33,13 +33,13 @@ def _failed(record: dict, known=()) -> list[str]:
 #: method (re-measure, then update the docs and these figures).
 PARITY_HALF = {"ratios": {"phi_eff": 0.9929, "phi_shear": 0.9915, "phi_total": 0.9923}, "scale": 0.9818,
                "rotation_deg": 0.032}
-#: The one bound the half-size pitch run misses, a documented claim with its reason (not a regression
-#: allowance): on the 96.9 mm grid at half size the 160 mm lens spans under two carrier periods and
-#: the Direct phi_shear spread across pitches reads 2.37 % (bound 2 %; the full-size run meets it,
-#: 1.99 %). The test holds the figure to +-0.2 points: more is a regression, less a docs update.
-PITCH_HALF_SPREAD_SHEAR = 0.0276
-PITCH_HALF_DIRECT_VS_EXACT = {"phi_eff": {"coarse": 1.037, "medium": 1.008, "fine": 0.999},
-                              "phi_shear": {"coarse": 1.030, "medium": 0.999, "fine": 1.003}}
+#: The half-size pitch run's Direct phi_shear spread across pitches: 1.32 % since F5 grows into the
+#: strong local frequencies and works on a grid fine enough for them (bound 2 %; it read 2.76 % when F5
+#: kept to the one pass's region and grid, 2.37 % before F5: the 160 mm lens spans under two carrier
+#: periods of the 96.9 mm grid at half size). Held to +-0.2 points: more is a regression, less a docs update.
+PITCH_HALF_SPREAD_SHEAR = 0.0132
+PITCH_HALF_DIRECT_VS_EXACT = {"phi_eff": {"coarse": 1.034, "medium": 1.006, "fine": 1.001},
+                              "phi_shear": {"coarse": 1.020, "medium": 1.008, "fine": 1.004}}
 
 
 @pytest.mark.slow
@@ -69,12 +69,11 @@ def test_pitch_reduced():
 
     Checked on the region common to all runs (each grid's own region differs, and the
     exact truth through the same stack moves by ~3 % with the region alone) and on the
-    interior region (common, at least 3 sigma inside its border), where the bounds are judged. The
-    one bound missed at half size is a documented claim (``PITCH_HALF_SPREAD_SHEAR``).
+    interior region (common, at least 3 sigma inside its border), where the bounds are judged.
     """
     res = run_pitch(**REDUCED)
     rec = res.record
-    assert not _failed(rec, ("spread_direct_phi_shear",)), _failed(rec, ("spread_direct_phi_shear",))
+    assert not _failed(rec), _failed(rec)
     assert rec["bounds"]["spread_direct_phi_shear"]["value"] == pytest.approx(PITCH_HALF_SPREAD_SHEAR, abs=0.002)
     inner = rec["summary"]["interior"]
     assert rec["interior_region_fraction"] > 0.1

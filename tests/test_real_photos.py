@@ -39,14 +39,14 @@ def test_comparative_and_direct_agree_on_waves(real_data):
     assert (c.valid & d.valid).mean() > 0.6
     v = c.trusted & d.trusted  # compared where statistics are taken (outside the guard band)
     assert v.mean() > 0.4
-    # README ("Accuracy"): correlation 0.997 / 0.998 (measured 0.9974 / 0.9983); mean |phi| of the
-    # Direct Method 3.4 % above the Comparative on phi_eff (measured 1.0342) and 3.6 % on phi_shear
-    # (1.0359), with F5's converged output and the Comparative's A1 Jacobian through the lens Block I
-    # fits on the glass-less reference (2.8 % / 1.2 % with a pinhole's and F5's smoothed prediction,
-    # 1.7 % / 0.04 % before F5). Both runs are
+    # README ("Accuracy"): correlation 0.998 / 0.998 (measured 0.9983 / 0.9986); mean |phi| of the
+    # Direct Method 1.9 % above the Comparative on phi_eff (measured 1.0190) and on phi_shear (1.0192),
+    # with F5 grown into the rings' steep flanks on its finer grid (3.4 % / 3.6 % when F5 kept to the
+    # one pass's region and grid; 1.7 % / 0.04 % before F5), the Comparative's A1 Jacobian through
+    # the lens Block I fits on the glass-less reference. Both runs are
     # deterministic on the same photo; the margins (0.3 points) allow for platform differences of
     # the FFT and the unwrapper, not for a change of method (re-measure and update the README).
-    for ch, ratio in (("phi_eff_mD", 1.0342), ("phi_shear_mD", 1.0359)):
+    for ch, ratio in (("phi_eff_mD", 1.0190), ("phi_shear_mD", 1.0192)):
         a, b = getattr(c, ch)[v], getattr(d, ch)[v]
-        assert np.corrcoef(a, b)[0, 1] > 0.996, ch
+        assert np.corrcoef(a, b)[0, 1] > 0.998, ch
         assert np.mean(np.abs(b)) / np.mean(np.abs(a)) == pytest.approx(ratio, abs=0.003), ch

@@ -15,6 +15,16 @@ PIV; Huang et al. 1993 in fringe analysis) removes the cause:
    cancels and the heterodyne is the residual ``phi - pred``, small and measured linearly;
 4. ``pred += residual``; repeat until the RMS update is below ``deformation_tolerance_periods``.
 
+Growth. The one pass leaves out where its bandpass clipped the local grid (steep flanks of
+strong waves, labelled beyond measurable distortion). F5 grows its measured region into them a
+carrier period per pass (:func:`grow`): a sample joins where its residual against the reference
+warped by the nearest measured prediction is coherent, small (the prediction is within a
+fraction of a turn, so no whole period is lost) and the photo shows a grid there; it never
+crosses a one-pass phase residue (a singularity of the grid itself). Each grown sample is then
+measured like the others, and the final region is judged on the converged residual. Where the
+one pass's grid is too coarse for the reach (:func:`deformation_grid`), F5 works on one with
+twice its samples along each axis, so steep flanks do not alias into phase residues.
+
 The phase handed on is ``pred + residual``: the filters' Gaussian ``G`` acts on the residual
 only. In the linear regime each pass measures ``G (true - B pred)`` (``B`` the bilinear
 interpolation by which the warped reference receives the prediction), so after ``n``
@@ -36,7 +46,14 @@ from scipy import ndimage
 
 from . import fourier as F
 
-__all__ = ["phase_to_displacement_px", "displacement_to_phase", "fill_nearest", "warped_reference"]
+__all__ = [
+    "deformation_grid", "displacement_to_phase", "fill_nearest", "grow", "phase_to_displacement_px", "to_grid",
+    "warped_reference",
+]
+
+# A sample joins the measured region only where its wrapped residual is the true one with a
+# margin for noise (|residual| well below pi, per carrier), rad.
+GROWTH_MAX_RESIDUAL_RAD = 1.0
 
 
 def _frequency_matrix(carriers: F.CarrierPair) -> np.ndarray:
@@ -66,12 +83,71 @@ def fill_nearest(a: np.ndarray, valid: np.ndarray) -> np.ndarray:
     return a[idx[0], idx[1]]
 
 
+def deformation_grid(grid: F.SamplingGrid, max_deviation: float, period_px: float, decimation) -> F.SamplingGrid:
+    """The demodulation grid F5 works on: ``grid``, or one with twice its samples along each axis where the reach needs it.
+
+    A local frequency ``max_deviation * |f|`` off the carrier turns the phase by
+    ``2 pi max_deviation step / period`` per sample; near ``pi`` the samples alias it (phase
+    residues on steep flanks). Where the step exceeds ``period / (4 max_deviation)`` (a quarter
+    turn per sample, ``period_px`` the shorter carrier period), F5 halves it: its ``2 x 2``
+    blocks are then the one pass's samples, and the Block A grid is the same. A user-set
+    ``decimation`` is kept.
+    """
+    if decimation != "auto" or max(grid.step) <= period_px / (4.0 * max_deviation) or grid.is_full:
+        return grid
+    H, W = grid.full_shape
+    h, w = grid.shape
+    return F.SamplingGrid(grid.full_shape, (min(2 * h, H // 4 * 4), min(2 * w, W // 4 * 4)))
+
+
+def to_grid(a: np.ndarray, src: F.SamplingGrid, dst: F.SamplingGrid, *, nearest: bool = False) -> np.ndarray:
+    """``a`` (h, w[, c]) on ``src`` resampled onto ``dst`` (same image), bilinear or nearest sample.
+
+    Both grids put sample ``i`` at ``(i + 1/2) step - 1/2`` px (:class:`~glassdist.analyzer.fourier.SamplingGrid`).
+    """
+    if src.shape == dst.shape:
+        return a
+    yy, xx = dst.coords()
+    (oy, ox), (sy, sx) = src.offset, src.step
+    fy, fx = (yy[:, 0] - oy) / sy, (xx[0] - ox) / sx
+    if nearest:
+        iy = np.clip(np.rint(fy).astype(int), 0, src.shape[0] - 1)
+        ix = np.clip(np.rint(fx).astype(int), 0, src.shape[1] - 1)
+        return a[iy[:, None], ix[None, :]]
+    y0 = np.clip(np.floor(fy).astype(int), 0, src.shape[0] - 2)
+    x0 = np.clip(np.floor(fx).astype(int), 0, src.shape[1] - 2)
+    ty = np.clip(fy - y0, 0.0, 1.0).astype(np.float32)[:, None]
+    tx = np.clip(fx - x0, 0.0, 1.0).astype(np.float32)[None, :]
+    if a.ndim == 3:
+        ty, tx = ty[..., None], tx[..., None]
+    top = a[y0][:, x0] * (1 - tx) + a[y0][:, x0 + 1] * tx
+    bottom = a[y0 + 1][:, x0] * (1 - tx) + a[y0 + 1][:, x0 + 1] * tx
+    return (top * (1 - ty) + bottom * ty).astype(a.dtype)
+
+
+def grow(measured: np.ndarray, coherent: np.ndarray, residual: np.ndarray, grid: F.SamplingGrid, reach_px: float) -> np.ndarray:
+    """Samples that join the measured region in this pass (bool (h, w)).
+
+    Within ``reach_px`` of ``measured``, coherent, and with a wrapped residual (h, w, 2) below
+    :data:`GROWTH_MAX_RESIDUAL_RAD` on both carriers: there the prediction (the nearest
+    measured one) is within a fraction of a turn of the field, so ``prediction + residual``
+    continues the measured phase without a whole-period jump, and the next pass measures
+    against a reference warped by it.
+    """
+    if measured.all() or not measured.any():
+        return np.zeros_like(measured)
+    near = ndimage.distance_transform_edt(~measured, sampling=grid.step) <= reach_px
+    small = np.all(np.abs(residual) < GROWTH_MAX_RESIDUAL_RAD, axis=-1)
+    return near & coherent & small & ~measured
+
+
 def warped_reference(pred: np.ndarray, own: np.ndarray | None, grid: F.SamplingGrid, carriers: F.CarrierPair) -> np.ndarray:
     """The reference grid warped by the current displacement, as its two carriers (float32, full resolution).
 
-    ``sum_i cos(2 pi f_i . r + pred_i(r) + own_i(r))``: ``pred`` (h, w, 2) on ``grid`` (rad,
+    ``sum_i cos(2 pi f_i . r + pred_i(r) + own_i(r))``: ``pred`` (h, w, 2) (rad,
     continuous: the prediction) and ``own`` (h, w, 2) complex, the reference photo's own
-    baseband ``exp(i own_i)`` (None: the flat carrier of the Direct Method), both brought to
+    baseband ``exp(i own_i)`` (None: the flat carrier of the Direct Method), each on a grid of
+    ``grid``'s image (their own sample counts: F5 may work on a finer grid than the reference's), both brought to
     the pixels by ``cv2.resize`` (bilinear: it maps the grid's sample positions exactly; its
     transfer, ``sinc^2`` per axis, is the ``B`` of the output's transfer in the module notes;
     the reference's phase is interpolated as a phasor, so its

@@ -109,9 +109,15 @@ class AnalyzerParams(BaseModel):
     )
     deformation_passes: int = Field(
         3, ge=0, le=8,
-        description="F5: largest number of image-deformation passes (a reference warped by the current displacement is "
-        "synthesised and the photo's residual against it demodulated, so the bandpass sees the local grid at the "
-        "carrier); 0 = one-pass demodulation",
+        description="F5: largest number of image-deformation passes once the measured region stops growing (a reference "
+        "warped by the current displacement is synthesised and the photo's residual against it demodulated, so the "
+        "bandpass sees the local grid at the carrier); 0 = one-pass demodulation",
+    )
+    deformation_growth_passes: int = Field(
+        6, ge=0, le=16,
+        description="F5: largest number of passes that may grow the measured region beyond the one-pass region, one "
+        "carrier period per pass, into samples whose residual against the warped reference is small and coherent "
+        "(strong local frequencies the one-pass bandpass clipped); 0 = F5 stays within the one-pass region",
     )
     deformation_min_deviation: float = Field(
         0.2, ge=0, le=1.0,

@@ -39,8 +39,8 @@ from .transfer import InstrumentTransfer
 from .params import AnalyzerParams, load_params
 from .pattern import settle_pattern
 from .region import (
-    ANALYSED, BEYOND_RANGE, LOW_MODULATION, Region, beyond_range_warning, contamination_px, downsample_mask, guard_band,
-    local_contrast, trim_edges, valid_region, within,
+    ANALYSED, BEYOND_RANGE, FRAGMENT, LOW_MODULATION, PHASE_RESIDUE, Region, beyond_range_warning, contamination_px,
+    downsample_mask, grid_seen, guard_band, local_contrast, trim_edges, valid_region, within,
 )
 from .resample import image_grid_valid
 from .result import AnalysisResult
@@ -289,6 +289,20 @@ class _AnalysisGrid:
     passes: int = 1  # demodulations the phases sum (F5)
 
 
+@dataclass(frozen=True)
+class _F5:
+    """F5's outcome: its demodulation, residual phases, modulations over the bandpass gain, the samples beyond
+    reach, the region its predictor was measured on (one-pass labels elsewhere) and the samples it grew (all on
+    ``demod.grid``)."""
+
+    demod: _Demodulation
+    residual: list
+    region_mods: list
+    beyond: np.ndarray
+    measured: Region
+    grown: np.ndarray
+
+
 # --------------------------------------------------------------------------- stages
 
 
@@ -375,41 +389,66 @@ def _region(demod: _Demodulation, p: AnalyzerParams, mask, warn: list[str], marg
 
 
 def _follow_local_grid(img, refm: ReferenceModel | None, demod: _Demodulation, region: Region, phases: np.ndarray,
-                       p: AnalyzerParams):
+                       p: AnalyzerParams, contrast):
     """F5: iterative deformation of the reference (:mod:`~glassdist.analyzer.deform`).
 
     Returns None when no pass is needed (``deformation_passes`` 0, or the one-pass local
-    frequency within ``deformation_min_deviation`` of the carrier), else the demodulation
-    whose phase is ``predictor + residual`` (its ``passes``: the demodulations summed, the
-    one-pass one included; transfer in :mod:`~glassdist.analyzer.transfer`) and the residual
-    phases (wrapped, rad), whose local frequency is what the bandpass was left with.
+    frequency within ``deformation_min_deviation`` of the carrier), else an :class:`_F5`: the
+    demodulation whose phase is ``predictor + residual`` (its ``passes``: the demodulations
+    summed, the one-pass one included; transfer in :mod:`~glassdist.analyzer.transfer`), on a
+    grid fine enough for the reach (:func:`~glassdist.analyzer.deform.deformation_grid`), and
+    the region the predictor was measured on: the one-pass region grown by up to
+    ``deformation_growth_passes`` passes (:func:`~glassdist.analyzer.deform.grow`), then up to
+    ``deformation_passes`` passes to converge. ``contrast(grid)``: the photo's local contrast on
+    ``grid`` (:func:`~glassdist.analyzer.region.local_contrast`); the growth enters only where it
+    shows a grid (:func:`~glassdist.analyzer.region.grid_seen`).
     """
     ks = demod.carriers
     if p.deformation_passes == 0 or img is None or region.n == 0:
         return None
     if _frequency_deviation(phases, region.valid, (ks.k1, ks.k2), demod.grid.step) <= p.deformation_min_deviation:
         return None
-    grid, covs = demod.grid, demod.covariances
+    covs = demod.covariances
     period = max(ks.k1.period_px, ks.k2.period_px)
+    grid = D.deformation_grid(demod.grid, p.deformation_max_deviation, min(ks.k1.period_px, ks.k2.period_px), p.decimation)
     own = None if refm is None else np.stack(refm.baseband, axis=-1)  # the reference's own phase (its lens, its print)
     bb_img = _basebands(F.compute_spectrum(img), ks, covs, grid)
-    pred = D.fill_nearest(np.nan_to_num(phases), region.valid)
-    for k in range(p.deformation_passes):
+    pred = D.to_grid(D.fill_nearest(np.nan_to_num(phases), region.valid), demod.grid, grid)
+    measured = D.to_grid(region.valid, demod.grid, grid, nearest=True)
+    first = D.to_grid(region.quality, demod.grid, grid, nearest=True)
+    # A phase residue of the one pass is a singularity of the grid itself (a dislocation, a tear), not a
+    # frequency the bandpass clipped: no continuous prediction crosses it, so the growth goes around it.
+    growable = first != PHASE_RESIDUE
+    if p.deformation_growth_passes > 0:
+        growable &= grid_seen(contrast(grid), measured, period, grid)
+    grown = np.zeros_like(measured)
+    growth_left, converging, k = p.deformation_growth_passes, 0, 0
+    while True:
+        k += 1
         ref_w = D.warped_reference(pred, own, grid, ks)
         bb_ref = _basebands(F.compute_spectrum(ref_w), ks, covs, grid)
         del ref_w
         zs, cohs = _smooth_with_coherence(tuple(b * np.conj(r) for b, r in zip(bb_img, bb_ref)), (ks.k1, ks.k2), grid, p)
         res = np.stack([np.angle(z) for z in zs], axis=-1)
-        ok = np.all([c_ > p.coherence_threshold for c_ in cohs], axis=0) & region.valid
+        coherent = np.all([c_ > p.coherence_threshold for c_ in cohs], axis=0)
+        ok = coherent & measured
         step = float(np.sqrt(np.mean(np.sum(D.phase_to_displacement_px(res[ok], ks) ** 2, axis=-1)))) / period if ok.any() else 0.0
-        log.debug("F5 pass %d: RMS update %.4f period", k + 1, step)
-        if step < p.deformation_tolerance_periods or k == p.deformation_passes - 1:
+        new = D.grow(measured, coherent & growable, res, grid, period) if growth_left > 0 else np.zeros_like(measured)
+        growth_left = growth_left - 1 if new.any() else 0
+        converging += 0 if new.any() else 1
+        log.debug("F5 pass %d: RMS update %.4f period, %d samples grown", k, step, int(new.sum()))
+        if not new.any() and (step < p.deformation_tolerance_periods or converging >= p.deformation_passes):
             break
-        pred = pred + D.fill_nearest(np.where(ok[..., None], res, 0.0), ok)
+        upd = ok | new
+        measured |= new
+        grown |= new
+        pred = pred + D.fill_nearest(np.where(upd[..., None], res, 0.0), upd)
     # The last residual was measured against the reference warped by pred: phi = pred + residual,
     # the converged field (the filters' Gaussian acts on the residual only; after n demodulations
     # the linear transfer is (1 - (1 - G B)^n) / B, transfer.InstrumentTransfer).
     total = [(np.abs(z) * np.exp(1j * (np.angle(z) + pred[..., i]))).astype(np.complex64) for i, z in enumerate(zs)]
+    mods = [_modulation(b, c.period_px, grid, p) for b, c in zip(bb_img, (ks.k1, ks.k2))]
+    mods += [D.to_grid(m_, demod.grid, grid) for m_ in demod.mods[2:]]
     # The bandpass's gain at the local frequency, read off the warped reference (a uniform grid
     # of amplitude 1/2 per carrier): the photo's modulation is judged against it (a faint grid where the gain
     # explains it is not occluded), and where the gain is below its value at
@@ -417,9 +456,10 @@ def _follow_local_grid(img, refm: ReferenceModel | None, demod: _Demodulation, r
     gain = [_modulation(r, c.period_px, grid, p) / np.float32(0.5) for r, c in zip(bb_ref, (ks.k1, ks.k2))]
     floor = float(np.exp(-0.5 * (p.deformation_max_deviation / p.bandpass_sigma_along) ** 2))
     beyond = np.any([g_ < floor for g_ in gain], axis=0)
-    region_mods = [m_ / np.maximum(g_, floor) for m_, g_ in zip(demod.mods[:2], gain)] + list(demod.mods[2:])
-    out = _Demodulation(demod.method, ks, covs, grid, tuple(total), cohs, demod.mods, demod.noise_std, passes=k + 2)
-    return out, list(res.transpose(2, 0, 1)), region_mods, beyond
+    region_mods = [m_ / np.maximum(g_, floor) for m_, g_ in zip(mods[:2], gain)] + mods[2:]
+    out = _Demodulation(demod.method, ks, covs, grid, tuple(total), cohs, mods, demod.noise_std, passes=k + 1)
+    return _F5(out, list(res.transpose(2, 0, 1)), region_mods, beyond, Region(measured, measured.astype(np.int32), 1, first),
+               grown)
 
 
 def _warn_sampling(carriers: F.CarrierPair, warn: list[str]) -> None:
@@ -944,31 +984,35 @@ def _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn
     _warn_sampling(carriers, warn)
     margins = _margins(carriers, demod.covariances, p, direct=demod.method == "direct")
     first: list[str] = []
-    held: list = []
+    held: dict = {}
 
-    def contrast():  # the photo's local contrast, computed once and only when an exclusion needs its cause
-        if not held:
-            held.append(local_contrast(inp.image, max(carriers.k1.period_px, carriers.k2.period_px), demod.grid))
-        return held[0]
+    def contrast(grid=demod.grid):  # the photo's local contrast, computed once per grid, only when an exclusion needs its cause
+        if grid.shape not in held:
+            held[grid.shape] = local_contrast(inp.image, max(carriers.k1.period_px, carriers.k2.period_px), grid)
+        return held[grid.shape]
 
     region = _region(demod, p, inp.mask, first, margins, contrast=contrast)
     _check_region(region, demod.mods, first)
     phases = _unwrapped_phases(demod, region, p)  # F4
-    followed = _follow_local_grid(inp.image, inp.reference, demod, region, phases, p)  # F5
-    if followed is not None:
+    f5 = _follow_local_grid(inp.image, inp.reference, demod, region, phases, p, contrast)  # F5
+    if f5 is not None:
         f5_warn: list[str] = []
-        f5_demod, residual, region_mods, beyond = followed
-        f5_region = within(_region(f5_demod, p, inp.mask, f5_warn, margins, residual, region_mods, beyond, contrast),
-                           region, p)
+        f5_region = within(_region(f5.demod, p, inp.mask, f5_warn, margins, f5.residual, f5.region_mods, f5.beyond,
+                                   lambda: contrast(f5.demod.grid)), f5.measured, p)
         if f5_region.n == 0:  # nothing F5 could measure: the one pass stands
-            followed = None
-    if followed is None:
+            f5 = None
+    if f5 is None:
         warn.extend(first)
     else:
-        # Where the one-pass local frequency was already beyond the bandpass, F5 had no predictor
-        # to follow: what it still cannot measure there is beyond reach, not occluded.
-        f5_region.quality[(f5_region.quality == LOW_MODULATION) & (region.quality == BEYOND_RANGE)] = BEYOND_RANGE
-        demod, region = f5_demod, f5_region
+        # Where the one-pass local frequency was already beyond the bandpass, what F5 still cannot
+        # measure there (no predictor to follow, or one that ran out of reach) is beyond reach: neither occluded,
+        # a residue of the grid itself nor a stray fragment.
+        lost = np.isin(f5_region.quality, (LOW_MODULATION, PHASE_RESIDUE, FRAGMENT)) & (f5.measured.quality == BEYOND_RANGE)
+        # A sample F5 grew into showed a coherent grid: where its modulation then fails, the bandpass's gain
+        # at its local frequency does, not an occlusion.
+        lost |= (f5_region.quality == LOW_MODULATION) & f5.grown
+        f5_region.quality[lost] = BEYOND_RANGE
+        demod, region = f5.demod, f5_region
         warn.extend(f5_warn)
         _check_region(region, demod.mods, warn)
         phases = _unwrapped_phases(demod, region, p)
@@ -1073,6 +1117,7 @@ def _result(meas: _Measurement, evaluated, warn: list[str], *, extra_fields: dic
         params=p,
         warnings=tuple(warn),
         sampling_step_px=ag.grid.step,
+        demodulation_step_px=meas.label_grid.step,
         effective_sigma_mm=meas.sigma_mm if ag.transfer is None else ag.transfer.effective_sigma_px(meas.sigma_mm / meas.mm_per_px) * meas.mm_per_px,
         n_regions=meas.n_regions if n_regions is None else n_regions,
         demodulations=ag.passes,

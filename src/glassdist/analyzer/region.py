@@ -70,11 +70,13 @@ __all__ = [
     "EXCLUDED",
     "Region",
     "valid_region",
+    "grid_seen",
     "contamination_px",
     "local_contrast",
     "beyond_range_warning",
     "local_frequency_deviation",
     "erode",
+    "grid_seen",
     "guard_band",
     "within",
     "pixel_quality",
@@ -347,12 +349,21 @@ def _grid_out_of_band(contrast, mods, ok: np.ndarray, p, period: float, grid: F.
         weak |= m < p.modulation_threshold * np.percentile(m[::2, ::2], 75)
     if not weak.any():
         return weak
-    contrast = contrast()
+    return weak & grid_seen(contrast(), ok, period, grid)
+
+
+def grid_seen(contrast: np.ndarray, ok: np.ndarray, period: float, grid: F.SamplingGrid) -> np.ndarray:
+    """Samples where the photo shows a grid at whatever local frequency: half its typical detail or more.
+
+    ``contrast`` from :func:`local_contrast`, the typical level its median over ``ok`` (the
+    measured samples); within a period of a flat patch (a quarter of the typical detail or less:
+    an occluder, blank or blurred) the detail is its edge's, not a grid's.
+    """
     typical = float(np.median(contrast[ok]))
     flat = contrast < 0.25 * typical
     if flat.any():
         flat = ndimage.distance_transform_edt(~flat, sampling=grid.step) <= period
-    return weak & (contrast > 0.5 * typical) & ~flat
+    return (contrast > 0.5 * typical) & ~flat
 
 
 def _excluded_causes(ok: np.ndarray, fast: np.ndarray, period: float, grid: F.SamplingGrid) -> np.ndarray:
@@ -483,12 +494,14 @@ def _without_residues(phases, valid: np.ndarray, labels: np.ndarray, warn: list[
 
 
 def within(region: Region, first: Region, p) -> Region:
-    """``region`` restricted to ``first``'s measured samples (F5's region, within the one-pass region).
+    """``region`` restricted to ``first``'s measured samples (F5's region, within the region its predictor was measured on).
 
-    F5 measures the residual against a reference warped by the one-pass phase; where the one
-    pass had no phase (beyond reach, a gap between regions) the predictor is a guess whose
-    whole periods nothing can check, so those samples stay excluded, with the one pass's
-    label. Connected parts are labelled anew (:func:`~glassdist.analyzer.unwrap.label_regions`).
+    F5 measures the residual against a reference warped by its prediction; the prediction is
+    measured on the one-pass region and on the samples F5 grew it into, a period at a time
+    (:func:`~glassdist.analyzer.deform.grow`). Elsewhere (beyond reach, a gap the growth did
+    not close) the predictor is a guess whose whole periods nothing can check, so those samples
+    stay excluded, with ``first``'s label (the one pass's). Connected parts are labelled anew
+    (:func:`~glassdist.analyzer.unwrap.label_regions`).
     """
     valid = region.valid & first.valid
     quality = region.quality.copy()
@@ -546,8 +559,9 @@ def pixel_quality(quality: np.ndarray, grid: F.SamplingGrid, valid: np.ndarray, 
     """The quality labels on the image's pixel grid, consistent with the reported region ``valid``.
 
     Nearest-sample upsampling; unreported pixels within ``edge_px`` of the image edge are
-    image edge, pixels the reported region trims elsewhere low modulation (partial blocks,
-    non-finite values), pixels it adds
+    image edge, pixels the reported region trims elsewhere (partial blocks next to an excluded
+    area, non-finite values) take the label of the nearest excluded sample, the cause of the
+    trim (low modulation where none is), pixels it adds
     (its border ring) guard band, and pixels outside the user mask user mask.
     """
     from .resample import upsample_labels
@@ -555,7 +569,12 @@ def pixel_quality(quality: np.ndarray, grid: F.SamplingGrid, valid: np.ndarray, 
     q = upsample_labels(quality, grid)
     reported = (q == ANALYSED) | (q == GUARD_BAND)
     trimmed = ~valid & reported
-    q[trimmed] = LOW_MODULATION
+    excluded = np.isin(quality, EXCLUDED)
+    if trimmed.any() and excluded.any():
+        iy, ix = ndimage.distance_transform_edt(~excluded, return_distances=False, return_indices=True)
+        q[trimmed] = upsample_labels(quality[iy, ix], grid)[trimmed]
+    else:
+        q[trimmed] = LOW_MODULATION
     if edge_px > 0:
         q[~valid & _edge_pixels(q.shape, edge_px)] = IMAGE_EDGE
     q[valid & ~reported] = GUARD_BAND

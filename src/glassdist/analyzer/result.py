@@ -149,6 +149,10 @@ class AnalysisResult:
     version : str
     sampling_step_px : (float, float)
         Spacing of the analysis grid, px.
+    demodulation_step_px : (float, float)
+        Spacing of the demodulation grid the phases were measured on, px (F5 refines the
+        one pass's grid where the strong local frequencies need it:
+        :func:`~glassdist.analyzer.deform.deformation_grid`); the ``B`` of the transfer.
     n_regions : int
         Connected parts of the valid region (analysed independently).
     captures : tuple of dict
@@ -190,6 +194,7 @@ class AnalysisResult:
     warnings: tuple[str, ...]
     version: str = __version__
     sampling_step_px: tuple[float, float] = (1.0, 1.0)
+    demodulation_step_px: tuple[float, float] = (1.0, 1.0)
     n_regions: int = 1
     captures: tuple = ()
     margin_px: tuple[float, float] = (0.0, 0.0)
@@ -367,6 +372,7 @@ class AnalysisResult:
             "noise_std": {"image": self.noise_std[0], "reference": self.noise_std[1]},
             "n_regions": self.n_regions,
             "sampling_step_px": list(self.sampling_step_px),
+            "demodulation_step_px": list(self.demodulation_step_px),
             "statistics": self.statistics() if statistics is None else statistics,
             # the smoothing actually used (the default, null, means 2 carrier periods)
             "parameters": {**self.params.resolved(), "sigma_mm": self.sigma_mm},
