@@ -96,3 +96,45 @@ def test_phase_and_displacement_conversions_are_inverse_and_signed():
     # The photo's carrier phase at r is the reference's at r - u: phi_i = -2 pi f_i . u.
     assert np.allclose(ph[..., 0], -2 * np.pi * (0.1 * u[..., 0] + 0.02 * u[..., 1]))
     assert np.allclose(D.phase_to_displacement_px(ph, pair), u)
+
+
+def test_to_grid_keeps_sample_positions():
+    # A plane a = 2 y - 0.5 x (px) sampled on one grid reads the same plane on another, between
+    # the source's outer samples (bilinear); nearest takes the source sample nearest in position.
+    src = F.SamplingGrid((256, 384), (64, 96))  # step 4
+    dst = F.SamplingGrid((256, 384), (128, 192))  # step 2
+    ys, xs = src.coords()
+    yd, xd = dst.coords()
+    a = (2 * ys - 0.5 * xs).astype(np.float32)
+    out = D.to_grid(a, src, dst)
+    inner = (yd >= ys.min()) & (yd <= ys.max()) & (xd >= xs.min()) & (xd <= xs.max())
+    assert np.allclose(out[inner], (2 * yd - 0.5 * xd)[inner], atol=1e-3)
+    near = D.to_grid(a, src, dst, nearest=True)
+    iy = np.clip(np.rint((yd - src.offset[0]) / src.step[0]), 0, 63).astype(int)
+    ix = np.clip(np.rint((xd - src.offset[1]) / src.step[1]), 0, 95).astype(int)
+    assert np.array_equal(near, a[iy, ix])
+    assert np.all(np.abs(ys[iy, ix] - yd) <= src.step[0] / 2 + 1e-9)
+
+
+def test_deformation_grid_halves_the_step_only_where_the_reach_needs_it():
+    # A quarter turn per sample at the reach: step <= period / (4 * 0.75) = period / 3.
+    g = F.SamplingGrid((1024, 1024), (252, 252))  # step 4.06 px
+    fine = D.deformation_grid(g, 0.75, 9.79, "auto")  # 9.79 / 3 = 3.26 < 4.06
+    assert fine.shape == (504, 504) and fine.step[0] == pytest.approx(g.step[0] / 2)
+    assert D.deformation_grid(g, 0.75, 12.5, "auto") is g  # 12.5 / 3 = 4.17 >= 4.06
+    assert D.deformation_grid(g, 0.75, 9.79, 4) is g  # a user-set decimation is kept
+
+
+def test_growth_takes_coherent_small_residuals_within_reach_only():
+    g = F.SamplingGrid((64, 64), (32, 32))  # step 2 px
+    measured = np.zeros((32, 32), bool)
+    measured[:, :10] = True
+    coherent = np.ones((32, 32), bool)
+    coherent[:16, 10:] = False  # upper half: no coherent grid beyond the region
+    res = np.zeros((32, 32, 2))
+    res[16:24, 11, 0] = 1.5  # a residual over 1 rad on one carrier: its whole period is not safe
+    new = D.grow(measured, coherent, res, g, reach_px=4.0)  # two samples of 2 px
+    assert set(np.nonzero(new.any(axis=0))[0]) == {10, 11}  # within reach of the region only
+    assert not new[:16].any()  # never where the grid is not coherent
+    assert new[16:, 10].all() and new[24:, 11].all() and not new[16:24, 11].any()
+    assert not (new & measured).any()

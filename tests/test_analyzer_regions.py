@@ -62,3 +62,20 @@ def test_compare_with_scene_detrends_the_truth_on_the_fit_region(tmp_path):
     # the model's channels exist only where it was detrended: on the fit region, not on the ring
     finite = np.isfinite(val.analytical.phi_eff_mD)
     assert finite.any() and not (finite & ~res.detrend_region).any()
+
+
+def test_trimmed_pixels_take_the_cause_of_their_trim():
+    from glassdist.analyzer import fourier as F
+    from glassdist.analyzer.region import ANALYSED, BEYOND_RANGE, LOW_MODULATION, pixel_quality
+
+    grid = F.SamplingGrid((32, 32), (8, 8))  # 4 px per sample
+    q = np.full((8, 8), ANALYSED, np.uint8)
+    q[:, 6:] = BEYOND_RANGE
+    valid = np.zeros((32, 32), bool)
+    valid[:, :20] = True  # the reported region stops a sample short of the beyond-range area
+    out = pixel_quality(q, grid, valid)
+    assert (out[:, 20:24] == BEYOND_RANGE).all()  # trimmed next to it: the same cause
+    assert (out[:, :20] == ANALYSED).all() and (out[:, 24:] == BEYOND_RANGE).all()
+    # with no excluded sample anywhere, a trimmed pixel is low modulation (non-finite values)
+    out = pixel_quality(np.full((8, 8), ANALYSED, np.uint8), grid, valid)
+    assert (out[:, 20:] == LOW_MODULATION).all()
