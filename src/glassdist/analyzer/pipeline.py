@@ -443,6 +443,12 @@ def _follow_local_grid(img, refm: ReferenceModel | None, demod: _Demodulation, r
         measured |= new
         grown |= new
         pred = pred + D.fill_nearest(np.where(upd[..., None], res, 0.0), upd)
+    # A grown sample started from its neighbours' prediction, not from the one pass's G-smoothed phase, so the
+    # documented transfer holds for it only once it has converged: kept where its last update is small.
+    late = grown & (np.sqrt(np.sum(D.phase_to_displacement_px(res, ks) ** 2, axis=-1)) / period
+                    > D.GROWTH_MAX_LAST_UPDATE_PERIODS)
+    measured &= ~late
+    grown &= ~late
     # The last residual was measured against the reference warped by pred: phi = pred + residual,
     # the converged field (the filters' Gaussian acts on the residual only; after n demodulations
     # the linear transfer is (1 - (1 - G B)^n) / B, transfer.InstrumentTransfer).
