@@ -35,6 +35,16 @@ the image's and the reference's. Near region borders the first-order normalised
 convolution averages fewer samples than the formula assumes (the uncertainty there is
 larger; those pixels are in the guard band of the quality map).
 
+Not included: the Direct Method's baseline (Block I's homography) moves with the noise
+too. Its change is affine plus two projective terms; the detrend removes the affine part,
+and at degree 1 the projective terms' strain remains, a plane in phi_eff. On a strongly
+distorted view that motion is set by Block I's discrete choices (RANSAC's consensus, the
+samples called undistorted, the winning candidate), not by a linear propagation of the
+phase noise, and it is not predicted here: at strain 0.31 and degree 1 the scatter of
+phi_eff over repeated captures reads 1.3-2.3 times the predicted sigma on 320 x 400 px
+(noise 0.06-0.01; 2.9-3.8 on 256 x 320 px; ``benchmarks/uncertainty_strong.py``,
+``docs/transfer_function.md``).
+
 References
 ----------
 Paper §2.2 (F1-F3, A2-A3). Takeda et al. (1982) for the demodulation; the noise of a
