@@ -50,7 +50,9 @@ REPO = Path(__file__).resolve().parents[1]
 MODULES = {
     "fourier": ("analyzer/fourier.py", ["tests/test_analyzer_fourier.py", "tests/test_accuracy_truth.py",
                                        "tests/test_adversarial_limits.py::test_a_grid_finer_than_3_px_is_refused"]),
-    "deform": ("analyzer/deform.py", ["tests/test_analyzer_deform.py", "tests/test_accuracy_truth.py"]),
+    "deform": ("analyzer/deform.py", ["tests/test_analyzer_deform.py", "tests/test_accuracy_truth.py",
+                                     "tests/test_analyzer_quality.py::test_every_label_has_its_cause",
+                                     "tests/test_real_photos.py::test_waves_field_explains_the_photo_and_agrees_with_fcd"]),
     "unwrap": ("analyzer/unwrap.py", ["tests/test_analyzer_unwrap.py", "tests/test_accuracy_truth.py"]),
     "homography": ("analyzer/homography.py", ["tests/test_analyzer_homography.py", "tests/test_homography_refit.py",
                                              "tests/test_accuracy_truth.py", "tests/test_lens.py"]),

@@ -123,6 +123,9 @@ def test_deformation_grid_halves_the_step_only_where_the_reach_needs_it():
     assert fine.shape == (504, 504) and fine.step[0] == pytest.approx(g.step[0] / 2)
     assert D.deformation_grid(g, 0.75, 12.5, "auto") is g  # 12.5 / 3 = 4.17 >= 4.06
     assert D.deformation_grid(g, 0.75, 9.79, 4) is g  # a user-set decimation is kept
+    # twice the samples, but never more than the image's own (to a multiple of 4): 104 -> 100
+    near_full = F.SamplingGrid((102, 130), (52, 64))
+    assert D.deformation_grid(near_full, 0.75, 4.0, "auto").shape == (100, 128)
 
 
 def test_growth_takes_coherent_small_residuals_within_reach_only():

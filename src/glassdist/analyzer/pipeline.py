@@ -453,8 +453,11 @@ def _follow_local_grid(img, refm: ReferenceModel | None, demod: _Demodulation, r
     # the converged field (the filters' Gaussian acts on the residual only; after n demodulations
     # the linear transfer is (1 - (1 - G B)^n) / B, transfer.InstrumentTransfer).
     total = [(np.abs(z) * np.exp(1j * (np.angle(z) + pred[..., i]))).astype(np.complex64) for i, z in enumerate(zs)]
-    mods = [_modulation(b, c.period_px, grid, p) for b, c in zip(bb_img, (ks.k1, ks.k2))]
-    mods += [D.to_grid(m_, demod.grid, grid) for m_ in demod.mods[2:]]
+    if grid is demod.grid:
+        mods = list(demod.mods)
+    else:  # the photo's on F5's grid, the reference's brought to it
+        mods = [_modulation(b, c.period_px, grid, p) for b, c in zip(bb_img, (ks.k1, ks.k2))]
+        mods += [D.to_grid(m_, demod.grid, grid) for m_ in demod.mods[2:]]
     # The bandpass's gain at the local frequency, read off the warped reference (a uniform grid
     # of amplitude 1/2 per carrier): the photo's modulation is judged against it (a faint grid where the gain
     # explains it is not occluded), and where the gain is below its value at
