@@ -103,10 +103,12 @@ def test_yaml_alias_bomb_is_refused_in_a_fraction_of_a_second(tmp_path):
     lines = ['l0: &l0 ["lol"]'] + [f"l{i}: &l{i} [" + ", ".join([f"*l{i - 1}"] * 9) + "]" for i in range(1, 12)]
     f = tmp_path / "bomb.yaml"
     f.write_text("\n".join(lines) + "\n")
-    t0 = time.perf_counter()
+    # The CPU time this process spends (6 ms measured alone): wall time also counts the other test
+    # workers' load (a fresh-clone run read 1.1 s of wall time once).
+    t0 = time.process_time()
     with pytest.raises(InputError, match="GLASSDIST_MAX_NODES"):
         load_document(f, "scene file")
-    assert time.perf_counter() - t0 < 1.0
+    assert time.process_time() - t0 < 1.0
 
 
 def test_a_spec_name_with_a_newline_cannot_print_a_verdict_line():
