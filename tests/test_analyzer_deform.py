@@ -10,6 +10,7 @@ is axis-aligned and reads one displacement component).
 
 import numpy as np
 import pytest
+from scipy import ndimage
 
 from glassdist import analyze
 from glassdist.analyzer import deform as D
@@ -141,3 +142,20 @@ def test_growth_takes_coherent_small_residuals_within_reach_only():
     assert not new[:16].any()  # never where the grid is not coherent
     assert new[16:, 10].all() and new[24:, 11].all() and not new[16:24, 11].any()
     assert not (new & measured).any()
+
+
+def test_growth_never_merges_two_parts_of_the_one_pass():
+    # Two measured parts three samples apart, coherent and converged between them: each grows,
+    # but no new sample touches the other part's (a seam across an unmeasured band has no residue).
+    g = F.SamplingGrid((40, 64), (20, 32))  # step 2 px
+    measured = np.zeros((20, 32), bool)
+    measured[:, :10] = measured[:, 13:] = True
+    parts = np.where(measured, np.where(np.arange(32) < 10, 1, 2)[None, :], 0).astype(np.int32)
+    new = D.grow(measured, np.ones((20, 32), bool), np.zeros((20, 32, 2)), g, reach_px=4.0, parts=parts)
+    assert new.any()
+    lab = np.where(measured | new, parts, 0)
+    for a, b in ((1, 2), (2, 1)):
+        near_b = ndimage.binary_dilation(lab == b, structure=np.ones((3, 3), bool))
+        assert not (near_b & (lab == a)).any()
+    # without the parts the same call closes the gap
+    assert D.grow(measured, np.ones((20, 32), bool), np.zeros((20, 32, 2)), g, reach_px=4.0)[:, 10:13].all()

@@ -39,14 +39,14 @@ def test_comparative_and_direct_agree_on_waves(real_data):
     assert (c.valid & d.valid).mean() > 0.6
     v = c.trusted & d.trusted  # compared where statistics are taken (outside the guard band)
     assert v.mean() > 0.4
-    # README ("Accuracy"): correlation 0.998 / 0.998 (measured 0.9982 / 0.9985); mean |phi| of the
-    # Direct Method 1.6 % above the Comparative on phi_eff (measured 1.0161) and 2.5 % on phi_shear (1.0254),
+    # README ("Accuracy"): correlation 0.998 / 0.998 (measured 0.9986 / 0.9988); mean |phi| of the
+    # Direct Method 1.4 % above the Comparative on phi_eff (measured 1.0136) and 1.0 % on phi_shear (1.0104),
     # with F5 grown into the rings' steep flanks on its finer grid (3.4 % / 3.6 % when F5 kept to the
     # one pass's region and grid; 1.7 % / 0.04 % before F5), the Comparative's A1 Jacobian through
     # the lens Block I fits on the glass-less reference. Both runs are
     # deterministic on the same photo; the margins (0.3 points) allow for platform differences of
     # the FFT and the unwrapper, not for a change of method (re-measure and update the README).
-    for ch, ratio in (("phi_eff_mD", 1.0161), ("phi_shear_mD", 1.0254)):
+    for ch, ratio in (("phi_eff_mD", 1.0136), ("phi_shear_mD", 1.0104)):
         a, b = getattr(c, ch)[v], getattr(d, ch)[v]
         assert np.corrcoef(a, b)[0, 1] > 0.998, ch
         assert np.mean(np.abs(b)) / np.mean(np.abs(a)) == pytest.approx(ratio, abs=0.003), ch
@@ -76,10 +76,10 @@ def _explains(ref, img, u, where) -> float:
 
 
 def test_waves_field_explains_the_photo_and_agrees_with_fcd(real_data):
-    # docs/waves_peers.md: F5 grows into the rings' steep flanks. Measured: 92.6 % of the photo
-    # analysed in one part (79.2 % in 36 parts without the growth), 98.8 % of it within 0.1
+    # docs/waves_peers.md: F5 grows into the rings' steep flanks. Measured: 92.1 % of the photo
+    # analysed in 2 parts (79.2 % in 36 parts without the growth), 98.6 % of it within 0.1
     # period of FCD's field, and the reference warped by glassdist's field correlates with the
-    # photo at 0.9846 over that region against 0.9805 for FCD's field on the same pixels.
+    # photo at 0.9845 over that region against 0.9806 for FCD's field on the same pixels.
     ref, img = real_data["reference"], real_data["waves"]
     p = dict(P, detrend_degree=3)
     res = analyze(img, pitch_mm=5.0, distance_m=0.5, reference=ref, params=p)
@@ -87,7 +87,7 @@ def test_waves_field_explains_the_photo_and_agrees_with_fcd(real_data):
     u = -res.displacement_mm / res.mm_per_px  # px, img(r) = ref(r - u)
     fcd = _fcd()(ref, img)
     v = res.valid
-    assert v.mean() > 0.923 and res.n_regions == 1
+    assert v.mean() > 0.918 and res.n_regions <= 2
     close = np.max(np.abs(u - fcd), axis=-1) < 0.1 * period
     assert close[v].mean() > 0.985
     ours, peer = _explains(ref, img, u, v), _explains(ref, img, fcd, v)

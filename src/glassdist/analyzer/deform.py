@@ -20,7 +20,8 @@ strong waves, labelled beyond measurable distortion). F5 grows its measured regi
 carrier period per pass (:func:`grow`): a sample joins where its residual against the reference
 warped by the nearest measured prediction is coherent, small (the prediction is within a
 fraction of a turn, so no whole period is lost) and the photo shows a grid there; it never
-crosses a one-pass phase residue (a singularity of the grid itself). Each grown sample is then
+crosses a one-pass phase residue (a singularity of the grid itself) and never merges two of the
+one pass's connected parts. Each grown sample is then
 measured like the others; it stays measured only where its last update is below
 :data:`GROWTH_MAX_LAST_UPDATE_PERIODS` (converged), and the final region is judged on the residual. Where the
 one pass's grid is too coarse for the reach (:func:`deformation_grid`), F5 works on one with
@@ -132,20 +133,35 @@ def to_grid(a: np.ndarray, src: F.SamplingGrid, dst: F.SamplingGrid, *, nearest:
     return (top * (1 - ty) + bottom * ty).astype(a.dtype)
 
 
-def grow(measured: np.ndarray, coherent: np.ndarray, residual: np.ndarray, grid: F.SamplingGrid, reach_px: float) -> np.ndarray:
+def grow(measured: np.ndarray, coherent: np.ndarray, residual: np.ndarray, grid: F.SamplingGrid, reach_px: float,
+         parts: np.ndarray | None = None) -> np.ndarray:
     """Samples that join the measured region in this pass (bool (h, w)).
 
     Within ``reach_px`` of ``measured``, coherent, and with a wrapped residual (h, w, 2) below
     :data:`GROWTH_MAX_RESIDUAL_RAD` on both carriers: there the prediction (the nearest
     measured one) is within a fraction of a turn of the field, so ``prediction + residual``
     continues the measured phase without a whole-period jump, and the next pass measures
-    against a reference warped by it.
+    against a reference warped by it. ``parts`` (int (h, w), updated in place): the connected
+    part of the one pass each measured sample grew from; a new sample takes its nearest
+    measured sample's part, and none joins next to another part's sample: two parts the one pass
+    kept apart never merge (where two fronts meet, across the band the one pass could not
+    measure, nothing checks that their phases agree, and a seam with no end has no residue).
     """
     if measured.all() or not measured.any():
         return np.zeros_like(measured)
-    near = ndimage.distance_transform_edt(~measured, sampling=grid.step) <= reach_px
+    dist, (iy, ix) = ndimage.distance_transform_edt(~measured, sampling=grid.step, return_indices=True)
     small = np.all(np.abs(residual) < GROWTH_MAX_RESIDUAL_RAD, axis=-1)
-    return near & coherent & small & ~measured
+    new = (dist <= reach_px) & coherent & small & ~measured
+    if parts is None or not new.any():
+        return new
+    lab = np.where(new, parts[iy, ix], parts)
+    lab = np.where(measured | new, lab, 0)
+    big = np.iinfo(np.int32).max
+    hi = ndimage.maximum_filter(lab, size=3)
+    lo = ndimage.minimum_filter(np.where(lab > 0, lab, big), size=3)
+    new &= (hi == lab) & (lo == lab)
+    parts[new] = lab[new]
+    return new
 
 
 def warped_reference(pred: np.ndarray, own: np.ndarray | None, grid: F.SamplingGrid, carriers: F.CarrierPair) -> np.ndarray:

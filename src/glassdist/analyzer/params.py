@@ -117,7 +117,8 @@ class AnalyzerParams(BaseModel):
         6, ge=0, le=16,
         description="F5: largest number of passes that may grow the measured region beyond the one-pass region, one "
         "carrier period per pass, into samples whose residual against the warped reference is small and coherent "
-        "(strong local frequencies the one-pass bandpass clipped); 0 = F5 stays within the one-pass region",
+        "(strong local frequencies the one-pass bandpass clipped), never merging two of its parts; 0 = F5 stays "
+        "within the one-pass region",
     )
     deformation_min_deviation: float = Field(
         0.2, ge=0, le=1.0,

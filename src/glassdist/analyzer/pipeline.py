@@ -419,10 +419,13 @@ def _follow_local_grid(img, refm: ReferenceModel | None, demod: _Demodulation, r
     # A phase residue of the one pass is a singularity of the grid itself (a dislocation, a tear), not a
     # frequency the bandpass clipped: no continuous prediction crosses it, so the growth goes around it.
     growable = first != PHASE_RESIDUE
-    if p.deformation_growth_passes > 0:
+    growth = p.deformation_growth_passes
+    # the one pass's connected parts: the growth never merges two (deform.grow)
+    parts = np.where(measured, D.to_grid(region.labels, demod.grid, grid, nearest=True), 0).astype(np.int32)
+    if growth > 0:
         growable &= grid_seen(contrast(grid), measured, period, grid)
     grown = np.zeros_like(measured)
-    growth_left, converging, k = p.deformation_growth_passes, 0, 0
+    growth_left, converging, k = growth, 0, 0
     while True:
         k += 1
         ref_w = D.warped_reference(pred, own, grid, ks)
@@ -433,7 +436,7 @@ def _follow_local_grid(img, refm: ReferenceModel | None, demod: _Demodulation, r
         coherent = np.all([c_ > p.coherence_threshold for c_ in cohs], axis=0)
         ok = coherent & measured
         step = float(np.sqrt(np.mean(np.sum(D.phase_to_displacement_px(res[ok], ks) ** 2, axis=-1)))) / period if ok.any() else 0.0
-        new = D.grow(measured, coherent & growable, res, grid, period) if growth_left > 0 else np.zeros_like(measured)
+        new = D.grow(measured, coherent & growable, res, grid, period, parts) if growth_left > 0 else np.zeros_like(measured)
         growth_left = growth_left - 1 if new.any() else 0
         converging += 0 if new.any() else 1
         log.debug("F5 pass %d: RMS update %.4f period, %d samples grown", k, step, int(new.sum()))
