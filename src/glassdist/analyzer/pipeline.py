@@ -419,13 +419,12 @@ def _follow_local_grid(img, refm: ReferenceModel | None, demod: _Demodulation, r
     # A phase residue of the one pass is a singularity of the grid itself (a dislocation, a tear), not a
     # frequency the bandpass clipped: no continuous prediction crosses it, so the growth goes around it.
     growable = first != PHASE_RESIDUE
-    growth = p.deformation_growth_passes
+    if p.deformation_growth_passes > 0:
+        growable &= grid_seen(contrast(grid), measured, period, grid)
     # the one pass's connected parts: the growth never merges two (deform.grow)
     parts = np.where(measured, D.to_grid(region.labels, demod.grid, grid, nearest=True), 0).astype(np.int32)
-    if growth > 0:
-        growable &= grid_seen(contrast(grid), measured, period, grid)
     grown = np.zeros_like(measured)
-    growth_left, converging, k = growth, 0, 0
+    growth_left, converging, k = p.deformation_growth_passes, 0, 0
     while True:
         k += 1
         ref_w = D.warped_reference(pred, own, grid, ks)

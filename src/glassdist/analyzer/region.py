@@ -70,7 +70,6 @@ __all__ = [
     "EXCLUDED",
     "Region",
     "valid_region",
-    "grid_seen",
     "contamination_px",
     "local_contrast",
     "beyond_range_warning",
