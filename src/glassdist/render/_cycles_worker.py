@@ -45,8 +45,10 @@ size in Blender.
     on the local -z side) and ``front_grad`` / ``back_grad`` (ny, nx, 2) their
     analytic gradients (dz/dx, dz/dy), used as smooth shading normals.
     ``ior`` is the refractive index; ``bsdf`` is ``"refraction"`` (no
-    Fresnel reflection: every ray is transmitted) or ``"glass"`` (Fresnel
-    reflection and transmission, ghosts included); ``transmittance`` ``T``
+    Fresnel reflection: every ray is transmitted), ``"glass"`` (Fresnel
+    reflection and transmission, ghosts included) or ``"mirror"`` (the front
+    face alone, a perfect mirror: the pane seen in reflection; ``back_z`` and
+    ``back_grad`` are then unused); ``transmittance`` ``T``
     (default 1) is applied as ``sqrt(T)`` at each interface. ``frame``
     (optional): ``{"intensity", "inner_half_mm": [hu, hv], "lift_mm"}``, an
     opaque band emitting ``intensity`` over the front-face quads outside
@@ -65,7 +67,9 @@ size in Blender.
     "dark_value", "light_value"}``, or ``{"kind": "image", "extent_mm":
     [u0, u1, v0, v1]}`` with the NPZ array ``backdrop_image`` (rows, cols)
     sampled at cell centres, row 0 at v = v1 and column 0 at u = u0
-    (bilinear interpolation).
+    (bilinear interpolation). ``visible_to_camera`` (default true): false
+    hides the backdrop from camera rays, for a board in the camera's plane
+    seen only in the pane's reflection.
 ``render``
     ``samples`` (per pixel), ``seed`` (integer), ``threads`` (0 = all
     cores), ``max_bounces``, ``chunks``: the samples are rendered as this
@@ -141,31 +145,17 @@ def slab_mesh(x, y, front_z, back_z, front_grad, back_grad):
         Unit shading normal at each quad corner, pointing out of the slab:
         the analytic normals on the two faces, the flat wall normals on the rim.
     """
-    x = np.asarray(x, dtype=np.float64)
-    y = np.asarray(y, dtype=np.float64)
+    front, front_quads, front_normals = face_mesh(x, y, front_z, front_grad)
+    back, back_quads, _ = face_mesh(x, y, back_z, back_grad)
     ny, nx = len(y), len(x)
-    X, Y = np.meshgrid(x, y)
-    front = np.stack([X, Y, front_z], axis=-1).reshape(-1, 3)
-    back = np.stack([X, Y, back_z], axis=-1).reshape(-1, 3)
     verts = np.concatenate([front, back])
     nf = ny * nx
-
-    def unit(v):
-        return v / np.linalg.norm(v, axis=-1, keepdims=True)
-
-    n_front = unit(np.stack([front_grad[..., 0], front_grad[..., 1], -np.ones((ny, nx))], -1)).reshape(-1, 3)
-    n_back = unit(np.stack([-back_grad[..., 0], -back_grad[..., 1], np.ones((ny, nx))], -1)).reshape(-1, 3)
-
-    idx = np.arange(nf).reshape(ny, nx)
-    a = idx[:-1, :-1].ravel()
-    b = idx[:-1, 1:].ravel()
-    c = idx[1:, 1:].ravel()
-    d = idx[1:, :-1].ravel()
-    # (a, b, c, d) runs counter-clockwise seen from +z: normal +z (back face, outward +z)
-    back_quads = np.stack([a, b, c, d], axis=1) + nf
-    front_quads = np.stack([a, d, c, b], axis=1)
+    n_back = _unit(np.stack([-back_grad[..., 0], -back_grad[..., 1], np.ones((ny, nx))], -1)).reshape(-1, 3)
+    # the back face's outward normal is +z: the front face's winding reversed
+    back_quads = back_quads[:, ::-1] + nf
     quads = [front_quads, back_quads]
-    normals = [n_front[front_quads], n_back[back_quads - nf]]
+    normals = [front_normals, n_back[back_quads - nf]]
+    idx = np.arange(nf).reshape(ny, nx)
 
     # rim: walk the boundary counter-clockwise seen from +z
     ring = np.concatenate([idx[0, :-1], idx[:-1, -1], idx[-1, :0:-1], idx[:0:-1, 0]])
@@ -173,10 +163,48 @@ def slab_mesh(x, y, front_z, back_z, front_grad, back_grad):
     # wall quad (front p, front q, back q, back p): outward for a counter-clockwise ring
     walls = np.stack([p, q, q + nf, p + nf], axis=1)
     edge = verts[q] - verts[p]
-    n_wall = unit(np.stack([edge[:, 1], -edge[:, 0], np.zeros(len(p))], axis=1))
+    n_wall = _unit(np.stack([edge[:, 1], -edge[:, 0], np.zeros(len(p))], axis=1))
     quads.append(walls)
     normals.append(np.repeat(n_wall[:, None, :], 4, axis=1))
     return verts, np.concatenate(quads), np.concatenate(normals)
+
+
+def _unit(v):
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def face_mesh(x, y, z, grad):
+    """Quad mesh of one height field seen from its local -z side (the front face, the mirror).
+
+    Parameters
+    ----------
+    x, y : ndarray, shapes (nx,) and (ny,)
+        The grid, as in :func:`slab_mesh`.
+    z : ndarray, shape (ny, nx)
+        Heights, mm.
+    grad : ndarray, shape (ny, nx, 2)
+        Gradients (dz/dx, dz/dy) (dimensionless).
+
+    Returns
+    -------
+    verts : ndarray, shape (ny * nx, 3)
+        Vertices in the local frame, mm.
+    quads : ndarray, shape (M, 4)
+        Vertex indices of each quad, wound so that the geometric normal points to -z.
+    corner_normals : ndarray, shape (M, 4, 3)
+        Unit analytic normal ``(gx, gy, -1) / |.|`` at each quad corner.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    ny, nx = len(y), len(x)
+    X, Y = np.meshgrid(x, y)
+    verts = np.stack([X, Y, z], axis=-1).reshape(-1, 3)
+    normal = _unit(np.stack([grad[..., 0], grad[..., 1], -np.ones((ny, nx))], -1)).reshape(-1, 3)
+    idx = np.arange(ny * nx).reshape(ny, nx)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
+    # (a, b, c, d) runs counter-clockwise seen from +z, so (a, d, c, b) faces -z
+    quads = np.stack([a, d, c, b], axis=1)
+    return verts, quads, normal[quads]
 
 
 def camera_pose_blender(rotation, position_mm, world_to_blender):
@@ -224,10 +252,14 @@ def _build_mesh(bpy, name, verts_m, quads, corner_normals):
 
 def _build_glass(bpy, job, arrays, world_to_blender):
     g = job["glass"]
-    verts, quads, normals = slab_mesh(
-        arrays["glass_x"], arrays["glass_y"], arrays["front_z"], arrays["back_z"],
-        arrays["front_grad"], arrays["back_grad"],
-    )
+    kind = g.get("bsdf", "refraction")
+    if kind == "mirror":
+        verts, quads, normals = face_mesh(arrays["glass_x"], arrays["glass_y"], arrays["front_z"], arrays["front_grad"])
+    else:
+        verts, quads, normals = slab_mesh(
+            arrays["glass_x"], arrays["glass_y"], arrays["front_z"], arrays["back_z"],
+            arrays["front_grad"], arrays["back_grad"],
+        )
     axes = _mat3(g["axes"])
     if np.linalg.det(axes) < 0:
         raise ValueError("glass.axes must be a proper rotation (determinant +1)")
@@ -237,29 +269,33 @@ def _build_glass(bpy, job, arrays, world_to_blender):
     verts_w = MM * ((verts @ rot.T) + world_to_blender @ origin)
     obj = _placed_object(bpy, "glass", verts_w, quads, normals @ rot.T)
     mat, nt, out = _new_material(bpy, "glass")
-    kind = g.get("bsdf", "refraction")
     if kind == "refraction":
         bsdf = nt.nodes.new("ShaderNodeBsdfRefraction")
     elif kind == "glass":
         bsdf = nt.nodes.new("ShaderNodeBsdfGlass")
+    elif kind == "mirror":
+        bsdf = nt.nodes.new("ShaderNodeBsdfGlossy")
     else:
-        raise ValueError(f"glass.bsdf must be 'refraction' or 'glass', got {kind!r}")
+        raise ValueError(f"glass.bsdf must be 'refraction', 'glass' or 'mirror', got {kind!r}")
     bsdf.distribution = "GGX"  # with roughness 0: a perfectly smooth (delta) interface
-    tau = math.sqrt(float(g.get("transmittance", 1.0)))  # two interfaces: T overall
-    bsdf.inputs["Color"].default_value = (tau, tau, tau, 1.0)
+    if kind == "mirror":  # the board's radiance as seen in the mirror: reflectance 1
+        bsdf.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    else:
+        tau = math.sqrt(float(g.get("transmittance", 1.0)))  # two interfaces: T overall
+        bsdf.inputs["Color"].default_value = (tau, tau, tau, 1.0)
+        bsdf.inputs["IOR"].default_value = float(g["ior"])
     bsdf.inputs["Roughness"].default_value = 0.0
-    bsdf.inputs["IOR"].default_value = float(g["ior"])
     nt.links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
     obj.data.materials.append(mat)
     if g.get("frame"):
-        _build_frame(bpy, g["frame"], verts, quads, rot, world_to_blender @ origin)
+        nfront = len(arrays["glass_x"]) * len(arrays["glass_y"])
+        _build_frame(bpy, g["frame"], verts, quads, nfront, rot, world_to_blender @ origin)
     return obj
 
 
-def _build_frame(bpy, frame, verts, quads, rot, origin_b):
-    """Opaque emitting band over the front face outside ``|u| <= hu, |v| <= hv``."""
+def _build_frame(bpy, frame, verts, quads, nfront, rot, origin_b):
+    """Opaque emitting band over the front face (vertices ``< nfront``) outside ``|u| <= hu, |v| <= hv``."""
     hu, hv = (float(t) for t in frame["inner_half_mm"])
-    nfront = len(verts) // 2
     front = quads[(quads < nfront).all(axis=1)]
     centre = verts[front].mean(axis=1)
     band = front[(np.abs(centre[:, 0]) > hu) | (np.abs(centre[:, 1]) > hv)]
@@ -399,6 +435,7 @@ def _build_backdrop(bpy, job, arrays, world_to_blender):
     verts = np.array([[-hu, -hv, 0], [hu, -hv, 0], [hu, hv, 0], [-hu, hv, 0]])
     mesh = _build_mesh(bpy, "backdrop", verts, np.array([[0, 1, 2, 3]]), None)
     obj = _new_object(bpy, "backdrop", mesh, m)
+    obj.visible_camera = bool(b.get("visible_to_camera", True))
 
     mat, nt, out = _new_material(bpy, "backdrop")
     try:

@@ -41,7 +41,14 @@ images; ``"refraction"``: every ray is transmitted, the exact engine's
 photometry), with
 the pane transmittance ``T`` applied as ``sqrt(T)`` per interface; box pixel
 filter of 1 px, no denoiser, no adaptive sampling, fixed seed, black world.
-The EXR is read back as scene-linear radiance (no view transform). The
+The EXR is read back as scene-linear radiance (no view transform).
+
+In reflection (``viewing.mode: reflection``) the pane is its front face alone,
+a perfect mirror (``bsdf = "mirror"``, the exact engine's front-face
+reflection), and the reference capture is the same mirror flat at the front
+face's nominal plane; the board, in the camera's plane, is hidden from camera
+rays and seen only in the pane. The back face's ghost (``viewing.back_face``)
+is rendered by the exact engine only. The
 scene's imaging effects (lighting, vignetting, blur, noise) are applied to
 the Cycles image afterwards with the same code as the exact engine.
 
@@ -71,7 +78,7 @@ import numpy as np
 
 from ..errors import GlassdistError, InputError
 from ..validation import safe_text
-from ..scene import Scene, pixel_directions
+from ..scene import Scene, pixel_directions, straight_landing
 from .imaging import apply_imaging
 
 __all__ = [
@@ -321,8 +328,11 @@ def _visible_box(scene: Scene, margin_mm: float) -> tuple[float, float, float, f
     return float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])
 
 
-def _glass_arrays(scene: Scene, spacing_mm: float, bsdf: str) -> tuple[dict, dict | None]:
-    """Sampled faces of the (cropped) pane and the job's ``glass`` section; ``({}, None)`` if not in view."""
+def _glass_arrays(scene: Scene, spacing_mm: float, bsdf: str, *, flat: bool = False) -> tuple[dict, dict | None]:
+    """Sampled faces of the (cropped) pane and the job's ``glass`` section; ``({}, None)`` if not in view.
+
+    ``flat`` samples the undeformed faces (the flat reference mirror in reflection).
+    """
     pane = scene.pane
     d = pane.thickness_mm
     hw, hh = pane.size_mm[0] / 2, pane.size_mm[1] / 2
@@ -343,8 +353,11 @@ def _glass_arrays(scene: Scene, spacing_mm: float, bsdf: str) -> tuple[dict, dic
             "use a coarser spacing_mm or a smaller pane"
         )
     U, V = np.meshgrid(u, v)
-    hf, fu, fv = (np.broadcast_to(a, U.shape) for a in pane.deformation.front_shape.height_gradient(U, V))
-    hb, bu, bv = (np.broadcast_to(a, U.shape) for a in pane.deformation.back_shape.height_gradient(U, V))
+    if flat:
+        hf = fu = fv = hb = bu = bv = np.zeros(U.shape)
+    else:
+        hf, fu, fv = (np.broadcast_to(a, U.shape) for a in pane.deformation.front_shape.height_gradient(U, V))
+        hb, bu, bv = (np.broadcast_to(a, U.shape) for a in pane.deformation.back_shape.height_gradient(U, V))
     front = -d / 2 + hf
     back = d / 2 + hb
     if np.any(back - front <= 0):
@@ -373,15 +386,13 @@ def _glass_arrays(scene: Scene, spacing_mm: float, bsdf: str) -> tuple[dict, dic
 
 
 def _backdrop_section(scene: Scene) -> dict:
-    """Job ``backdrop`` section: a plane at ``backdrop_z_mm`` far larger than the camera's view of it."""
+    """Job ``backdrop`` section: a plane at ``backdrop_z_mm`` far larger than the camera's view of it
+    (in reflection, of its image in the pane)."""
     cam, b = scene.camera, scene.backdrop
     H, W = cam.shape
     cols = np.array([0.0, W, W, 0.0, W / 2])
     rows = np.array([0.0, 0.0, H, H, H / 2])
-    dirs = pixel_directions(cam, cols, rows)
-    c = np.asarray(cam.position_mm, float)
-    t = (scene.backdrop_z_mm - c[2]) / dirs[:, 2]
-    pts = c[:2] + t[:, None] * dirs[:, :2]
+    pts = straight_landing(scene, pixel_directions(cam, cols, rows))
     centre = pts[4]
     half = np.abs(pts[:4] - centre).max(axis=0)
     size = 2 * (3 * half + 1000.0)  # generous: deflected rays must still land on it
@@ -403,6 +414,7 @@ def _backdrop_section(scene: Scene) -> dict:
         "v": [0.0, 1.0, 0.0],
         "size_mm": [float(size[0]), float(size[1])],
         "pattern": pattern,
+        "visible_to_camera": not scene.reflection,  # a board in the camera's plane: seen in the pane only
     }
 
 
@@ -474,7 +486,8 @@ def write_job(
         line positions to about 0.005 px on the paper's geometry).
     bsdf : {"glass", "refraction"}
         Fresnel glass (reflections, ghosts; the default) or refraction only
-        (every ray transmitted, as in the exact engine).
+        (every ray transmitted, as in the exact engine). Unused in reflection,
+        where the pane is its front face as a perfect mirror.
     threads : int
         CPU threads for Cycles, 0 for all.
     blend, exr : path-like, optional
@@ -489,8 +502,14 @@ def write_job(
         raise InputError(f"bsdf must be 'refraction' or 'glass', got '{bsdf}'")
     if not spacing_mm > 0:
         raise InputError(f"spacing_mm must be positive, got {spacing_mm}")
+    if scene.reflection and scene.viewing.back_face:
+        raise InputError("the cycles engine renders the front face's reflection only; render the back face's ghost "
+                         "(viewing.back_face) with --engine exact")
     directory = Path(directory)
-    arrays, glass = _glass_arrays(scene, spacing_mm, bsdf) if not reference else ({}, None)
+    if scene.reflection:  # the pane's front face as a mirror; the reference is that mirror flat
+        arrays, glass = _glass_arrays(scene, spacing_mm, "mirror", flat=reference)
+    else:
+        arrays, glass = _glass_arrays(scene, spacing_mm, bsdf) if not reference else ({}, None)
     np.savez(directory / "arrays.npz", **(arrays or {"empty": np.zeros(1)}))
     H, W = scene.camera.shape
     job = {
@@ -647,14 +666,11 @@ class CyclesRenderer:
         Raises
         ------
         InputError
-            Cycles is not installed (the message says how to install it), or the scene is
-            viewed in reflection (rendered by the exact engine only).
+            Cycles is not installed (the message says how to install it), or the scene asks
+            for the back face's ghost in reflection (rendered by the exact engine only).
         CyclesError
             The render failed.
         """
-        if scene.reflection:
-            raise InputError("the cycles engine renders scenes viewed in transmission only; render a reflection "
-                             "scene with --engine exact")
         py = Path(self.python) if self.python is not None else find_cycles_python()
         seed = int(rng.integers(0, 2**31 - 1))
         if self.work_dir is not None:
