@@ -256,17 +256,59 @@ def _power_truth(scene, res, incidence_deg):
     return _truth.reflected_channels(P, res.detrend_region, res.effective_sigma_mm / res.mm_per_px)
 
 
+def _tensor_parts(eff, shear, axis_deg):
+    """(phi_eff, the deviator's two components phi_shear (cos 2a, sin 2a)): the power tensor as three fields
+    that add and subtract linearly, unlike an axis (an angle modulo 180 deg)."""
+    a = np.radians(axis_deg)
+    return eff, shear * np.cos(2 * a), shear * np.sin(2 * a)
+
+
+def _rms_percent(res, truth, inner, scale, *, planes=False):
+    """RMS of result - truth over ``inner`` in % of ``scale``, for phi_eff and for the deviator as a tensor; with
+    ``planes``, after each component's best-fit plane a + b x + c y is removed from the difference."""
+    yy, xx = np.nonzero(inner)
+    A = np.stack([np.ones(xx.size), xx, yy], axis=1)
+    r = _tensor_parts(res.phi_eff_mD[inner], res.phi_shear_mD[inner], res.axis_deg[inner])
+    t = _tensor_parts(*(f[inner] for f in truth))
+    d = [a - b for a, b in zip(r, t)]
+    if planes:
+        d = [e - A @ np.linalg.lstsq(A, e, rcond=None)[0] for e in d]
+    return 100 * np.sqrt(np.mean(d[0] ** 2)) / scale, 100 * np.sqrt(np.mean(d[1] ** 2 + d[2] ** 2)) / scale
+
+
 def test_roll_wave_maps_within_two_percent_of_the_truth(roll_wave_photos):
     """phi_eff and phi_shear maps of a 0.1 mm, 400 mm roll wave (Comparative, default sigma: 28 mm on the pane)
     against the independent truth: RMS difference within 2 % of the truth's RMS over the interior (3 sigma inside
-    the trusted region), at normal incidence (measured 0.76 % / 1.46 %) and 20 deg off the normal (1.52 % / 1.88 %)."""
+    the trusted region), at normal incidence (measured 0.76 % / 1.46 %) and 20 deg off the normal (1.52 % / 1.88 %).
+    The astigmatism with its axis, as a tensor, within 2 % too (measured 1.49 % / 1.91 %): the pixel-grid axis is
+    interpolated as a doubled angle (read directly, it swung by +-17 deg at the wave's strongest shear and left
+    (-90, 90])."""
     scene, th, img, ref = roll_wave_photos
     res = analyze_reflection(img, pitch_mm=28, geometry=_geometry(th), reference=ref, detrend_degree=0)
-    eff, shear, _, _ = _power_truth(scene, res, th)
+    truth = _power_truth(scene, res, th)
+    eff, shear = truth[0], truth[1]
     inner = _interior(res)
     scale = np.sqrt(np.mean(eff[inner] ** 2))
     assert np.sqrt(np.mean((res.phi_eff_mD[inner] - eff[inner]) ** 2)) <= 0.02 * scale
     assert np.sqrt(np.mean((res.phi_shear_mD[inner] - shear[inner]) ** 2)) <= 0.02 * scale
+    axis = res.axis_deg[res.valid]
+    assert axis.min() > -90.0 and axis.max() <= 90.0
+    assert max(_rms_percent(res, (eff, shear, truth[3]), inner, scale)) <= 2.0
+
+
+def test_roll_wave_direct_maps_within_two_percent_but_for_the_homography(roll_wave_photos):
+    """The Direct Method on the same photo. Its homography takes a uniform power (a change of scale) and keystone
+    ramps, which a single photo cannot tell from the glass (README "Conventions"; the summary says so): with each
+    power component's best-fit plane removed from the difference, phi_eff and the astigmatism tensor are within 2 %
+    of the truth (measured 0.74 % / 1.10 % at normal incidence, 1.30 % / 1.27 % at 20 deg; with the planes kept,
+    1.03 % / 4.22 % and 3.48 % / 10.36 %, the mean phi_eff 1.0 mD off at 20 deg)."""
+    scene, th, img, _ = roll_wave_photos
+    res = analyze_reflection(img, pitch_mm=28, geometry=_geometry(th), detrend_degree=0)
+    truth = _power_truth(scene, res, th)
+    inner = _interior(res)
+    assert inner.mean() > 0.3
+    scale = np.sqrt(np.mean(truth[0][inner] ** 2))
+    assert max(_rms_percent(res, (truth[0], truth[1], truth[3]), inner, scale, planes=True)) <= 2.0
 
 
 @pytest.mark.parametrize("incidence_deg", [0.0, 20.0])

@@ -65,8 +65,9 @@ incidence ``P = (m / D) eps``: the transmission channels at the effective distan
 :func:`analyze_reflection` runs the Analyzer before turning its strain into ``P``.
 
 What a single photo cannot give: in the Direct Method a uniform power is a uniform change
-of scale of the board's image, which the homography absorbs; a whole-pane bow is read by
-the Comparative Method (a flat reference surface at the same place).
+of scale of the board's image, which the homography absorbs, and a power changing linearly
+across the view is, to first order, its keystone (projective) terms; a whole-pane bow is
+read by the Comparative Method (a flat reference surface at the same place).
 
 References
 ----------
@@ -102,8 +103,9 @@ __all__ = [
 
 #: What the Direct Method's summary says about a whole-pane (uniform) power.
 UNIFORM_POWER_NOTE = (
-    "Direct Method: a uniform reflective power is a uniform change of scale of the board's image, absorbed by "
-    "the homography; a whole-pane bow is read by the Comparative Method (a flat reference surface at the same place)"
+    "Direct Method: a uniform reflective power is a uniform change of scale of the board's image, and a power "
+    "changing linearly across the view its keystone, both absorbed by the homography; a whole-pane bow is read by "
+    "the Comparative Method (a flat reference surface at the same place)"
 )
 
 
