@@ -19,7 +19,7 @@ from scipy import ndimage
 from . import fourier as F
 
 __all__ = ["grid_fill_indices", "image_grid_valid", "bspline_upsample", "bspline_eval", "upsample_field",
-           "upsample_field_rows", "upsample_labels"]
+           "upsample_field_rows", "upsample_labels", "axis_deviator", "axis_of_deviator", "upsample_axis"]
 
 
 def grid_fill_indices(valid: np.ndarray):
@@ -180,3 +180,27 @@ def upsample_labels(labels: np.ndarray, grid: F.SamplingGrid) -> np.ndarray:
     dtype = a.dtype
     src = a.astype(np.int16 if a.dtype.itemsize > 1 or a.dtype.kind == "b" else np.uint8)
     return cv2.resize(src, (W, H), interpolation=cv2.INTER_NEAREST).astype(dtype, copy=False)
+
+
+def axis_deviator(axis_deg: np.ndarray, phi_shear: np.ndarray | None = None) -> np.ndarray:
+    """``phi_shear * (cos 2a, sin 2a)``, (..., 2): the astigmatism as a field that can be interpolated.
+
+    An axis is an angle modulo 180 deg, and it turns by 90 deg where the shear changes sign;
+    interpolated directly, across the wrap or such a turn, it takes angles the field never
+    has. Without ``phi_shear`` the doubled angle's unit vector.
+    """
+    # from the float32 values a stored result holds, so a field read back refines exactly as the analysis did
+    a = np.radians(np.asarray(axis_deg, np.float32).astype(np.float64))
+    s = 1.0 if phi_shear is None else np.asarray(phi_shear, np.float32).astype(np.float64)
+    return np.stack([s * np.cos(2 * a), s * np.sin(2 * a)], axis=-1).astype(np.float32)
+
+
+def axis_of_deviator(deviator: np.ndarray) -> np.ndarray:
+    """Axis (deg, in (-90, 90], float32; NaN where the deviator is NaN) of :func:`axis_deviator`'s field."""
+    axis = (0.5 * np.degrees(np.arctan2(deviator[..., 1], deviator[..., 0]))).astype(np.float32)
+    return np.where(axis <= -90.0, axis + np.float32(180.0), axis)
+
+
+def upsample_axis(axis_deg: np.ndarray, phi_shear, idx, grid: F.SamplingGrid, invalid: np.ndarray) -> np.ndarray:
+    """:func:`upsample_field` for an axis field: its deviator (:func:`axis_deviator`) interpolated, then its angle."""
+    return axis_of_deviator(upsample_field(axis_deviator(axis_deg, phi_shear), idx, grid, invalid))

@@ -20,7 +20,7 @@ from .homography import HomographyFit
 from .metrics import channel_statistics
 from .params import AnalyzerParams
 from .region import ANALYSED, LABELS, pixel_quality, trusted_on
-from .resample import upsample_field, upsample_field_rows, upsample_labels
+from .resample import axis_deviator, axis_of_deviator, upsample_axis, upsample_field, upsample_field_rows, upsample_labels
 
 __all__ = ["AnalysisResult", "FieldSpec", "FIELDS", "CHANNELS"]
 
@@ -231,16 +231,8 @@ class AnalysisResult:
         if _SPECS[name].kind == "label":
             return upsample_labels(f, d["grid"])
         if name == "axis_deg":
-            return _axis_of(upsample_field(self._deviator_grid(), d["idx"], d["grid"], ~self.valid))
+            return upsample_axis(f, self.grid_field("phi_shear_mD"), d["idx"], d["grid"], ~self.valid)
         return upsample_field(f, d["idx"], d["grid"], ~self.valid)
-
-    def _deviator_grid(self) -> np.ndarray:
-        """``phi_shear * (cos 2a, sin 2a)`` on the analysis grid, (h, w, 2): the astigmatism as a field that can be
-        interpolated. An axis is an angle modulo 180 deg, and interpolating it directly across the wrap (or across
-        a change of sign of the shear, where it turns by 90 deg) gives angles the field never has."""
-        a = np.radians(self.grid_field("axis_deg").astype(np.float64))
-        s = self.grid_field("phi_shear_mD").astype(np.float64)
-        return np.stack([s * np.cos(2 * a), s * np.sin(2 * a)], axis=-1)
 
     def pixel_rows(self, names, max_pixels: int = 1 << 21):
         """Fields ``names`` on the pixel grid, one block of image rows at a time.
@@ -258,8 +250,9 @@ class AnalysisResult:
             if name in self.__dict__ or _SPECS[name].kind == "label":
                 streams.append(_row_slices(getattr(self, name), block_rows))
             elif name == "axis_deg":
-                rows = upsample_field_rows(self._deviator_grid(), d["idx"], d["grid"], ~self.valid, block_rows)
-                streams.append((r, _axis_of(b)) for r, b in rows)
+                dev = axis_deviator(self.grid_field(name), self.grid_field("phi_shear_mD"))
+                rows = upsample_field_rows(dev, d["idx"], d["grid"], ~self.valid, block_rows)
+                streams.append((r, axis_of_deviator(b)) for r, b in rows)
             else:
                 streams.append(upsample_field_rows(self.grid_field(name), d["idx"], d["grid"], ~self.valid, block_rows))
         for blocks in zip(*streams):
@@ -409,9 +402,3 @@ class AnalysisResult:
 for _f in FIELDS:
     setattr(AnalysisResult, _f.name, _ImageGridField(_f.name))
 del _f
-
-
-def _axis_of(deviator: np.ndarray) -> np.ndarray:
-    """Axis (deg, in (-90, 90], float32; NaN where the deviator is NaN) of ``shear * (cos 2a, sin 2a)``."""
-    axis = (0.5 * np.degrees(np.arctan2(deviator[..., 1], deviator[..., 0]))).astype(np.float32)
-    return np.where(axis <= -90.0, axis + np.float32(180.0), axis)

@@ -246,12 +246,15 @@ class StoredResult:
         if self.layout == "pixel" or f.shape[:2] == self.valid.shape:  # label maps are stored on the pixel grid
             return f
         from ..analyzer.fourier import SamplingGrid
-        from ..analyzer.resample import grid_fill_indices, upsample_field, upsample_labels
+        from ..analyzer.resample import grid_fill_indices, upsample_axis, upsample_field, upsample_labels
 
         grid = SamplingGrid(tuple(self.valid.shape), tuple(self.grid_valid.shape))
         if f.dtype.kind != "f":
             return upsample_labels(f, grid)
-        return upsample_field(f, grid_fill_indices(self.grid_valid), grid, ~self.valid)
+        idx = grid_fill_indices(self.grid_valid)
+        if name == "axis_deg":
+            return upsample_axis(f, self.fields.get("phi_shear_mD"), idx, grid, ~self.valid)
+        return upsample_field(f, idx, grid, ~self.valid)
 
     def to_pixel_grid(self) -> dict:
         """Every field on the pixel grid, plus ``valid``: the keys of ``analyze --fields pixel``'s result.npz."""
