@@ -2,7 +2,7 @@
 
 The scene of ``tests/test_analyzer_deform.py``: a roller wave of strain 0.31 (amplitude
 4 mm, wavelength 80 mm, 30 deg) on an 8 px line grid, 320 x 400 px at 1 mm/px, analysed at
-``sigma_mm`` = 16, ``detrend_degree`` = 1, L = 10 m. ``--n`` independent noise
+``sigma_mm`` = 16, ``detrend_degree`` = 1 (``--degree``), L = 10 m. ``--n`` independent noise
 realisations of the same scene (seeded generators; the reference gets its own noise too)
 are analysed by both methods. Per pixel trusted in every realisation, the empirical
 standard deviation of ``phi_eff_mD``, ``phi_shear_mD`` and both components of
@@ -21,7 +21,7 @@ out is the part of the scatter that is Block I's baseline.
 Usage::
 
     python benchmarks/uncertainty_strong.py [--n 16] [--noise 0.03] [--amplitude 4] [--size 320 400]
-        [--seed 0] [--methods comparative direct] [--minus-projective] [--out FILE.json]
+        [--seed 0] [--degree 1] [--methods comparative direct] [--minus-projective] [--out FILE.json]
 
 ``docs/uncertainty_strong.json`` holds the run with ``--minus-projective`` (figures and
 discussion: ``docs/transfer_function.md``, "With image deformation (F5)").
@@ -62,13 +62,13 @@ def _minus_plane(f: np.ndarray, region: np.ndarray) -> np.ndarray:
 
 
 def realisations(method: str, *, n: int = 16, noise: float = 0.03, shape=(320, 400), seed: int = 0,
-                 amplitude_mm: float = 4.0):
+                 amplitude_mm: float = 4.0, degree: int = 1):
     """Analyse ``n`` noise realisations of the strong wave; yields each result."""
     from glassdist import analyze
     from glassdist.synthetic import synthetic_capture, wave_displacement
 
     disp = wave_displacement(amplitude_mm, 80.0, 30.0)
-    params = {"pattern": "lines", "sigma_mm": 16.0, "detrend_degree": 1}
+    params = {"pattern": "lines", "sigma_mm": 16.0, "detrend_degree": degree}
     for i in range(n):
         cap = synthetic_capture(tuple(shape), pitch_mm=8.0, mm_per_px=1.0, displacement=disp, noise_std=noise,
                                 rng=np.random.default_rng([seed, i]))
@@ -107,6 +107,7 @@ def main(argv=None) -> int:
     ap.add_argument("--size", type=int, nargs=2, default=(320, 400), metavar=("H", "W"), help="image size, px")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--amplitude", type=float, default=4.0, help="wave amplitude, mm (4: strain 0.31)")
+    ap.add_argument("--degree", type=int, default=1, help="detrend degree N (the Direct Method's default is 2)")
     ap.add_argument("--methods", nargs="+", default=("comparative", "direct"), choices=("comparative", "direct"))
     ap.add_argument("--minus-projective", action="store_true",
                     help="Direct: also the ratios with Block I's baseline removed per realisation (module docstring)")
@@ -117,7 +118,8 @@ def main(argv=None) -> int:
     print("| method | trusted px | φ_eff σ mD | φ_eff | φ_shear | δ_x | δ_y |")
     print("|---|---|---|---|---|---|---|")
     for method in a.methods:
-        res = list(realisations(method, n=a.n, noise=a.noise, shape=a.size, seed=a.seed, amplitude_mm=a.amplitude))
+        res = list(realisations(method, n=a.n, noise=a.noise, shape=a.size, seed=a.seed, amplitude_mm=a.amplitude,
+                               degree=a.degree))
         rows = [("", ratios(res))]
         if a.minus_projective and method == "direct":
             rows.append((" (projective removed)", ratios(res, minus_projective=True)))

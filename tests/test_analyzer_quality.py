@@ -246,3 +246,28 @@ def test_blurred_and_faint_patches_are_low_modulation_not_beyond_range():
         assert (core == LOW_MODULATION).all(), np.unique(core, return_counts=True)
     assert not (q == BEYOND_RANGE).any()
     assert not any(w.startswith("strong distortion") for w in res.warnings)
+
+
+@pytest.mark.parametrize("method", ["comparative", "direct"])
+def test_uncertainty_matches_the_scatter_of_single_captures_of_a_strong_wave(method):
+    """A roller wave of strain 0.31 (F5 runs, its region grown), 12 independent captures of the same scene (noise
+    0.03, the reference with its own), nothing removed between them, the default detrend degree 2: the per-pixel
+    std of phi_eff and phi_shear over the captures against the predicted sigma maps, median ratio within 0.8-1.25
+    (benchmarks/uncertainty_strong.py --degree 2, 16 captures: 0.86 / 1.05 Comparative, 0.98 / 0.97 Direct)."""
+    params = {"pattern": "lines", "sigma_mm": 16.0, "detrend_degree": 2}
+    vals, preds, trusted = {"phi_eff_mD": [], "phi_shear_mD": []}, {"phi_eff_mD": [], "phi_shear_mD": []}, None
+    for i in range(12):
+        cap = synthetic_capture((320, 400), pitch_mm=8.0, mm_per_px=1.0, displacement=wave_displacement(4.0, 80.0, 30.0),
+                                noise_std=0.03, rng=np.random.default_rng([0, i]))
+        res = analyze(cap.image, pitch_mm=8.0, distance_m=10.0,
+                      reference=cap.reference if method == "comparative" else None, params=params)
+        assert res.demodulations > 1  # the deformation passes ran
+        trusted = res.trusted if trusted is None else trusted & res.trusted
+        for k in vals:
+            vals[k].append(getattr(res, k))
+            preds[k].append(getattr(res, k.replace("_mD", "_sigma_mD")))
+    assert trusted.mean() > 0.6
+    for k in vals:
+        emp = np.std(np.stack(vals[k]), axis=0, ddof=1)[trusted]
+        ratio = np.median(emp / np.mean(np.stack(preds[k]), axis=0)[trusted])
+        assert 0.8 < ratio < 1.25, (k, ratio)
