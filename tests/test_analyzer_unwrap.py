@@ -66,3 +66,50 @@ def test_coarse_unwrap_is_exact_on_a_smooth_phase_with_a_hole(k):
     offset = un[valid] - truth[valid]
     assert np.allclose(offset, offset[0], atol=1e-9) and abs(offset[0] / (2 * np.pi) - round(offset[0] / (2 * np.pi))) < 1e-9
     assert np.all(np.isnan(un[~valid]))
+
+
+def test_no_residue_on_a_steep_smooth_phase():
+    """A plane phase stepping 2.0 rad per sample down and 2.5 across (wrapped steps still inside (-pi, pi]): every
+    2 x 2 loop closes, no residue; each edge of the loop counts with its own sign (a flipped edge sums 4 rad)."""
+    y, x = np.mgrid[0:40, 0:50].astype(float)
+    assert not residues(wrap(2.0 * y + 2.5 * x)).any()
+    assert not residues(wrap(-2.0 * y + 2.5 * x)).any()
+
+
+def test_regions_are_numbered_by_decreasing_size_and_min_size_is_inclusive():
+    valid = np.zeros((60, 60), bool)
+    valid[:5, :4] = True  # 20 samples
+    valid[10:30, 10:30] = True  # 400
+    valid[40:50, 40:50] = True  # 100
+    valid[55:57, 55:60] = True  # 10: exactly min_size
+    labels, n = label_regions(valid, min_size=10)
+    assert n == 4
+    assert (labels[20, 20], labels[45, 45], labels[2, 2], labels[56, 57]) == (1, 2, 3, 4)
+    assert label_regions(valid, min_size=11)[1] == 3
+
+
+def test_each_region_is_brought_to_the_smallest_displacement():
+    """A ramp of ten turns, offset by 21 turns: whatever multiple of 2 pi the unwrapper starts from, the region's
+    median is brought into (-pi, pi], for the first region as for the others."""
+    y, x = np.mgrid[0:60, 0:200].astype(float)
+    true = 42 * np.pi + 0.3 * x + 0.02 * y
+    valid = np.ones(true.shape, bool)
+    labels, n = label_regions(valid)
+    un = unwrap(wrap(true), valid, labels, n, seed=0)
+    assert np.ptp(un - true) < 1e-9
+    assert -np.pi < np.median(un) <= np.pi
+
+
+def test_coarse_unwrap_refuses_a_ridge_narrower_than_its_step():
+    """A ridge of 4 rad, 3 samples wide, running down the view: the k = 8 estimate cannot follow it across, so the
+    samples beside it snap a turn off and the phase jumps by more than pi along x only. The coarse path must see
+    that and hand over (None), not return the jumps."""
+    from glassdist.analyzer.unwrap import _unwrap_coarse
+
+    y, x = np.mgrid[0:120, 0:200].astype(float)
+    truth = 0.05 * x + 0.01 * y + 4.0 * np.exp(-(((x - 100) / 1.5) ** 2))
+    valid = np.ones(truth.shape, bool)
+    assert _unwrap_coarse(wrap(truth), valid, 0, 8) is None
+    labels, n = label_regions(valid)
+    un = unwrap(wrap(truth), valid, labels, n, seed=0)  # the full-resolution unwrapper follows it
+    assert np.ptp(un - truth) < 1e-9
