@@ -57,7 +57,8 @@ def test_coarse_unwrap_is_exact_on_a_smooth_phase_with_a_hole(k):
     """
     from glassdist.analyzer.unwrap import _unwrap_coarse
 
-    y, x = np.mgrid[0:240, 0:320].astype(float)
+    # 245 x 322: not multiples of k, so the coarse estimate is padded or cropped to the phase's shape
+    y, x = np.mgrid[0:245, 0:322].astype(float)
     truth = 0.1 * x - 0.06 * y + 3.0 * np.sin(2 * np.pi * x / 150.0) * np.cos(2 * np.pi * y / 110.0)  # ~7 turns
     wrapped = np.angle(np.exp(1j * truth))
     valid = np.hypot(y - 120, x - 160) > 30  # an opaque drop: the coarse samples are filled across it
@@ -74,6 +75,17 @@ def test_no_residue_on_a_steep_smooth_phase():
     y, x = np.mgrid[0:40, 0:50].astype(float)
     assert not residues(wrap(2.0 * y + 2.5 * x)).any()
     assert not residues(wrap(-2.0 * y + 2.5 * x)).any()
+    # a twisted phase: the step across turns from -3 to +3 rad down the view, each loop its own rows
+    y, x = np.mgrid[0:40, 0:20].astype(float)
+    assert not residues(wrap(3.0 * (2 * y / 40 - 1) * x)).any()
+
+
+def test_wrap_is_the_principal_value():
+    phase = np.linspace(-40.0, 40.0, 4001)
+    w = wrap(phase)
+    assert np.all((w >= -np.pi) & (w <= np.pi))
+    turns = (phase - w) / (2 * np.pi)
+    assert np.allclose(turns, np.round(turns), atol=1e-9)
 
 
 def test_regions_are_numbered_by_decreasing_size_and_min_size_is_inclusive():
@@ -86,6 +98,11 @@ def test_regions_are_numbered_by_decreasing_size_and_min_size_is_inclusive():
     assert n == 4
     assert (labels[20, 20], labels[45, 45], labels[2, 2], labels[56, 57]) == (1, 2, 3, 4)
     assert label_regions(valid, min_size=11)[1] == 3
+    labels, n = label_regions(np.zeros((5, 5), bool))
+    assert n == 0 and not labels.any()
+    lone = np.zeros((5, 5), bool)
+    lone[2, 2] = True  # by default every region counts, a single sample too
+    assert label_regions(lone)[1] == 1
 
 
 def test_each_region_is_brought_to_the_smallest_displacement():
@@ -109,7 +126,8 @@ def test_coarse_unwrap_refuses_a_ridge_narrower_than_its_step():
     y, x = np.mgrid[0:120, 0:200].astype(float)
     truth = 0.05 * x + 0.01 * y + 4.0 * np.exp(-(((x - 100) / 1.5) ** 2))
     valid = np.ones(truth.shape, bool)
-    assert _unwrap_coarse(wrap(truth), valid, 0, 8) is None
     labels, n = label_regions(valid)
+    for t in (truth, truth.T):  # the ridge across x, then across y
+        assert _unwrap_coarse(wrap(t), valid.T if t is not truth else valid, 0, 8) is None
     un = unwrap(wrap(truth), valid, labels, n, seed=0)  # the full-resolution unwrapper follows it
     assert np.ptp(un - truth) < 1e-9
