@@ -510,3 +510,28 @@ def test_heatmap_axes_and_overlays_keep_the_frame_limits():
     ax = Figure().add_subplot()
     draw_overlays(ax, acc, "phi_eff", to_axes, extent)
     assert ax.get_xlim() == pytest.approx(extent[:2]) and ax.get_ylim() == pytest.approx(extent[2:])
+
+
+def test_assess_records_colour_limits_protocol_and_camera_as_asked():
+    """On a real small analysis: a numeric colour limit is used as given and 'spec' takes each channel's smallest
+    limit; the protocol record (with what the run used) comes with a resolved protocol alone, as written (no empty
+    pins) from a spec alone; the camera is recorded only when given."""
+    import glassdist
+    from glassdist.acceptance.assess import assess
+    from glassdist.synthetic import lens_displacement, synthetic_capture
+
+    cap = synthetic_capture((160, 160), pitch_mm=2.0, mm_per_px=0.25,
+                            displacement=lens_displacement(0.05, 1.0, radius_mm=7.0), rng=0)
+    res = glassdist.analyze(cap.image, reference=cap.reference, pitch_mm=2.0, distance_m=1.0)
+    crit = [{"channel": "phi_eff", "statistic": "max_abs", "max_mD": 40}, {"channel": "phi_eff", "statistic": "p95_abs",
+            "max_mD": 25}, {"channel": "phi_shear", "statistic": "p95_abs", "max_mD": 30}]
+    fixed = assess(res, Spec(name="f", criteria=crit, figures={"colour_limit": 7.5}))
+    assert fixed.colour_limits == {"phi_eff": 7.5, "phi_shear": 7.5}
+    by_spec = assess(res, Spec(name="s", criteria=crit, figures={"colour_limit": "spec"}, protocol={"pitch_mm": 2.0}))
+    assert by_spec.colour_limits == {"phi_eff": 25.0, "phi_shear": 30.0}
+    assert by_spec.protocol["pinned"] == {"pitch_mm": 2.0}
+    assert by_spec.protocol["used"]["pitch_mm"] == 2.0 and "camera" not in by_spec.metadata
+    alone = assess(res, protocol=resolve_protocol(Protocol(), reference_given=True, pitch_mm=2.0, distance_m=1.0),
+                   camera={"model": "X"})
+    assert alone.verdict is None and alone.protocol["used"]["method"] == "comparative"
+    assert alone.metadata["camera"] == {"model": "X"}

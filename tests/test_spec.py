@@ -223,3 +223,112 @@ def test_protocol_sigma_in_carrier_periods_of_a_checkerboard():
         r = resolve_protocol(Protocol(sigma_periods=2, pattern=pattern), reference_given=True, pitch_mm=5.0,
                              distance_m=1.0)
         assert r.sigma_mm == pytest.approx(2 * period), pattern
+
+
+# --- the specification's own validation and protocol rules, one by one -------------------------------------------
+
+def test_pane_needs_positive_sizes_and_a_convex_quadrilateral_at_any_scale():
+    from glassdist.acceptance.spec import Pane
+
+    square = ((0.0, 0.0), (0.5, 0.0), (0.5, 0.5), (0.0, 0.5))  # half a pixel a side: convexity has no scale
+    assert Pane(corners_px=square, size_mm=(0.5, 100.0)).size_mm == (0.5, 100.0)
+    assert Pane(corners_px=square[::-1], size_mm=(10.0, 10.0))  # the other winding
+    for size in ((-5.0, 100.0), (0.0, 100.0)):
+        with pytest.raises(ValueError, match="two positive numbers"):
+            Pane(corners_px=square, size_mm=size)
+    dart = ((0.0, 0.0), (10.0, 0.0), (3.0, 3.0), (0.0, 10.0))
+    with pytest.raises(ValueError, match="convex"):
+        Pane(corners_px=dart, size_mm=(10.0, 10.0))
+
+
+def test_colour_limit_is_auto_spec_or_a_positive_number():
+    from glassdist.acceptance.spec import Figures
+
+    assert Figures(colour_limit=0.5).colour_limit == 0.5
+    assert Figures(colour_limit="spec").colour_limit == "spec"
+    for bad in (0.0, -2.0):
+        with pytest.raises(ValueError, match="positive number"):
+            Figures(colour_limit=bad)
+
+
+def _spec(**extra):
+    from glassdist.acceptance.spec import Spec
+
+    return Spec.model_validate({"name": "t", "criteria": [{"channel": "phi_eff", "statistic": "p95_abs", "max_mD": 5}],
+                                **extra})
+
+
+def test_zones_are_named_once_and_found_by_name():
+    s = _spec(zones=[{"name": "a", "inset_mm": 0}, {"name": "b", "edge_band_mm": 20}])
+    assert s.zone("b").edge_band_mm == 20 and s.zone("a").inset_mm == 0
+    with pytest.raises(ValueError, match="given twice"):
+        _spec(zones=[{"name": "a", "inset_mm": 0}, {"name": "a", "inset_mm": 5}])
+    with pytest.raises(ValueError, match=r"not in 'zones' \(none defined\)"):
+        _spec(criteria=[{"channel": "phi_eff", "statistic": "p95_abs", "max_mD": 5, "zone": "edge"}])
+
+
+def test_a_criterion_needs_its_own_limit():
+    from glassdist.acceptance.spec import Criterion
+
+    with pytest.raises(ValueError, match="needs 'max_mD'"):
+        Criterion(channel="phi_eff", statistic="p95_abs")
+    with pytest.raises(ValueError, match="needs 'threshold_mD' and 'max_percent'"):
+        Criterion(channel="phi_eff", statistic="area_over", threshold_mD=5.0)
+
+
+def test_protocol_resolution_defaults_pins_and_what_the_errors_name():
+    from glassdist.acceptance.spec import Protocol, resolve_protocol
+    from glassdist.analyzer import load_params
+
+    r = resolve_protocol(Protocol(pitch_mm=5.0, distance_m=1.0), reference_given=False)
+    assert (r.detrend_degree, r.pattern, r.sigma_mm) == (2, "lines", 10.0)  # the defaults: N = 2, 2 periods
+    assert r.pinned == {"pitch_mm": 5.0, "distance_m": 1.0}  # as written, no empty entries
+    assert r.to_dict()["pinned"] == {"pitch_mm": 5.0, "distance_m": 1.0}
+    # a parameter file without sigma_periods leaves the default two carrier periods
+    r = resolve_protocol(Protocol(), reference_given=False, pitch_mm=4.0, distance_m=1.0,
+                         params=load_params({"detrend_degree": 3}))
+    assert r.sigma_mm == 8.0 and r.sources["sigma_mm"] == "default" and r.detrend_degree == 3
+    # sigma pinned in carrier periods reaches the analysis as an override
+    r = resolve_protocol(Protocol(sigma_periods=3.0), reference_given=True, pitch_mm=4.0, distance_m=1.0)
+    assert r.params_overrides["sigma_mm"] == 12.0 and r.sources["sigma_mm"] == "spec"
+    with pytest.raises(InputError, match=r"--pitch-mm is required \(the grid pitch, mm\)"):
+        resolve_protocol(Protocol(), reference_given=False, distance_m=1.0)
+    with pytest.raises(InputError, match=r"--distance-m is required \(the glass-to-grid distance L, m\)"):
+        resolve_protocol(Protocol(), reference_given=False, pitch_mm=4.0)
+    with pytest.raises(InputError, match="^--sigma-mm 10 contradicts"):
+        resolve_protocol(Protocol(sigma_periods=3.0), reference_given=True, pitch_mm=4.0, distance_m=1.0, sigma_mm=10.0)
+    with pytest.raises(InputError, match="^the --params file's sigma_mm 10 contradicts"):
+        resolve_protocol(Protocol(sigma_periods=3.0), reference_given=True, pitch_mm=4.0, distance_m=1.0,
+                         params=load_params({"sigma_mm": 10.0}))
+
+
+def test_lens_calibration_source_required_by_the_protocol():
+    from glassdist.acceptance.spec import Protocol, check_lens_source
+
+    either = Protocol(lens_calibration="photo_or_file")
+    check_lens_source(either, lens_photo=True, camera_file=False)
+    check_lens_source(either, lens_photo=False, camera_file=True)
+    with pytest.raises(InputError, match="--lens-photo PHOTO or --camera-file FILE"):
+        check_lens_source(either, lens_photo=False, camera_file=False)
+    with pytest.raises(InputError, match="give --lens-photo PHOTO$"):
+        check_lens_source(Protocol(lens_calibration="photo"), lens_photo=False, camera_file=True)
+
+
+def test_protocol_checks_and_zone_coverage_at_their_limits():
+    from glassdist.acceptance.spec import Protocol, spec_verdict
+
+    spec = _spec(protocol=Protocol(sigma_periods=2.0).model_dump(exclude_none=True),
+                 zones=[{"name": "z", "inset_mm": 0, "min_valid_percent": 50}],
+                 criteria=[{"channel": "phi_eff", "statistic": "area_over", "threshold_mD": 2, "max_percent": 10}])
+    result = SimpleNamespace(carrier_period_mm=8.0, sigma_mm=16.0, method="direct")
+    stats = {"phi_eff": {"area_over_2": 10.0}}  # at the limit: <= passes
+    v = spec_verdict(spec, stats, result, zones={"z": {"trusted_percent": 50.0}}, trusted_percent=100.0)
+    by = {c.criterion: c for c in v.checks}
+    assert by["protocol: sigma_mm = 16 mm"].passed  # 2 periods of 8 mm
+    assert by["trusted area >= 50 % of zone 'z'"].passed  # at the limit: >= passes
+    area = next(c for c in v.checks if c.comparison == "<=")
+    assert area.passed and area.unit == "%"  # an area_over limit is a share, not mD
+    assert v.passed
+    v = spec_verdict(spec, stats, SimpleNamespace(carrier_period_mm=8.0, sigma_mm=12.0, method="direct"),
+                     zones={"z": {"trusted_percent": 49.9}}, trusted_percent=100.0)
+    assert not v.passed
