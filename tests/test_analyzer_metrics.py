@@ -211,3 +211,29 @@ def test_gradients_of_a_lightly_smoothed_wave_are_those_of_the_smoothed_field():
     peak = 2 * A * k * g / L * 1000
     assert np.max(np.abs(ch.phi_eff_mD[inner] - eff[inner])) < 1e-3 * peak
     assert np.max(np.abs(ch.phi_shear_mD[inner] - shear[inner])) < 1e-3 * peak
+
+
+@pytest.mark.parametrize("shape", [(40, 20), (21, 26)])
+def test_a_kernel_wider_than_the_data_is_centred_on_an_odd_fft_grid(shape):
+    """A kernel reaching beyond the data is sampled on the FFT grid (here 75 x 45 and 44 x 54 samples, odd and even)
+    with its offsets wrapped around the origin: the zeroth-order normalised convolution equals the direct sum over
+    every pair of samples of a correlated Gaussian (x, y order covariance). Exactly (1e-14) where both axes span the
+    data twice; on 40 rows the row axis is padded by the kernel's reach (4 sigma + 1) only, and the kernel's values
+    from 37 to 39 rows off (5e-5 of its peak) wrap around: 1.6e-5 here. A kernel off by one sample (a wrong centre on
+    an odd grid) is off by a tenth of the field's step."""
+    from glassdist.analyzer.metrics import masked_gaussian
+
+    h, w = shape
+    rng = np.random.default_rng(7)
+    field = rng.normal(size=shape) + 0.3 * np.arange(w)[None, :]
+    weight = np.ones(shape)
+    weight[3:6, 4:9] = 0.0
+    cov = np.array([[100.0, 40.0], [40.0, 64.0]])  # px^2, (x, y)
+    got = masked_gaussian(field, weight, cov, order=0)
+    y, x = np.mgrid[0:h, 0:w]
+    dx = x.ravel()[:, None] - x.ravel()[None, :]
+    dy = y.ravel()[:, None] - y.ravel()[None, :]
+    ci = np.linalg.inv(cov)
+    k = np.exp(-0.5 * (ci[0, 0] * dx**2 + 2 * ci[0, 1] * dx * dy + ci[1, 1] * dy**2)) * weight.ravel()[None, :]
+    want = (k @ field.ravel() / k.sum(axis=1)).reshape(shape)
+    assert np.abs(got - want).max() < (3e-5 if shape == (40, 20) else 1e-12)
