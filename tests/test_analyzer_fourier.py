@@ -149,3 +149,35 @@ def test_angle_between_carriers_is_that_of_the_lines(a1, a2, between):
     """The recorded angle between the two carriers is that of the grid's lines: modulo 180 deg, at most 90."""
     k = [F.Carrier(0.1 * np.cos(np.radians(a)), 0.1 * np.sin(np.radians(a))) for a in (a1, a2)]
     assert F.CarrierPair(*k).to_dict()["angle_between_deg"] == pytest.approx(between)
+
+
+def test_a_cross_term_stronger_than_the_second_family_is_not_taken_for_it():
+    """Lines along k1, a weaker family along k2 (100 deg from it) and a cross-modulation term k1 + k2 stronger than
+    k2 (50 deg from k1, so a candidate): k2 is the second carrier, not the cross term (paper §2.2 F1)."""
+    H = W = 256
+    y, x = np.mgrid[0:H, 0:W].astype(float)
+    k1 = np.array([26 / W, 0.0])
+    k2 = np.array([-4 / W, 25 / H])  # about 99 deg from k1, on whole bins
+    tone = lambda k: np.cos(2 * np.pi * (k[0] * x + k[1] * y))  # noqa: E731
+    image = 0.5 + 0.3 * tone(k1) + 0.08 * tone(k2) + 0.12 * tone(k1 + k2)
+    pair = F.find_carriers(F.compute_spectrum(image))
+    f1, f2 = np.array([pair.k1.fx, pair.k1.fy]), np.array([pair.k2.fx, pair.k2.fy])
+    assert min(np.linalg.norm(f1 - k1), np.linalg.norm(f1 + k1)) < 0.2 / W
+    assert min(np.linalg.norm(f2 - k2), np.linalg.norm(f2 + k2)) < 0.2 / W
+
+
+@pytest.mark.parametrize("coarse", [(256, 256), (64, 64), (48, 80)])
+def test_baseband_is_the_analytic_signal_at_the_grid_sample_positions(coarse):
+    """A tone d off the carrier: b(r) = 0.2 g exp(2 pi i d . r) at each sample centre r of the grid (closed form),
+    on the full grid and on coarser ones whose samples sit between pixels (offset (step - 1) / 2)."""
+    H = W = 256
+    y, x = np.mgrid[0:H, 0:W].astype(float)
+    f0, d = np.array([32 / W, 12 / H]), np.array([2 / W, -1 / H])
+    image = 0.5 + 0.4 * np.cos(2 * np.pi * ((f0[0] + d[0]) * x + (f0[1] + d[1]) * y))
+    cov = np.diag([0.02**2, 0.02**2])
+    grid = F.SamplingGrid((H, W), coarse)
+    b = F.baseband(F.compute_spectrum(image), F.Carrier(f0[0], f0[1]), cov, grid)
+    rows, cols = grid.coords()
+    g = np.exp(-0.5 * d @ np.linalg.inv(cov) @ d)
+    want = 0.2 * g * np.exp(2j * np.pi * (d[0] * cols + d[1] * rows))
+    np.testing.assert_allclose(b, want, atol=2e-4 * 0.2)
