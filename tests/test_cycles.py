@@ -245,8 +245,11 @@ def test_reflection_job_is_the_front_face_as_a_mirror(tmp_path):
     land = straight_landing(scene, pixel_directions(scene.camera, cols.ravel(), rows.ravel()))
     assert np.all(np.abs(land - b["origin_mm"][:2]) < np.asarray(b["size_mm"]) / 4)  # with room for deflected rays
     ref = json.loads(cycles.write_job(scene, tmp_path / "ref", reference=True).read_text())
-    flat = np.load(tmp_path / "ref" / ref["arrays"])
+    flat = dict(np.load(tmp_path / "ref" / ref["arrays"]))
     assert ref["glass"]["bsdf"] == "mirror"
+    framed = scene.with_changes(pane={"frame": {"width_mm": 30, "intensity": 0.1}})
+    assert json.loads(cycles.write_job(framed, tmp_path / "ref").read_text())["glass"]["frame"] is not None
+    assert json.loads(cycles.write_job(framed, tmp_path / "ref", reference=True).read_text())["glass"]["frame"] is None
     assert np.all(flat["front_z"] == -scene.pane.thickness_mm / 2) and not flat["front_grad"].any()
     # the mirror's quads face the camera (local -z), with the analytic normals
     verts, quads, normals = worker.face_mesh(arrays["glass_x"], arrays["glass_y"], arrays["front_z"],

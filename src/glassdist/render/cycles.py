@@ -506,8 +506,10 @@ def write_job(
         raise InputError("the cycles engine renders the front face's reflection only; render the back face's ghost "
                          "(viewing.back_face) with --engine exact")
     directory = Path(directory)
-    if scene.reflection:  # the pane's front face as a mirror; the reference is that mirror flat
+    if scene.reflection:  # the pane's front face as a mirror; the reference is that mirror flat, unframed
         arrays, glass = _glass_arrays(scene, spacing_mm, "mirror", flat=reference)
+        if reference and glass is not None:
+            glass = {**glass, "frame": None}  # as the exact engine's reference: the board alone
     else:
         arrays, glass = _glass_arrays(scene, spacing_mm, bsdf) if not reference else ({}, None)
     np.savez(directory / "arrays.npz", **(arrays or {"empty": np.zeros(1)}))
