@@ -181,3 +181,31 @@ def test_baseband_is_the_analytic_signal_at_the_grid_sample_positions(coarse):
     g = np.exp(-0.5 * d @ np.linalg.inv(cov) @ d)
     want = 0.2 * g * np.exp(2j * np.pi * (d[0] * cols + d[1] * rows))
     np.testing.assert_allclose(b, want, atol=2e-4 * 0.2)
+
+
+def test_a_finer_grid_along_the_rows_alone_is_refused():
+    """A family of lines 2.5 px apart running down the image (its peak on the spectrum's first row, ky = 0) beside a
+    legitimate 8 px pair: the finer grid is seen and the photo refused, not read at the wrong scale."""
+    from glassdist.errors import InputError
+
+    H, W = 200, 240
+    y, x = np.mgrid[0:H, 0:W].astype(float)
+    tone = lambda fx, fy: np.cos(2 * np.pi * (fx * x + fy * y))  # noqa: E731
+    a = np.radians(60.0)
+    image = 0.5 + 0.1 * tone(0.0, 1 / 8) + 0.1 * tone(np.cos(a) / 8, np.sin(a) / 8) + 0.25 * tone(0.4, 0.0)
+    with pytest.raises(InputError, match="about 2.50 px, below the 3 px"):
+        F.find_carriers(F.compute_spectrum(image))
+
+
+def test_the_carrier_band_runs_from_four_periods_across_the_image_to_the_finest_period():
+    """A crossed grid of 5 periods across the image is found (the band starts at 4, below it is illumination), and
+    a stronger 2.5 px family on the diagonal, finer than min_period_px, is never taken for a carrier."""
+    H = W = 256
+    y, x = np.mgrid[0:H, 0:W].astype(float)
+    tone = lambda fx, fy: np.cos(2 * np.pi * (fx * x + fy * y))  # noqa: E731
+    coarse = F.find_carriers(F.compute_spectrum(0.5 + 0.2 * tone(5 / W, 0.0) + 0.2 * tone(0.0, 5 / H)))
+    assert sorted(round(k.period_px, 1) for k in (coarse.k1, coarse.k2)) == [51.2, 51.2]
+    d = 0.4 / np.sqrt(2.0)  # 2.5 px, along the diagonal: inside the square |fx|, |fy| < 1/3
+    image = 0.5 + 0.1 * tone(32 / W, 0.0) + 0.1 * tone(0.0, 32 / H) + 0.25 * tone(d, d)
+    pair = F.find_carriers(F.compute_spectrum(image))
+    assert sorted(round(k.period_px, 2) for k in (pair.k1, pair.k2)) == [8.0, 8.0]
