@@ -210,6 +210,9 @@ def main(argv=None) -> int:
     else:
         sizes = {name: int(count) if count else args.per_module for name, _, count in items}
     with tempfile.TemporaryDirectory(prefix="glassdist-mutation-") as tmp:
+        # the experiments find their scenes beside src/ (examples/, docs/): the copies see the repository's
+        for folder in ("examples", "docs"):
+            (Path(tmp) / folder).symlink_to(REPO / folder, target_is_directory=True)
         copies = queue.Queue()
         for j in range(max(1, args.jobs)):
             src = Path(tmp) / f"src{j}"
