@@ -298,7 +298,7 @@ def test_roll_wave_maps_within_two_percent_of_the_truth(roll_wave_photos):
 
 def test_roll_wave_direct_maps_within_two_percent_but_for_the_homography(roll_wave_photos):
     """The Direct Method on the same photo. Its homography takes a uniform power (a change of scale) and keystone
-    ramps, which a single photo cannot tell from the glass (README "Conventions"; the summary says so): with each
+    ramps, which a single photo cannot tell from the glass (docs/reflection.md; the summary says so): with each
     power component's best-fit plane removed from the difference, phi_eff and the astigmatism tensor are within 2 %
     of the truth (measured 0.74 % / 1.10 % at normal incidence, 1.30 % / 1.27 % at 20 deg; with the planes kept,
     1.03 % / 4.22 % and 3.48 % / 10.36 %, the mean phi_eff 1.0 mD off at 20 deg)."""
