@@ -19,7 +19,7 @@ from scipy import ndimage
 from . import fourier as F
 
 __all__ = ["grid_fill_indices", "image_grid_valid", "bspline_upsample", "bspline_eval", "upsample_field",
-           "upsample_field_rows", "upsample_labels", "axis_deviator", "axis_of_deviator", "upsample_axis"]
+           "upsample_field_rows", "upsample_labels", "axis_deviator", "axis_of_deviator", "upsample_axis", "upsample_axis_rows"]
 
 
 def grid_fill_indices(valid: np.ndarray):
@@ -204,3 +204,9 @@ def axis_of_deviator(deviator: np.ndarray) -> np.ndarray:
 def upsample_axis(axis_deg: np.ndarray, phi_shear, idx, grid: F.SamplingGrid, invalid: np.ndarray) -> np.ndarray:
     """:func:`upsample_field` for an axis field: its deviator (:func:`axis_deviator`) interpolated, then its angle."""
     return axis_of_deviator(upsample_field(axis_deviator(axis_deg, phi_shear), idx, grid, invalid))
+
+
+def upsample_axis_rows(axis_deg: np.ndarray, phi_shear, idx, grid: F.SamplingGrid, invalid: np.ndarray, block_rows: int):
+    """:func:`upsample_axis` one block of image rows at a time (as :func:`upsample_field_rows`): yields ``(rows, block)``."""
+    for rows, block in upsample_field_rows(axis_deviator(axis_deg, phi_shear), idx, grid, invalid, block_rows):
+        yield rows, axis_of_deviator(block)

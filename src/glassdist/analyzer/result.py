@@ -20,7 +20,7 @@ from .homography import HomographyFit
 from .metrics import channel_statistics
 from .params import AnalyzerParams
 from .region import ANALYSED, LABELS, pixel_quality, trusted_on
-from .resample import axis_deviator, axis_of_deviator, upsample_axis, upsample_field, upsample_field_rows, upsample_labels
+from .resample import upsample_axis, upsample_axis_rows, upsample_field, upsample_field_rows, upsample_labels
 
 __all__ = ["AnalysisResult", "FieldSpec", "FIELDS", "CHANNELS"]
 
@@ -250,9 +250,8 @@ class AnalysisResult:
             if name in self.__dict__ or _SPECS[name].kind == "label":
                 streams.append(_row_slices(getattr(self, name), block_rows))
             elif name == "axis_deg":
-                dev = axis_deviator(self.grid_field(name), self.grid_field("phi_shear_mD"))
-                rows = upsample_field_rows(dev, d["idx"], d["grid"], ~self.valid, block_rows)
-                streams.append((r, axis_of_deviator(b)) for r, b in rows)
+                streams.append(upsample_axis_rows(self.grid_field(name), self.grid_field("phi_shear_mD"), d["idx"],
+                                                  d["grid"], ~self.valid, block_rows))
             else:
                 streams.append(upsample_field_rows(self.grid_field(name), d["idx"], d["grid"], ~self.valid, block_rows))
         for blocks in zip(*streams):
