@@ -127,6 +127,7 @@ def test_deformation_grid_halves_the_step_only_where_the_reach_needs_it():
     # twice the samples, but never more than the image's own (to a multiple of 4): 104 -> 100
     near_full = F.SamplingGrid((102, 130), (52, 64))
     assert D.deformation_grid(near_full, 0.75, 4.0, "auto").shape == (100, 128)
+    assert D.deformation_grid(F.SamplingGrid((130, 102), (64, 52)), 0.75, 4.0, "auto").shape == (128, 100)  # columns
 
 
 def test_growth_takes_coherent_small_residuals_within_reach_only():

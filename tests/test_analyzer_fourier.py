@@ -209,3 +209,47 @@ def test_the_carrier_band_runs_from_four_periods_across_the_image_to_the_finest_
     image = 0.5 + 0.1 * tone(32 / W, 0.0) + 0.1 * tone(0.0, 32 / H) + 0.25 * tone(d, d)
     pair = F.find_carriers(F.compute_spectrum(image))
     assert sorted(round(k.period_px, 2) for k in (pair.k1, pair.k2)) == [8.0, 8.0]
+
+
+def test_a_peak_is_a_5x5_maximum_beside_the_rows_and_columns_the_pooling_skips():
+    """``_spectral_peaks`` returns 5x5 local maxima. Its 4x4 pooling skips the last H % 4 rows and
+    W % 4 columns; a stronger bin there, three bins away (outside the 5x5 window; rows wrap), must not
+    hide a peak."""
+    work = np.zeros((67, 67))
+    work[1, 20], work[65, 20] = 1.0, 2.0  # rows 1 and 65: three rows apart across the wrap
+    work[30, 62], work[30, 65] = 1.0, 2.0  # columns 62 and 65: three columns apart
+    got = set(F._spectral_peaks(work, 10).tolist())
+    assert {1 * 67 + 20, 30 * 67 + 62} <= got
+
+
+def test_a_harmonic_inside_the_carrier_band_is_not_a_finer_grid():
+    """Thin lines whose second harmonic is stronger than their fundamental: with ``min_period_px``
+    2.5 the harmonic (2.8 px) lies inside the carrier band, so the grid is read at its fundamental
+    (5.6 px), not refused as finer than the band."""
+    y, x = np.mgrid[0:480, 0:640].astype(float)
+    img = 0.5 + 0.08 * np.cos(2 * np.pi * x / 5.6) + 0.2 * np.cos(2 * np.pi * x / 2.8) + 0.12 * np.cos(2 * np.pi * y / 6.0)
+    c = F.find_carriers(F.compute_spectrum(img), min_period_px=2.5)
+    assert sorted(k.period_px for k in (c.k1, c.k2)) == pytest.approx([5.6, 6.0], rel=1e-3)
+
+
+def test_spectral_centroid_of_a_symmetric_sideband_comb_is_its_centre():
+    """A carrier with equal sidebands at every offset up to 20 bins along ky: the power centroid lies
+    on the carrier (the Gaussian-weighted window is symmetric about it, so no side is cut short)."""
+    n = 256
+    y, x = np.mgrid[0:n, 0:n].astype(float)
+    img = np.cos(2 * np.pi * (26 * x + 10 * y) / n)
+    for d in range(1, 21):
+        for s in (1, -1):
+            img += 0.4 * np.cos(2 * np.pi * (26 * x + (10 + s * d) * y) / n)
+    cy, cx = F._spectral_centroid(F.compute_spectrum(img), 10.0, 26.0)
+    assert (cy, cx) == pytest.approx((10.0, 26.0), abs=1e-3)
+
+
+def test_the_auto_grid_carries_the_band_and_no_more():
+    """The coarse grid spans +-4 standard deviations of the widest bandpass along each axis
+    (no aliasing) and is the next multiple of 4 above that, no wider (its size is the cost of F3-F5)."""
+    shape, sd = (1000, 1200), 0.02
+    g = F.sampling_grid(shape, [np.diag([sd**2, (sd / 2) ** 2])])
+    for n, N in zip(g.shape, shape):
+        need = 2 * 4 * sd * N
+        assert need <= n <= 2 * np.ceil(4 * sd * N) + 4

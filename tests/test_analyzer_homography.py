@@ -68,3 +68,86 @@ def test_inverse_jacobian_is_the_derivative_of_the_inverse_map():
         plus, minus = np.array(apply_inverse(H, x + dx, y + dy)), np.array(apply_inverse(H, x - dx, y - dy))
         for a in range(2):
             np.testing.assert_allclose(J[..., a, b], (plus[a] - minus[a]) / (2 * h), rtol=1e-6, atol=1e-12)
+
+
+def _lensed_grid(shape=(384, 512), step=4.0, k1=-0.05, k2=0.01):
+    """Samples of a grid seen through a known homography and Brown lens: (U, V, y, x, H, lens)."""
+    from glassdist.analyzer.lens import LensModel
+    from glassdist.brown import BrownDistortion
+
+    H = np.array([[8.0, 0.3, 255.5 - 8 * 30], [-0.2, 8.2, 191.5 - 8.2 * 22], [1e-5, -2e-5, 1.0]])
+    h, w = shape
+    lens = LensModel(BrownDistortion(k1, k2), ((w - 1) / 2, (h - 1) / 2), float(np.hypot(w, h) / 2))
+    y, x = np.meshgrid(np.arange(step / 2, h, step), np.arange(step / 2, w, step), indexing="ij")
+    U, V = apply_inverse(H, *lens.undistort_px(x, y))
+    return U, V, y, x, H, lens
+
+
+def test_exact_samples_of_a_lensed_grid_carry_no_strain_against_their_lens():
+    """The local grid frequencies of exact samples match those the true homography and lens predict:
+    Block I's 'unstrained' test (in carrier periods) passes everywhere, and against the bare
+    homography it does not (the lens is what it measures)."""
+    import glassdist.analyzer.homography as hm
+
+    U, V, y, x, H, lens = _lensed_grid()
+    S = hm._strain_samples(U, V, y, x, np.ones(U.shape, bool), (4.0, 4.0), 8.0)
+    with_lens = hm._lens_strain(H, lens, S, 8.0)
+    assert np.percentile(with_lens, 95) < 2e-3
+    assert np.percentile(hm._lens_strain(H, None, S, 8.0), 95) > 10 * np.percentile(with_lens, 95)
+
+
+def test_least_squares_homography_needs_eight_points_and_takes_them():
+    """The plain least-squares fit returns the homography from eight exact points and refuses seven."""
+    import glassdist.analyzer.homography as hm
+
+    H = _truth()
+    rng = np.random.default_rng(3)
+    src = rng.uniform(0, 40, (8, 2))
+    q = np.c_[src, np.ones(8)] @ H.T
+    dst = q[:, :2] / q[:, 2:3]
+    G = hm._lsq(src, dst)
+    assert G is not None and np.allclose(G, H, rtol=1e-5, atol=1e-8)
+    assert hm._lsq(src[:7], dst[:7]) is None
+
+
+def test_a_known_lens_is_applied_from_a_hundred_strain_samples():
+    """With a camera file's lens, Block I refits the homography through it from 2 x 50 strain samples
+    (a small view): the homography and lens it returns reproduce the exact samples."""
+    import glassdist.analyzer.homography as hm
+    from glassdist.analyzer.lens import LensCalibration
+
+    U, V, y, x, H, lens = _lensed_grid(shape=(320, 320), step=32.0)
+    valid = np.ones(U.shape, bool)
+    assert valid.sum() == 100
+    fit0 = hm.HomographyFit(H @ np.diag([1.01, 0.99, 1.0]), 1.0, 100, 0.0)
+    known = LensCalibration(lens, "file")
+    fit = hm.refit_with_lens(fit0, U, V, y, x, valid, 1, period_px=8.0, step_px=(32.0, 32.0), threshold_px=0.8,
+                             image_shape=(320, 320), known=known)
+    assert fit.lens is known
+    q = np.c_[U[valid], V[valid], np.ones(100)] @ fit.matrix.T
+    px = np.stack(lens.distort_px(q[:, 0] / q[:, 2], q[:, 1] / q[:, 2]), 1)
+    assert np.max(np.hypot(px[:, 0] - x[valid], px[:, 1] - y[valid])) < 1e-3
+
+
+def test_each_region_joins_the_fit_by_its_own_integer_offsets():
+    """Two parts of the view (an opaque bar between them) whose logical grid numbering differs by
+    whole periods, U by +3 and V by -2 on the right: Block I takes each offset from its own
+    coordinate, so both parts fit one homography and every point is an inlier."""
+    from glassdist.analyzer import fourier as F
+    from glassdist.analyzer.homography import fit_grid_homography
+    from glassdist.analyzer.params import AnalyzerParams
+
+    H = np.array([[8.0, 0.4, 20.0], [-0.3, 8.2, 12.0], [2e-5, -1e-5, 1.0]])
+    grid = F.SamplingGrid((384, 512), (96, 128))
+    yy, xx = grid.coords()
+    U, V = apply_inverse(H, xx, yy)
+    labels = np.where(xx < 200, 1, np.where(xx > 260, 2, 0))
+    U, V = np.where(labels == 2, U + 3, U), np.where(labels == 2, V - 2, V)
+    carriers = F.CarrierPair(F.Carrier(1 / 8.0, 0.0, 50.0), F.Carrier(0.0, 1 / 8.2, 50.0))
+    fit, offsets = fit_grid_homography((U, V), yy, xx, labels, 2, carriers, grid, AnalyzerParams(lens_model="none"), [])
+    assert offsets[2].tolist() == [3.0, -2.0]
+    assert fit.inlier_fraction > 0.99
+    q = np.c_[np.stack([U - offsets[labels, 0], V - offsets[labels, 1]], -1)[labels > 0], np.ones((labels > 0).sum())]
+    p = q @ fit.matrix.T
+    err = np.hypot(p[:, 0] / p[:, 2] - xx[labels > 0], p[:, 1] / p[:, 2] - yy[labels > 0])
+    assert err.max() < 1e-3
