@@ -79,24 +79,45 @@ def _truth(sc, res, N):
                                sigma_px=res.sigma_mm / res.mm_per_px, degree=N, distance_m=res.distance_m)
 
 
+def _slope(m, t):
+    """Least-squares slope of the map on the truth."""
+    return float(np.sum((t - t.mean()) * (m - m.mean())) / np.sum((t - t.mean()) ** 2))
+
+
+def _inside(res, k):
+    """Pixels more than ``k`` sigma inside the analysed region (Euclidean distance to its edge)."""
+    from scipy import ndimage
+
+    return ndimage.distance_transform_edt(np.pad(res.valid, 1))[1:-1, 1:-1] > k * res.sigma_mm / res.mm_per_px
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("lens", list(LENSES))
 def test_direct_through_camera_lenses_at_n2(lens):
     """Lens region + roller through Brown lenses, Direct Method at N = 2, no cubic detrend.
 
-    Measured: slope of the map on the truth 1.0075 / 1.0070 / 1.0045 (mean |phi_eff| 1.018 / 1.016 /
-    1.007; the Comparative Method on the barrel render 1.017, slope 1.010), r 0.997 / 0.999 / 0.996;
-    fitted k1 within 4.3%, k2 of the moustache within 2.1% (k2 = 0 rendered: |k2| < 0.1 |k1|).
+    Judged 3 sigma inside the analysed region (``valid``), where the reported map is the field
+    smoothed by G_sigma and no border rule enters: mean |phi_eff| 1.0003 / 1.0035 / 1.0047 of the
+    truth, slope 0.9995 / 1.0031 / 1.0048, r 0.9999 / 0.9999 / 0.9996 (barrel / pincushion /
+    moustache). Over the whole trusted region the mean reads 1.018 / 1.016 / 1.007 (slope 1.0075 /
+    1.0070 / 1.0045, r 0.997 / 0.999 / 0.996): between 1 and 2 sigma from the region's edge the
+    Analyzer's first-order normalised convolution and the truth's zeroth-order one are two
+    different border rules (the Comparative Method on the barrel render reads the same 1.017
+    there). Fitted k1 within 4.3%, k2 of the moustache within 2.1% (k2 = 0 rendered: |k2| < 0.1 |k1|).
     """
     sc = _render(LENSES[lens])
     res = _direct(sc)
     truth = _truth(sc, res, 2)
     ok = res.trusted & np.isfinite(truth) & np.isfinite(res.phi_eff_mD)
     m, t = res.phi_eff_mD[ok], truth[ok]
-    slope = float(np.sum((t - t.mean()) * (m - m.mean())) / np.sum((t - t.mean()) ** 2))
-    assert slope == pytest.approx(1.0, abs=0.015)
+    assert _slope(m, t) == pytest.approx(1.0, abs=0.015)
     assert np.mean(np.abs(m)) / np.mean(np.abs(t)) == pytest.approx(1.0, abs=0.02)
     assert np.corrcoef(m, t)[0, 1] > 0.995
+    inner = ok & _inside(res, 3.0)
+    m, t = res.phi_eff_mD[inner], truth[inner]
+    assert _slope(m, t) == pytest.approx(1.0, abs=0.01)
+    assert np.mean(np.abs(m)) / np.mean(np.abs(t)) == pytest.approx(1.0, abs=0.01)
+    assert np.corrcoef(m, t)[0, 1] > 0.999
     cal = res.homography_fit.lens
     assert cal is not None and cal.identifiable and cal.source == "self"
     true = sc.camera.distortion.brown.rescaled(cal.model.scale_px / sc.camera.focal_length_px)
@@ -106,6 +127,21 @@ def test_direct_through_camera_lenses_at_n2(lens):
     else:
         assert abs(cal.model.distortion.k2) < 0.1 * abs(true.k1)
     assert res.summary()["homography"]["lens"]["identifiable"] is True
+
+
+@pytest.mark.slow
+def test_direct_through_the_moustache_lens_at_n1():
+    """N = 1, the moustache wide-angle lens: 3 sigma inside the analysed region mean |phi_eff|
+    1.0003 of the truth, slope 0.9917, r 0.994. (The barrel and pincushion lenses read 0.976 /
+    0.979 there at N = 1, a miss whose cause is not established.)"""
+    sc = _render(LENSES["moustache"])
+    res = _direct(sc, N=1)
+    truth = _truth(sc, res, 1)
+    ok = res.trusted & np.isfinite(truth) & np.isfinite(res.phi_eff_mD) & _inside(res, 3.0)
+    m, t = res.phi_eff_mD[ok], truth[ok]
+    assert np.mean(np.abs(m)) / np.mean(np.abs(t)) == pytest.approx(1.0, abs=0.015)
+    assert _slope(m, t) == pytest.approx(1.0, abs=0.015)
+    assert np.corrcoef(m, t)[0, 1] > 0.99
 
 
 @pytest.mark.slow
