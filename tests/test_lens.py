@@ -279,11 +279,17 @@ def test_calibration_photo_and_camera_file_agree(tmp_path):
     cam = {"camera_matrix": [[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1]],
            "dist_coeffs": [sc.camera.distortion.k1, sc.camera.distortion.k2, 0, 0, 0], "image_size": [w, h]}
     (tmp_path / "camera.json").write_text(json.dumps(cam))
-    from_photo = calibrate_from_photo(photo, pitch_mm=sc.backdrop.pitch_mm, pattern="checkerboard", image_shape=img.shape)
+    from_photo = calibrate_from_photo(photo, pitch_mm=sc.backdrop.pitch_mm, pattern="checkerboard", image_shape=img.shape,
+                                      distance_m=sc.backdrop.distance_m)
     from_file = calibration_from_camera_file(tmp_path / "camera.json", img.shape)
     a, b = from_photo.model.opencv(f), from_file.model.opencv(f)
     assert a.k1 == pytest.approx(b.k1, rel=0.05) and a.k2 == pytest.approx(b.k2, rel=0.05)
     assert from_photo.source == "photo" and from_file.source == "file"
+    # The rendered board is a perfect grid: the calibration photo's own Direct reading is its noise
+    # (measured mean |phi_eff| 0.023 mD against a noise sigma of 0.037 mD), and the pane reads no floor warning.
+    fl = from_photo.floor
+    assert fl["detrend_degree"] == 2 and fl["distance_m"] == sc.backdrop.distance_m
+    assert fl["mean_abs_phi_eff_mD"] < fl["phi_eff_sigma_mD"] and not from_file.floor
 
     write_png16(tmp_path / "pane.png", img)
     write_png16(tmp_path / "calib.png", photo)
@@ -300,6 +306,8 @@ def test_calibration_photo_and_camera_file_agree(tmp_path):
         assert run.returncode == 0, run.stderr
         summary = json.loads((out / "summary.json").read_text())
         assert summary["homography"]["lens"]["source"] == name
+        assert ("floor" in summary["homography"]["lens"]) == (name == "photo")
+        assert not any("calibration photo (no glass)" in w for w in summary["warnings"])
         means[name] = summary["statistics"]["phi_eff_mD"]
     assert means["photo"]["mean_abs"] == pytest.approx(means["file"]["mean_abs"], rel=0.01)
     refused = subprocess.run(base + ["--spec", str(tmp_path / "spec.json"), "--out", str(tmp_path / "no")],

@@ -95,3 +95,26 @@ def test_waves_field_explains_the_photo_and_agrees_with_fcd(real_data):
     # the growth is what reaches the flanks: without it the region stays the one pass's
     one = analyze(img, pitch_mm=5.0, distance_m=0.5, reference=ref, params=dict(p, deformation_growth_passes=0))
     assert one.valid.mean() < 0.81
+
+
+def test_the_boards_own_reading_is_said_when_the_lens_comes_from_a_calibration_photo(real_data):
+    """The glass-less reference as the calibration photo: read by the Direct Method it shows the rig's floor
+    (the board of these photos is not a perfect grid: mean |phi_eff| 3.97 mD at N = 2 and L = 0.5 m, 18 times
+    its noise), reported with the lens, and the pane's reading is compared with it: 14 % of the waves'
+    (29 mD) and 70 % of the floating ring's (5.7 mD), both said."""
+    from glassdist.analyzer.params import load_params
+    from glassdist.analyzer.pipeline import calibrate_from_photo
+
+    p = load_params({"pattern": "checkerboard", "detrend_degree": 2})
+    ref = real_data["reference"]
+    cal = calibrate_from_photo(ref, pitch_mm=5.0, params=p, image_shape=ref.shape, distance_m=0.5)
+    assert cal.floor["mean_abs_phi_eff_mD"] == pytest.approx(3.97, rel=0.02)
+    assert cal.floor["mean_abs_phi_eff_mD"] > 10 * cal.floor["phi_eff_sigma_mD"]
+    for name, share in (("waves", 14), ("ring", 70)):
+        res = analyze(real_data[name], pitch_mm=5.0, distance_m=0.5, params=p, lens=cal)
+        said = [w for w in res.warnings if "calibration photo (no glass)" in w]
+        assert len(said) == 1 and f"{share}% of this pane's" in said[0], said
+        assert res.summary()["homography"]["lens"]["floor"] == cal.floor
+    # At L = 1 m the same board reads half the floor (phi ~ 1 / L): the warning scales it.
+    res = analyze(real_data["ring"], pitch_mm=5.0, distance_m=1.0, params=p, lens=cal)
+    assert any("shows mean |phi_eff| 1.99 mD" in w for w in res.warnings)

@@ -282,7 +282,8 @@ def _lens_source(args, pinned, protocol, params, images):
     if args.camera_file is not None:
         return calibration_from_camera_file(args.camera_file, images[0].shape)
     photo = read_image(args.lens_photo, dtype=np.float32)
-    return calibrate_from_photo(photo, pitch_mm=protocol.pitch_mm, params=params, image_shape=images[0].shape)
+    return calibrate_from_photo(photo, pitch_mm=protocol.pitch_mm, params=params, image_shape=images[0].shape,
+                                distance_m=protocol.distance_m)
 
 
 def _run_analyze(args) -> int:

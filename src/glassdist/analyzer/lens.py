@@ -127,6 +127,13 @@ class LensCalibration:
         Self-calibration only: how far the radial profile moves when the fit leaves out the
         inner disc (``"inner"``) or the worst quadrant (``"quadrants"``) of the view
         (:func:`radial_consistency`; a camera lens's distortion is global).
+    floor : dict
+        Calibration photo only: that photo (no glass) read by the Direct Method through this
+        lens, at the analysis's detrend degree, smoothing and distance L:
+        ``mean_abs_phi_eff_mD`` and ``p95_abs_phi_eff_mD`` over its trusted pixels, with
+        ``phi_eff_sigma_mD`` (its median noise) and ``detrend_degree``, ``distance_m``. What the
+        board and the camera leave against the perfect grid and the lens model, glass aside:
+        the Direct Method's floor on that rig (:func:`glassdist.analyzer.pipeline.calibrate_from_photo`).
     """
 
     model: LensModel
@@ -138,6 +145,7 @@ class LensCalibration:
     focal_px: float | None = None
     note: str = ""
     consistency: dict = field(default_factory=dict)
+    floor: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         d = {"source": self.source, "model": self.model.to_dict(), "sigma": dict(self.sigma),
@@ -145,6 +153,8 @@ class LensCalibration:
              "corner_shift_px": self.model.corner_shift_px(), "note": self.note}
         if self.consistency:
             d["consistency"] = dict(self.consistency)
+        if self.floor:
+            d["floor"] = dict(self.floor)
         if self.focal_px is not None:
             d["focal_px"] = self.focal_px
             d["opencv"] = self.model.opencv(self.focal_px).to_dict()

@@ -568,6 +568,46 @@ def _warn_n_dependence(meas, ag: _AnalysisGrid, ch, ks, warn: list[str]) -> None
         )
 
 
+# The Direct Method's reading is compared with its floor on the rig (the calibration photo read the same
+# way) when the floor's mean |phi_eff| reaches this share of the pane's: above it the board and the camera
+# move the pane's statistics by a visible amount (the bundled photos' board: 14 % of the waves' reading,
+# which still agree with the Comparative within 3 %; 83 % of the floating ring's, which read 22 % high).
+_FLOOR_SHARE_WARN = 0.1
+
+
+def _warn_rig_floor(meas, ag: _AnalysisGrid, ch, warn: list[str]) -> None:
+    """Direct: warn when the calibration photo's own reading is a sizeable share of the pane's.
+
+    :attr:`~glassdist.analyzer.lens.LensCalibration.floor` holds the calibration photo (no
+    glass) read by the Direct Method at the same detrend degree, smoothing and L; it is
+    compared, as mean |phi_eff|, with the pane's over the analysis-grid samples farther than
+    the guard band from the region's border (those of :func:`_warn_n_dependence`), where the
+    floor stands above the calibration photo's own noise (twice its median
+    ``phi_eff_sigma_mD``; a perfect rendered board reads 0.6 of it) and only where the
+    detrend degrees match (another degree reads another floor; L is scaled, phi ~ 1 / L).
+    """
+    cal = meas.fit.lens
+    floor = {} if cal is None else cal.floor
+    if not floor or floor["detrend_degree"] != meas.inputs.params.detrend_degree:
+        return
+    f = floor["mean_abs_phi_eff_mD"] * floor["distance_m"] / meas.distance_m  # phi scales as 1 / L
+    inner = ndimage.distance_transform_edt(np.pad(ag.valid, 1), sampling=ag.grid.step)[1:-1, 1:-1] > meas.guard_px
+    a = np.abs(ch.phi_eff_mD[inner & np.isfinite(ch.phi_eff_mD)])
+    if a.size < 64:
+        return
+    m = float(np.mean(a))
+    # A floor at the photo's own noise (mean |noise| is 0.8 of its sigma) says nothing about the rig.
+    if f > _FLOOR_SHARE_WARN * m and floor["mean_abs_phi_eff_mD"] > 2.0 * floor["phi_eff_sigma_mD"]:
+        warn.append(
+            f"Direct Method: the calibration photo (no glass), read the same way, shows mean |phi_eff| {f:.3g} mD "
+            f"(p95 {floor['p95_abs_phi_eff_mD'] * floor['distance_m'] / meas.distance_m:.3g} mD, noise "
+            f"{floor['phi_eff_sigma_mD'] * floor['distance_m'] / meas.distance_m:.2g} mD), {100 * f / m:.0f}% of this "
+            f"pane's {m:.3g} mD: the board (its print, its flatness) or the camera departs from the perfect grid and "
+            "the lens model by that much, and the Direct Method reads it as glass - use the Comparative Method, or a "
+            "flatter, finer-printed board"
+        )
+
+
 def _n_move(meas, ag: _AnalysisGrid, ch, ks):
     """``(s0, s1, what)``: the statistic (mean or p95 |phi_eff|, mD) that moves most from N to N + 1, or None.
 
@@ -1063,6 +1103,7 @@ def _evaluate(meas: _Measurement, ag: _AnalysisGrid, warn: list[str]):
                                   lens=None if meas.fit is None else meas.fit.lens_model)
     if meas.fit is not None:
         _warn_n_dependence(meas, ag, ch, ks, warn)
+        _warn_rig_floor(meas, ag, ch, warn)
     fields = _result_fields(delta_cam, ch)
     fields.update(_uncertainty(ag, meas.phase_noise, ch, a1, meas.sigma_mm / meas.mm_per_px, meas.distance_m))
     valid_full, idx = _reported_region(fields, ag, meas.inputs.mask, meas.margin_px[1], warn)
@@ -1143,12 +1184,19 @@ def _result(meas: _Measurement, evaluated, warn: list[str], *, extra_fields: dic
 
 
 def calibrate_from_photo(image, *, pitch_mm: float, pattern: str | None = None, params=None,
-                         image_shape: tuple[int, int] | None = None) -> LensCalibration:
+                         image_shape: tuple[int, int] | None = None, distance_m: float = 1.0) -> LensCalibration:
     """The lens from a calibration photo: the same grid without glass, same camera and focus, any pose.
 
     Block I's self-calibration on a photo without glass, where the whole view is unstrained
     (:func:`glassdist.analyzer.homography.refit_with_lens`); the ``params.lens_model`` terms
     are fitted ("radial" when it is "none").
+
+    The same analysis is the Direct Method's reading of a pane with no glass: whatever it
+    shows is what the board (its print, its flatness) and the camera leave against the
+    perfect grid and the lens model. Its mean and p95 |phi_eff| over the trusted pixels, at
+    ``params``'s detrend degree and smoothing and at the pane's ``distance_m`` (phi scales
+    as 1/L), are returned as :attr:`LensCalibration.floor`; :func:`analyze` compares the
+    pane's reading with it.
 
     Raises
     ------
@@ -1163,10 +1211,16 @@ def calibrate_from_photo(image, *, pitch_mm: float, pattern: str | None = None, 
     p = params if isinstance(params, AnalyzerParams) else load_params(params)
     if p.lens_model == "none":
         p = p.model_copy(update={"lens_model": "radial"})
-    res = analyze(image, pitch_mm=pitch_mm, distance_m=1.0, params=p, pattern=pattern)
+    res = analyze(image, pitch_mm=pitch_mm, distance_m=distance_m, params=p, pattern=pattern)
     cal = res.homography_fit.lens if res.homography_fit is not None else None
     if cal is None or not cal.identifiable:
         why = "too few grid points" if cal is None else cal.note
         raise InputError(f"the calibration photo does not pin the lens ({why}); photograph the grid filling the view, "
                          "without glass")
-    return LensCalibration(cal.model, "photo", cal.sigma, True, cal.fit_fraction, cal.rms_px, None, "")
+    floor = {}
+    a = np.abs(res.phi_eff_mD[res.trusted])
+    if a.size:
+        floor = {"mean_abs_phi_eff_mD": float(np.mean(a)), "p95_abs_phi_eff_mD": float(np.percentile(a, 95)),
+                 "phi_eff_sigma_mD": float(np.nanmedian(res.phi_eff_sigma_mD[res.trusted])),
+                 "detrend_degree": p.detrend_degree, "distance_m": float(distance_m)}
+    return LensCalibration(cal.model, "photo", cal.sigma, True, cal.fit_fraction, cal.rms_px, None, "", floor=floor)
