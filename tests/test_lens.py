@@ -5,6 +5,8 @@ polynomial detrend, a mask-normalised Gaussian and centred differences
 (:func:`glassdist.experiments.transfer.independent_phi_eff`), on the trusted pixels of the result.
 """
 
+import json
+
 import numpy as np
 import pytest
 
@@ -262,7 +264,6 @@ def test_calibration_photo_and_camera_file_agree(tmp_path):
     """A calibration photo (no glass, another pose) and the camera file of the rendered lens give the
     same model within 5% (measured: k1 0.2%, k2 0.05% apart), through the command line as well; a
     specification requiring a calibration source refuses a run without one (exit 2)."""
-    import json
     import subprocess
     import sys
 
@@ -341,30 +342,47 @@ def _bulk_truth(sc, res):
 
 
 @pytest.mark.slow
-def test_bulk_channel_of_the_pillowed_igu():
+def test_bulk_channel_of_the_pillowed_igu(tmp_path):
     """Comparative: the pane-level sphere of the pillowed IGU within 3% of the truth on the region the
     channel documents (its trusted interior; measured -0.883 vs -0.897 mD, 1.7%; over the whole region,
     guard band included, it read -0.813 vs -0.845, 3.8%); flat glass within 3 sigma of its truth
     (measured -0.1097 +- 0.0010 vs -0.1096 mD: the thick slab seen obliquely has a bulk power of its
-    own). The Direct Method says why it does not report it."""
+    own).
+
+    Direct Method, magnification pinned (the scene camera's file and its 5 m from the pane): -0.8825
+    (cylinder 0.1766 against 0.1797), flat -0.10979 +- 0.0008 against -0.10957; a centimetre of
+    distance moves it by the reported 0.133 mD. Without the pins it says why it does not report it."""
+    from glassdist.analyzer.lens import calibration_from_camera_file
+
     for flat in (False, True):
         sc = load_scene(SCENES / "pillowed_igu.yaml")
         sc = sc.with_changes(**FLAT) if flat else sc
         img, ref = render_scene(sc), render_scene(sc, reference=True)
-        res = glassdist.analyze(img, pitch_mm=sc.backdrop.pitch_mm, distance_m=sc.backdrop.distance_m, reference=ref,
-                                params={"pattern": "checkerboard", "detrend_degree": 2})
+        kw = dict(pitch_mm=sc.backdrop.pitch_mm, distance_m=sc.backdrop.distance_m,
+                  params={"pattern": "checkerboard", "detrend_degree": 2})
+        res = glassdist.analyze(img, reference=ref, **kw)
         eff, shear = _bulk_truth(sc, res)
-        b = res.bulk
-        assert b.reason == "" and b.region["samples"] > 100
-        if flat:
-            assert abs(b.phi_eff_mD - eff) < 3 * b.phi_eff_sigma_mD
-        else:
-            assert b.phi_eff_mD == pytest.approx(eff, rel=0.03)
-            assert b.phi_shear_mD == pytest.approx(shear, abs=0.03)
-            assert res.summary()["bulk"]["phi_eff_mD"] == b.phi_eff_mD
-    direct = glassdist.analyze(img, pitch_mm=sc.backdrop.pitch_mm, distance_m=sc.backdrop.distance_m,
-                               params={"pattern": "checkerboard"})
-    assert direct.bulk.phi_eff_mD is None and "not identifiable" in direct.bulk.reason
+        h, w = img.shape
+        f = sc.camera.focal_length_px
+        (tmp_path / "camera.json").write_text(json.dumps(
+            {"camera_matrix": [[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1]], "dist_coeffs": [0, 0, 0, 0]}))
+        cam = calibration_from_camera_file(tmp_path / "camera.json", img.shape)
+        D = (sc.pane.center_mm[2] - sc.camera.position_mm[2]) / 1000.0  # camera to the pane (its mid-plane, as L), m
+        direct = glassdist.analyze(img, lens=cam, camera_distance_m=D, **kw)
+        for b in (res.bulk, direct.bulk):
+            assert b.reason == "" and b.region["samples"] > 100
+            if flat:
+                assert abs(b.phi_eff_mD - eff) < 3 * b.phi_eff_sigma_mD
+            else:
+                assert b.phi_eff_mD == pytest.approx(eff, rel=0.03)
+                assert b.phi_shear_mD == pytest.approx(shear, abs=0.03)
+        assert res.summary()["bulk"]["phi_eff_mD"] == res.bulk.phi_eff_mD
+        assert direct.summary()["bulk"]["pinned"]["camera_distance_m"] == D
+    per_cm = direct.bulk.pinned["phi_eff_mD_per_cm_of_distance"]
+    nearer = glassdist.analyze(img, lens=cam, camera_distance_m=D - 0.01, **kw).bulk.phi_eff_mD
+    assert nearer - direct.bulk.phi_eff_mD == pytest.approx(per_cm, rel=0.02)  # nearer: less negative
+    bare = glassdist.analyze(img, **kw)
+    assert bare.bulk.phi_eff_mD is None and "not identifiable" in bare.bulk.reason and "missing here" in bare.bulk.reason
 
 
 @pytest.mark.slow
@@ -402,11 +420,24 @@ def test_camera_file_formats_and_bad_files(tmp_path):
            "k3": {"camera_matrix": [[700, 0, 255.5], [0, 700, 191.5], [0, 0, 1]], "dist_coeffs": [0, 0, 0, 0, 0.1]},
            "size": {"camera_matrix": [[700, 0, 255.5], [0, 700, 191.5], [0, 0, 1]], "dist_coeffs": [0, 0, 0, 0],
                     "image_size": [640, 480]}}
-    import json
-
     for name, doc in bad.items():
         f = tmp_path / f"{name}.json"
         f.write_text(json.dumps(doc))
         with pytest.raises(InputError) as exc:
             calibration_from_camera_file(f, (384, 512))
         assert "\n" not in str(exc.value)
+
+
+def test_camera_distance_in_transmission_needs_a_camera_file(tmp_path):
+    """--camera-distance-m without --optics reflection pins the Direct Method's magnification with a camera
+    file's focal length: without --camera-file, or with --reference, it is refused with one line (exit 2)."""
+    import subprocess
+    import sys
+
+    data = REPO / "examples" / "data"
+    base = [sys.executable, "-m", "glassdist", "analyze", str(data / "distorted_waves.bmp"), "--pitch-mm", "5",
+            "--distance-m", "0.5", "--pattern", "checkerboard", "--camera-distance-m", "2", "-q"]
+    for extra in ([], ["--reference", str(data / "reference.png")]):
+        run = subprocess.run(base + extra + ["--out", str(tmp_path / "o")], capture_output=True, text=True)
+        assert run.returncode == 2 and "--camera-file" in run.stderr and len(run.stderr.strip().splitlines()) == 1
+        assert not (tmp_path / "o").exists()

@@ -92,7 +92,9 @@ def _register_analyze(sub) -> None:
                    help="transmission (default: the grid seen through the pane) or reflection (a grid board seen in the "
                    "pane; phi in reflective power on the pane, docs/reflection.md)")
     p.add_argument("--camera-distance-m", type=number_option(DISTANCE_M),
-                   help="reflection: camera-to-pane distance C, m (default: the camera in the board plane, C = D)")
+                   help="reflection: camera-to-pane distance C, m (default: the camera in the board plane, C = D); "
+                   "transmission, Direct Method with --camera-file: the camera-to-pane distance along the pane normal, "
+                   "the camera facing the pane, which pins the magnification so that the bulk channel is reported")
     p.add_argument("--incidence-deg", type=float,
                    help="reflection: angle between the line of sight and the pane normal at the view's centre, deg (default 0)")
     p.add_argument("--reference", type=Path, help="glass-less photo from the same camera position (Comparative Method)")
@@ -233,8 +235,13 @@ def _optics(args, pinned, distance_m: float):
         chosen[key] = mine if mine is not None else pin
     if chosen["optics"] != "reflection":
         for key, opt in (("camera_distance_m", "--camera-distance-m"), ("incidence_deg", "--incidence-deg")):
-            if chosen[key] is not None:
-                raise InputError(f"{opt} applies to --optics reflection only; add --optics reflection or leave {opt} out")
+            if chosen[key] is None or (key == "camera_distance_m" and args.camera_distance_m is not None):
+                continue
+            raise InputError(f"{opt} applies to --optics reflection only; add --optics reflection or leave {opt} out")
+        if args.camera_distance_m is not None and (args.reference is not None or args.camera_file is None):
+            raise InputError("--camera-distance-m without --optics reflection pins the Direct Method's magnification "
+                             "with the focal length of --camera-file: add --camera-file (and no --reference), or "
+                             "leave --camera-distance-m out")
         return None
     return ReflectionGeometry(distance_m=distance_m, camera_distance_m=chosen["camera_distance_m"],
                               incidence_deg=0.0 if chosen["incidence_deg"] is None else float(chosen["incidence_deg"]))
@@ -310,7 +317,9 @@ def _run_analyze(args) -> int:
             L = protocol.distance_m if optics is None else optics.effective_distance_m  # reflection: D / m
             kw = dict(pitch_mm=protocol.pitch_mm, distance_m=L, reference=reference, params=params, mask=request.mask)
             # a single photo is handed over, so that the analysis frees it once Block F is done
-            result = analyze(images.pop(), lens=lens, **kw) if len(images) == 1 else analyze_captures(images, **kw)
+            pin = args.camera_distance_m if optics is None else None  # transmission: the Direct bulk channel
+            result = (analyze(images.pop(), lens=lens, camera_distance_m=pin, **kw) if len(images) == 1
+                      else analyze_captures(images, **kw))
             del images, reference, kw
             if optics is not None:
                 result = reflect_result(result, optics)

@@ -16,8 +16,22 @@ Identifiability. The Comparative Method measures it directly (the reference fixe
 glass-less landing points). The Direct Method's baseline is a homography (and the lens): a
 uniform power is a change of scale, which the homography absorbs, and a linear change of
 power is a perspective term. Only a capture that pins the magnification (calibrated lens,
-camera focal length and camera-to-pane distance) separates them; the Direct Method reports
-why the bulk channel is not identifiable instead.
+camera focal length and camera-to-pane distance) separates them; otherwise the Direct
+Method reports why the bulk channel is not identifiable.
+
+Pinned magnification (Direct Method, :func:`pinned_strain`). With the camera's focal length
+``f`` (px), the normal distance ``Z = D + L`` from the camera to the board (camera-to-pane ``D``
+plus glass-to-board ``L``) and the camera facing the pane squarely, a glass-less board point
+lands at ``X_s = (Z / f) Q (r − c)`` (Q a rotation): ``Z / f`` board mm per px everywhere. The
+fitted baseline (homography and lens) gives the board point seen at each pixel, ``X(r)``; with
+``X = X_s + δ(X_s)``, ``dX/dr = (I + ∇δ) (Z / f) Q``, so the polar decomposition of
+``M = (f / Z) dX/dr`` gives the baseline's own strain ``ε_H = (M Mᵀ)^{1/2} − I`` (∇δ symmetric).
+The bulk strain is the mean of ε_H over the channel's region plus the mean strain of the
+degree-N polynomial of the Direct displacement (what the baseline left). Its sensitivity to
+the inputs is first order and large: ``dε = −dZ/Z`` and ``dε = df/f`` (isotropic), i.e.
+φ_eff moves by ``2 (dZ/Z) / L`` and ``2 (df/f) / L`` (both reported, so that the user's own
+tolerances on the distance and the focal length set the uncertainty); a camera turned by θ
+from the pane normal reads a cylinder of about θ²/2 (0.4 % at 5°).
 
 Uncertainty. The residual after the detrend, ``r``, is treated as noise correlated over the
 reporting scale σ: the slope of a least-squares fit over ``n`` samples of positional
@@ -34,13 +48,14 @@ import numpy as np
 
 from .metrics import polynomial_detrend
 
-__all__ = ["BulkChannel", "bulk_channel", "DIRECT_BULK_REASON"]
+__all__ = ["BulkChannel", "bulk_channel", "pinned_strain", "DIRECT_BULK_REASON"]
 
 #: Why the Direct Method does not report the bulk channel.
 DIRECT_BULK_REASON = (
     "not identifiable with the Direct Method: a uniform power is a change of scale, which the homography "
     "absorbs (and a linear change of power a perspective term); it needs a capture that pins the magnification "
-    "(calibrated lens, camera focal length and camera-to-pane distance) or the Comparative Method"
+    "(a camera file's focal length, --camera-file, and the camera-to-pane distance, --camera-distance-m, the camera "
+    "facing the pane) or the Comparative Method"
 )
 
 
@@ -56,16 +71,39 @@ class BulkChannel:
     degree: int
     region: dict
     reason: str = ""
+    pinned: dict | None = None
 
     def to_dict(self) -> dict:
-        return {"phi_eff_mD": self.phi_eff_mD, "phi_shear_mD": self.phi_shear_mD, "axis_deg": self.axis_deg,
-                "phi_eff_sigma_mD": self.phi_eff_sigma_mD, "phi_shear_sigma_mD": self.phi_shear_sigma_mD,
-                "detrend_degree": self.degree, "region": self.region, "reason": self.reason}
+        d = {"phi_eff_mD": self.phi_eff_mD, "phi_shear_mD": self.phi_shear_mD, "axis_deg": self.axis_deg,
+             "phi_eff_sigma_mD": self.phi_eff_sigma_mD, "phi_shear_sigma_mD": self.phi_shear_sigma_mD,
+             "detrend_degree": self.degree, "region": self.region, "reason": self.reason}
+        if self.pinned is not None:
+            d["pinned"] = self.pinned
+        return d
+
+
+def pinned_strain(jacobian_mm_per_px: np.ndarray, *, focal_px: float, board_distance_mm: float) -> np.ndarray:
+    """The baseline's own strain where the magnification is pinned (module docstring), (..., 2, 2).
+
+    Parameters
+    ----------
+    jacobian_mm_per_px : ndarray (..., 2, 2)
+        ``dX/dr`` of the baseline: board mm (component frame) per px.
+    focal_px : float
+        Focal length, px (square pixels).
+    board_distance_mm : float
+        Normal distance from the camera to the board, mm (camera-to-pane plus glass-to-board).
+    """
+    M = np.asarray(jacobian_mm_per_px, float) * (focal_px / board_distance_mm)
+    A = M @ np.swapaxes(M, -1, -2)  # (I + eps)^2, symmetric positive definite
+    rd = np.sqrt(np.abs(np.linalg.det(A)))[..., None, None]
+    tr = (A[..., 0, 0] + A[..., 1, 1])[..., None, None]
+    return (A + rd * np.eye(2)) / np.sqrt(tr + 2.0 * rd) - np.eye(2)  # closed-form 2 x 2 square root
 
 
 def bulk_channel(delta_mm: np.ndarray, valid: np.ndarray, labels: np.ndarray, *, degree: int, step_px, jacobian,
                  frame_rotation, distance_m: float, sigma_px: float, xx: np.ndarray, yy: np.ndarray,
-                 guard_px: float = 0.0) -> BulkChannel:
+                 guard_px: float = 0.0, base_strain: np.ndarray | None = None, pinned: dict | None = None) -> BulkChannel:
     """The bulk channel of a displacement on the analysis grid (module docstring).
 
     Parameters
@@ -94,6 +132,12 @@ def bulk_channel(delta_mm: np.ndarray, valid: np.ndarray, labels: np.ndarray, *,
         border and the displacement is biased (on the ray-traced pillowed IGU the displacement
         over the whole region carries a sphere 4.7 % below the exact one, over the trusted
         pixels 0.2 %). Samples at ``guard_px`` and closer are left out when enough remain.
+    base_strain : ndarray (h, w, 2, 2), optional
+        Direct Method with the magnification pinned: the baseline's own strain per sample
+        (:func:`pinned_strain`, component frame); its mean over the region is added to the
+        polynomial's.
+    pinned : dict, optional
+        What pinned it (reported as :attr:`BulkChannel.pinned`).
     """
     from scipy import ndimage
 
@@ -118,6 +162,9 @@ def bulk_channel(delta_mm: np.ndarray, valid: np.ndarray, labels: np.ndarray, *,
     gok = ok & np.all(np.isfinite(G), axis=(-2, -1))
     E = G[gok].mean(axis=0)
     E = 0.5 * (E + E.T)
+    if base_strain is not None:
+        B = base_strain[gok].mean(axis=0)
+        E = E + 0.5 * (B + B.T)
     if frame_rotation is not None:
         E = frame_rotation.T @ E @ frame_rotation
     k = 1000.0 / distance_m
@@ -132,4 +179,5 @@ def bulk_channel(delta_mm: np.ndarray, valid: np.ndarray, labels: np.ndarray, *,
     s_r = float(np.sqrt(np.mean(resid[ok] ** 2)))
     n_eff = ok.sum() * min(1.0, sy * sx / (4 * np.pi * max(sigma_px, 1e-9) ** 2))
     s_slope = s_r / np.sqrt(max(n_eff, 1.0) * max(var_x, 1e-30))
-    return BulkChannel(eff, shear, axis, float(np.sqrt(2.0) * s_slope * k), float(2.0 * s_slope * k), degree, region)
+    return BulkChannel(eff, shear, axis, float(np.sqrt(2.0) * s_slope * k), float(2.0 * s_slope * k), degree, region,
+                       pinned=pinned)

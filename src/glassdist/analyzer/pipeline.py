@@ -29,7 +29,7 @@ from ..errors import AnalysisError, InputError
 from ..validation import DISTANCE_M, PITCH_MM, check_number
 from . import deform as D
 from . import fourier as F
-from .bulk import DIRECT_BULK_REASON, BulkChannel, bulk_channel
+from .bulk import DIRECT_BULK_REASON, BulkChannel, bulk_channel, pinned_strain
 from .homography import HomographyFit, fit_grid_homography, logical_coordinates, logical_jacobian
 from .lens import LensCalibration
 from .metrics import (
@@ -896,6 +896,7 @@ def analyze(
     detrend_degree: int | None = None,
     sigma_mm: float | None = None,
     lens: LensCalibration | None = None,
+    camera_distance_m: float | None = None,
 ) -> AnalysisResult:
     """Measure the distortion field of a photo of a grid seen through glass.
 
@@ -925,6 +926,10 @@ def analyze(
         :func:`calibrate_from_photo`, or a camera file,
         :func:`~glassdist.analyzer.lens.calibration_from_camera_file`); Block I then fits the
         homography through it. None: the lens is fitted from the photo (``params.lens_model``).
+    camera_distance_m : float, optional
+        Direct Method: the camera's distance from the pane along its normal, m, the camera
+        facing the pane. With a camera file's ``lens`` (its focal length) it pins the
+        magnification, and the bulk channel is reported (:mod:`glassdist.analyzer.bulk`).
 
     Returns
     -------
@@ -976,7 +981,7 @@ def analyze(
         meas = _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn, lens=lens)
         del image  # Block A needs no photo: freed here unless the caller keeps it (the command line does not)
         evaluated = _evaluate(meas, meas.ag, warn)
-    return _result(meas, evaluated, warn)
+    return _result(meas, evaluated, warn, camera_distance_m=camera_distance_m)
 
 
 def _api_inputs(image, reference, params, mask, detrend_degree, sigma_mm):
@@ -1111,23 +1116,47 @@ def _evaluate(meas: _Measurement, ag: _AnalysisGrid, warn: list[str]):
     return ag, fields, valid_full, idx
 
 
-def _bulk(meas: _Measurement, ag: _AnalysisGrid, fields: dict) -> BulkChannel:
-    """The bulk channel (:mod:`glassdist.analyzer.bulk`): measured by the Comparative Method, not identifiable by the Direct."""
+def _bulk(meas: _Measurement, ag: _AnalysisGrid, fields: dict, camera_distance_m: float | None = None) -> BulkChannel:
+    """The bulk channel (:mod:`glassdist.analyzer.bulk`).
+
+    Comparative Method: measured. Direct Method: only where the magnification is pinned (a
+    camera file's focal length, and ``camera_distance_m``, the camera facing the pane): the
+    baseline's own strain (:func:`~glassdist.analyzer.bulk.pinned_strain`) plus what the
+    degree-N polynomial of the Direct displacement holds; otherwise why it is not identifiable.
+    """
     p = meas.inputs.params
+    base = pinned = lens_model = None
     if meas.fit is not None:
-        return BulkChannel(None, None, None, None, None, p.detrend_degree, {}, DIRECT_BULK_REASON)
+        cal = meas.fit.lens
+        focal = None if cal is None or not cal.identifiable else cal.focal_px
+        if camera_distance_m is None or focal is None:
+            missing = [w for w, gone in (("the camera's focal length and principal point (a camera file)", focal is None),
+                                         ("the camera-to-pane distance", camera_distance_m is None)) if gone]
+            return BulkChannel(None, None, None, None, None, p.detrend_degree, {},
+                               f"{DIRECT_BULK_REASON}; missing here: {' and '.join(missing)}")
+        lens_model = meas.fit.lens_model
+        board_mm = (camera_distance_m + meas.distance_m) * 1000.0
+        k = 1000.0 / meas.distance_m
+        pinned = {"camera_distance_m": float(camera_distance_m), "focal_px": float(focal),
+                  "phi_eff_mD_per_cm_of_distance": float(2.0 * 10.0 / board_mm * k),
+                  "phi_eff_mD_per_percent_of_focal_length": float(2.0 * 0.01 * k)}
     yy, xx = ag.grid.coords()
     delta = fields["displacement_mm"]
     if p.a1_mode == "projective":
-        J = meas.inputs.carrier_period_mm * logical_jacobian(meas.baseline, None, xx, yy)
+        J = meas.inputs.carrier_period_mm * logical_jacobian(meas.baseline, lens_model, xx, yy)
+        if pinned is not None:
+            base = pinned_strain(J, focal_px=pinned["focal_px"], board_distance_mm=board_mm)
         hc, wc = ag.grid.shape
         R = _polar_rotation(J[hc // 2, wc // 2])
         delta = delta @ R.T  # back to the component frame
     else:
+        if pinned is not None:
+            return BulkChannel(None, None, None, None, None, p.detrend_degree, {},
+                               "the pinned Direct bulk channel needs the projective A1 (a1_mode 'projective')")
         J, R = np.broadcast_to(meas.mm_per_px * np.eye(2), xx.shape + (2, 2)), None
     return bulk_channel(delta, ag.valid, ag.labels, degree=p.detrend_degree, step_px=ag.grid.step, jacobian=J,
                         frame_rotation=R, distance_m=meas.distance_m, sigma_px=meas.sigma_mm / meas.mm_per_px, xx=xx, yy=yy,
-                        guard_px=meas.guard_px)
+                        guard_px=meas.guard_px, base_strain=base, pinned=pinned)
 
 
 # Share of the requested region below which the trusted pixels (quality label 0) are called few.
@@ -1148,7 +1177,7 @@ def _warn_few_trusted(quality: np.ndarray, grid: F.SamplingGrid, mask, warn: lis
 
 
 def _result(meas: _Measurement, evaluated, warn: list[str], *, extra_fields: dict | None = None,
-            n_regions: int | None = None) -> AnalysisResult:
+            n_regions: int | None = None, camera_distance_m: float | None = None) -> AnalysisResult:
     """The :class:`AnalysisResult` of :func:`_evaluate`'s output (``extra_fields``: more registered fields)."""
     ag, fields, valid_full, idx = evaluated
     p = meas.inputs.params
@@ -1176,7 +1205,7 @@ def _result(meas: _Measurement, evaluated, warn: list[str], *, extra_fields: dic
         margin_px=meas.margin_px,
         guard_px=meas.guard_px,
         noise_std=meas.noise_std,
-        bulk=_bulk(meas, ag, fields),
+        bulk=_bulk(meas, ag, fields, camera_distance_m),
         _deferred={"fields": {**fields, "quality": meas.quality, **(extra_fields or {})}, "idx": idx, "grid": ag.grid,
                    "fit_valid": np.ascontiguousarray(ag.valid),
                    "label_grid": meas.label_grid, "mask": meas.inputs.mask},
