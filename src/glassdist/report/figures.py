@@ -120,8 +120,13 @@ def _label_image_axes(ax, title, units="px", px_axis=None):
 
 
 def map_title(ax, text, **kwargs):
-    """Set a map's title, above its secondary pixel axis when it has one."""
-    ax.set_title(text, pad=36 if getattr(ax, "glassdist_px_axis", False) else 6, **kwargs)
+    """Set a map's title, above its secondary pixel axis when it has one.
+
+    The position is given (``y`` = the axes' top, then ``pad`` points: 36 clear the secondary
+    axis's small tick labels and label), so matplotlib does not search every artist's extent
+    for it at each draw (over a second of a 24 Mpx run's figures).
+    """
+    ax.set_title(text, pad=36 if getattr(ax, "glassdist_px_axis", False) else 6, y=1.0, **kwargs)
 
 
 def _masked(field, valid):
@@ -395,7 +400,7 @@ def plot_histogram(field, valid=None, *, signed=True, limits_mD=(), bins=80, tit
     ax.set_xlabel("mD")
     ax.set_ylabel("pixels")
     if title:
-        ax.set_title(title)
+        ax.set_title(title, y=1.0)  # given: no search of the artists' extents at each draw
     return fig, ax
 
 
