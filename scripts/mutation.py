@@ -2,7 +2,8 @@
 
 Each mutant changes one operator or constant of one function of a core module (Block F
 ``analyzer/fourier.py`` and its F5 deformation ``analyzer/deform.py``, the unwrapping ``analyzer/unwrap.py``, Block I
-``analyzer/homography.py``, Block A ``analyzer/metrics.py``, the acceptance checks
+``analyzer/homography.py`` and its lens model ``analyzer/lens.py``, Block A ``analyzer/metrics.py`` and its bulk
+channel ``analyzer/bulk.py``, the acceptance checks
 ``acceptance/assess.py`` and ``acceptance/spec.py``). It is written into a scratch copy of
 ``src/`` and the module's targeted tests run against it (``PYTHONPATH``, first failure
 stops the run). A mutant is *killed* when a test fails (or the run exceeds the time
@@ -56,6 +57,8 @@ MODULES = {
     "unwrap": ("analyzer/unwrap.py", ["tests/test_analyzer_unwrap.py", "tests/test_accuracy_truth.py"]),
     "homography": ("analyzer/homography.py", ["tests/test_analyzer_homography.py", "tests/test_homography_refit.py",
                                              "tests/test_accuracy_truth.py", "tests/test_lens.py"]),
+    "lens": ("analyzer/lens.py", ["tests/test_analyzer_homography.py", "tests/test_lens.py"]),
+    "bulk": ("analyzer/bulk.py", ["tests/test_lens.py::test_bulk_channel_of_the_pillowed_igu"]),
     "metrics": ("analyzer/metrics.py", ["tests/test_analyzer_metrics.py", "tests/test_streamed_statistics.py",
                                        "tests/test_accuracy_truth.py"]),
     "acceptance": ("acceptance/assess.py", ["tests/test_acceptance.py"]),

@@ -441,3 +441,10 @@ def test_camera_distance_in_transmission_needs_a_camera_file(tmp_path):
         run = subprocess.run(base + extra + ["--out", str(tmp_path / "o")], capture_output=True, text=True)
         assert run.returncode == 2 and "--camera-file" in run.stderr and len(run.stderr.strip().splitlines()) == 1
         assert not (tmp_path / "o").exists()
+    from glassdist.errors import InputError
+    from glassdist.synthetic import synthetic_capture
+
+    cap = synthetic_capture((96, 128), pitch_mm=10.0, mm_per_px=1.25)
+    for bad in (-2.0, 0.0, float("nan")):
+        with pytest.raises(InputError, match="camera_distance_m"):
+            glassdist.analyze(cap.image, pitch_mm=10.0, distance_m=2.0, camera_distance_m=bad)

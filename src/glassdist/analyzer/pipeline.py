@@ -571,7 +571,7 @@ def _warn_n_dependence(meas, ag: _AnalysisGrid, ch, ks, warn: list[str]) -> None
 # The Direct Method's reading is compared with its floor on the rig (the calibration photo read the same
 # way) when the floor's mean |phi_eff| reaches this share of the pane's: above it the board and the camera
 # move the pane's statistics by a visible amount (the bundled photos' board: 14 % of the waves' reading,
-# which still agree with the Comparative within 3 %; 83 % of the floating ring's, which read 22 % high).
+# which still agree with the Comparative within 3 %; 70 % of the floating ring's, which reads 22 % high).
 _FLOOR_SHARE_WARN = 0.1
 
 
@@ -976,6 +976,9 @@ def analyze(
     True
     """
     image, reference, params, mask = _api_inputs(image, reference, params, mask, detrend_degree, sigma_mm)
+    if camera_distance_m is not None:
+        camera_distance_m = check_number(camera_distance_m, "camera_distance_m (--camera-distance-m, camera to pane)",
+                                         DISTANCE_M)
     warn: list[str] = []
     with _routed_warnings(warn):
         meas = _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn, lens=lens)
