@@ -428,6 +428,28 @@ def test_camera_file_formats_and_bad_files(tmp_path):
         assert "\n" not in str(exc.value)
 
 
+@pytest.mark.slow
+def test_pinned_bulk_of_a_turned_camera_reads_off_as_documented(tmp_path):
+    """The pinned Direct bulk channel assumes the camera faces the pane: the flat pillowed-IGU scene with
+    the camera turned by 3 deg (moved so that the view stays on the pane) reads its sphere 0.105 mD above
+    the Comparative Method's (measured; the Comparative reads the truth within 0.001 mD there)."""
+    from glassdist.analyzer.lens import calibration_from_camera_file
+
+    sc = load_scene(SCENES / "pillowed_igu.yaml").with_changes(
+        camera={"yaw_deg": 3.0, "position_mm": [380 - 5000 * np.tan(np.radians(3.0)), 0, -5000]}, **FLAT)
+    img, ref = render_scene(sc), render_scene(sc, reference=True)
+    h, w = img.shape
+    f = sc.camera.focal_length_px
+    (tmp_path / "camera.json").write_text(json.dumps(
+        {"camera_matrix": [[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1]], "dist_coeffs": [0, 0, 0, 0]}))
+    cam = calibration_from_camera_file(tmp_path / "camera.json", img.shape)
+    kw = dict(pitch_mm=sc.backdrop.pitch_mm, distance_m=sc.backdrop.distance_m,
+              params={"pattern": "checkerboard", "detrend_degree": 2})
+    direct = glassdist.analyze(img, lens=cam, camera_distance_m=5.0, **kw).bulk
+    comparative = glassdist.analyze(img, reference=ref, **kw).bulk
+    assert direct.phi_eff_mD - comparative.phi_eff_mD == pytest.approx(0.105, abs=0.02)
+
+
 def test_camera_distance_in_transmission_needs_a_camera_file(tmp_path):
     """--camera-distance-m without --optics reflection pins the Direct Method's magnification with a camera
     file's focal length: without --camera-file, or with --reference, it is refused with one line (exit 2)."""
