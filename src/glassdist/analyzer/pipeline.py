@@ -568,6 +568,11 @@ def _warn_n_dependence(meas, ag: _AnalysisGrid, ch, ks, warn: list[str]) -> None
         )
 
 
+def _beyond_guard(meas, ag: _AnalysisGrid) -> np.ndarray:
+    """Analysis-grid samples farther than the guard band from the region's border (the trusted pixels' rule)."""
+    return ndimage.distance_transform_edt(np.pad(ag.valid, 1), sampling=ag.grid.step)[1:-1, 1:-1] > meas.guard_px
+
+
 # The Direct Method's reading is compared with its floor on the rig (the calibration photo read the same
 # way) when the floor's mean |phi_eff| reaches this share of the pane's: above it the board and the camera
 # move the pane's statistics by a visible amount (the bundled photos' board: 14 % of the waves' reading,
@@ -590,9 +595,9 @@ def _warn_rig_floor(meas, ag: _AnalysisGrid, ch, warn: list[str]) -> None:
     floor = {} if cal is None else cal.floor
     if not floor or floor["detrend_degree"] != meas.inputs.params.detrend_degree:
         return
-    f = floor["mean_abs_phi_eff_mD"] * floor["distance_m"] / meas.distance_m  # phi scales as 1 / L
-    inner = ndimage.distance_transform_edt(np.pad(ag.valid, 1), sampling=ag.grid.step)[1:-1, 1:-1] > meas.guard_px
-    a = np.abs(ch.phi_eff_mD[inner & np.isfinite(ch.phi_eff_mD)])
+    scale = floor["distance_m"] / meas.distance_m  # phi scales as 1 / L
+    f = floor["mean_abs_phi_eff_mD"] * scale
+    a = np.abs(ch.phi_eff_mD[_beyond_guard(meas, ag) & np.isfinite(ch.phi_eff_mD)])
     if a.size < 64:
         return
     m = float(np.mean(a))
@@ -600,8 +605,8 @@ def _warn_rig_floor(meas, ag: _AnalysisGrid, ch, warn: list[str]) -> None:
     if f > _FLOOR_SHARE_WARN * m and floor["mean_abs_phi_eff_mD"] > 2.0 * floor["phi_eff_sigma_mD"]:
         warn.append(
             f"Direct Method: the calibration photo (no glass), read the same way, shows mean |phi_eff| {f:.3g} mD "
-            f"(p95 {floor['p95_abs_phi_eff_mD'] * floor['distance_m'] / meas.distance_m:.3g} mD, noise "
-            f"{floor['phi_eff_sigma_mD'] * floor['distance_m'] / meas.distance_m:.2g} mD), {100 * f / m:.0f}% of this "
+            f"(p95 {floor['p95_abs_phi_eff_mD'] * scale:.3g} mD, noise "
+            f"{floor['phi_eff_sigma_mD'] * scale:.2g} mD), {100 * f / m:.0f}% of this "
             f"pane's {m:.3g} mD: the board (its print, its flatness) or the camera departs from the perfect grid and "
             "the lens model by that much, and the Direct Method reads it as glass - use the Comparative Method, or a "
             "flatter, finer-printed board"
@@ -617,9 +622,8 @@ def _n_move(meas, ag: _AnalysisGrid, ch, ks):
     n = p.detrend_degree
     if n >= 8 or ag.valid.sum() < 64:
         return None
-    inner = ndimage.distance_transform_edt(np.pad(ag.valid, 1), sampling=ag.grid.step)[1:-1, 1:-1] > meas.guard_px
     a = ch.phi_eff_mD
-    ok = inner & np.isfinite(a)
+    ok = _beyond_guard(meas, ag) & np.isfinite(a)
     if ok.sum() < 64:
         return None
     delta, jac = _components(ag, ks, meas.baseline, p, meas.inputs.carrier_period_mm, meas.mm_per_px,
@@ -1128,16 +1132,18 @@ def _bulk(meas: _Measurement, ag: _AnalysisGrid, fields: dict, camera_distance_m
     degree-N polynomial of the Direct displacement holds; otherwise why it is not identifiable.
     """
     p = meas.inputs.params
-    base = pinned = lens_model = None
+    base = pinned = None
     if meas.fit is not None:
         cal = meas.fit.lens
         focal = None if cal is None or not cal.identifiable else cal.focal_px
         if camera_distance_m is None or focal is None:
-            missing = [w for w, gone in (("the camera's focal length and principal point (a camera file)", focal is None),
+            missing = [w for w, gone in (("the camera's focal length (a camera file)", focal is None),
                                          ("the camera-to-pane distance", camera_distance_m is None)) if gone]
             return BulkChannel(None, None, None, None, None, p.detrend_degree, {},
                                f"{DIRECT_BULK_REASON}; missing here: {' and '.join(missing)}")
-        lens_model = meas.fit.lens_model
+        if p.a1_mode != "projective":
+            return BulkChannel(None, None, None, None, None, p.detrend_degree, {},
+                               "the pinned Direct bulk channel needs the projective A1 (a1_mode 'projective')")
         board_mm = (camera_distance_m + meas.distance_m) * 1000.0
         k = 1000.0 / meas.distance_m
         pinned = {"camera_distance_m": float(camera_distance_m), "focal_px": float(focal),
@@ -1146,16 +1152,14 @@ def _bulk(meas: _Measurement, ag: _AnalysisGrid, fields: dict, camera_distance_m
     yy, xx = ag.grid.coords()
     delta = fields["displacement_mm"]
     if p.a1_mode == "projective":
-        J = meas.inputs.carrier_period_mm * logical_jacobian(meas.baseline, lens_model, xx, yy)
+        lens = None if pinned is None else meas.fit.lens_model  # the Direct baseline is seen through the lens
+        J = meas.inputs.carrier_period_mm * logical_jacobian(meas.baseline, lens, xx, yy)
         if pinned is not None:
             base = pinned_strain(J, focal_px=pinned["focal_px"], board_distance_mm=board_mm)
         hc, wc = ag.grid.shape
         R = _polar_rotation(J[hc // 2, wc // 2])
         delta = delta @ R.T  # back to the component frame
     else:
-        if pinned is not None:
-            return BulkChannel(None, None, None, None, None, p.detrend_degree, {},
-                               "the pinned Direct bulk channel needs the projective A1 (a1_mode 'projective')")
         J, R = np.broadcast_to(meas.mm_per_px * np.eye(2), xx.shape + (2, 2)), None
     return bulk_channel(delta, ag.valid, ag.labels, degree=p.detrend_degree, step_px=ag.grid.step, jacobian=J,
                         frame_rotation=R, distance_m=meas.distance_m, sigma_px=meas.sigma_mm / meas.mm_per_px, xx=xx, yy=yy,
@@ -1250,9 +1254,9 @@ def calibrate_from_photo(image, *, pitch_mm: float, pattern: str | None = None, 
         raise InputError(f"the calibration photo does not pin the lens ({why}); photograph the grid filling the view, "
                          "without glass")
     floor = {}
-    a = np.abs(res.phi_eff_mD[res.trusted])
-    if a.size:
-        floor = {"mean_abs_phi_eff_mD": float(np.mean(a)), "p95_abs_phi_eff_mD": float(np.percentile(a, 95)),
-                 "phi_eff_sigma_mD": float(np.nanmedian(res.phi_eff_sigma_mD[res.trusted])),
+    stats = res.statistics()["phi_eff_mD"]
+    if stats["n_valid"]:
+        floor = {"mean_abs_phi_eff_mD": stats["mean_abs"], "p95_abs_phi_eff_mD": stats["p95_abs"],
+                 "phi_eff_sigma_mD": res.noise_floor()["phi_eff_sigma_mD"]["median"],
                  "detrend_degree": p.detrend_degree, "distance_m": float(distance_m)}
     return LensCalibration(cal.model, "photo", cal.sigma, True, cal.fit_fraction, cal.rms_px, None, "", floor=floor)
