@@ -168,6 +168,18 @@ class Pillow(_TermBase):
             np.where(inside, -A * kb * np.cos(x) * np.sin(y), 0.0),
         )
 
+    def height_gradient(self, u, v):
+        # One set of sines and cosines for the three (the tracer's Newton step asks for all of
+        # them at every iteration); the same products in the same order, so the same values.
+        inside, ka, kb, x, y = self._parts(u, v)
+        A = self.amplitude_mm
+        cx, cy, sx, sy = np.cos(x), np.cos(y), np.sin(x), np.sin(y)
+        return (
+            np.where(inside, A * cx * cy, 0.0),
+            np.where(inside, -A * ka * sx * cy, 0.0),
+            np.where(inside, -A * kb * cx * sy, 0.0),
+        )
+
     def hessian(self, u, v):
         inside, ka, kb, x, y = self._parts(u, v)
         A = self.amplitude_mm
@@ -220,6 +232,12 @@ class SphericalCap(_TermBase):
         inside, du, dv, root, sg = self._parts(u, v)
         return np.where(inside, -sg * du / root, 0.0), np.where(inside, -sg * dv / root, 0.0)
 
+    def height_gradient(self, u, v):
+        inside, du, dv, root, sg = self._parts(u, v)
+        R, a = abs(self.radius_mm), self.aperture_mm
+        return (np.where(inside, sg * (root - math.sqrt(R * R - a * a)), 0.0),
+                np.where(inside, -sg * du / root, 0.0), np.where(inside, -sg * dv / root, 0.0))
+
     def hessian(self, u, v):
         inside, du, dv, root, sg = self._parts(u, v)
         r3 = root**3
@@ -251,6 +269,10 @@ class GaussianBump(_TermBase):
     def gradient(self, u, v):
         du, dv, s2, g = self._parts(u, v)
         return -du / s2 * g, -dv / s2 * g
+
+    def height_gradient(self, u, v):
+        du, dv, s2, g = self._parts(u, v)
+        return g, -du / s2 * g, -dv / s2 * g
 
     def hessian(self, u, v):
         du, dv, s2, g = self._parts(u, v)
@@ -291,6 +313,11 @@ class PolynomialBump(_TermBase):
         du, dv, R2, q = self._parts(u, v)
         c = -2.0 * self.order * self.amplitude_mm / R2 * q ** (self.order - 1)
         return c * du, c * dv
+
+    def height_gradient(self, u, v):
+        du, dv, R2, q = self._parts(u, v)
+        c = -2.0 * self.order * self.amplitude_mm / R2 * q ** (self.order - 1)
+        return self.amplitude_mm * q**self.order, c * du, c * dv
 
     def hessian(self, u, v):
         du, dv, R2, q = self._parts(u, v)
