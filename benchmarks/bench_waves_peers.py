@@ -18,16 +18,21 @@ Every field is written as ``u`` (px) with ``img(r) = ref(r - u(r))`` (glassdist:
   restricted to glassdist's region and smoothed by one carrier period over it, NaN-aware),
   means removed, over the pixels where both are valid; 1 = the same amplitude. Every score is
   also given for the peers at matched smoothing ("matched");
-* **agreement area**: pixels where FCD and Farneback agree within 0.1 carrier period
-  (largest component); **coverage** = share of it inside glassdist's ``valid``;
+* **agreement area**: every pixel where FCD and Farneback agree within 0.1 carrier period;
+  **coverage** = share of it inside glassdist's ``valid``;
   **inside** = share of glassdist's ``valid`` within it; **accuracy** = share of
   ``valid`` where glassdist agrees with FCD within 0.1 period.
 
 Usage::
 
     python benchmarks/bench_waves_peers.py [--params JSON] [--image PATH] [--out FILE.md]
+    python benchmarks/bench_waves_peers.py --farneback-sweep [--out FILE.md]
 
 ``--out docs/waves_peers.md`` is the table the docs show (the command is written in it).
+``--farneback-sweep`` runs the Farneback peer over a grid of its own settings (window, iterations,
+polynomial expansion) and tabulates, per setting, the area where the two peers agree and the share
+of glassdist's region inside it. A setting is judged by the peers' agreement alone, which does not
+involve glassdist (docs/waves_peers_farneback.md).
 """
 
 from __future__ import annotations
@@ -50,14 +55,16 @@ from _fcd import fcd_displacement  # noqa: E402
 TOL_PERIODS = 0.1
 
 
-def farneback(ref: np.ndarray, img: np.ndarray, winsize: int) -> np.ndarray:
+def farneback(ref: np.ndarray, img: np.ndarray, winsize: int, iterations: int = 10, poly_n: int = 7,
+              poly_sigma: float = 1.5) -> np.ndarray:
     """No-pyramid Farneback flow ref -> img as ``u`` (px) with ``img(r) = ref(r - u)``."""
     import cv2
 
     a = np.clip(ref * 255, 0, 255).astype(np.uint8)
     b = np.clip(img * 255, 0, 255).astype(np.uint8)
     # ref(r) = img(r + flow(r)); to first order u = flow.
-    flow = cv2.calcOpticalFlowFarneback(a, b, None, 0.5, 1, winsize, 10, 7, 1.5, cv2.OPTFLOW_FARNEBACK_GAUSSIAN)
+    flow = cv2.calcOpticalFlowFarneback(a, b, None, 0.5, 1, winsize, iterations, poly_n, poly_sigma,
+                                        cv2.OPTFLOW_FARNEBACK_GAUSSIAN)
     return flow.astype(float)
 
 
@@ -179,6 +186,45 @@ def run(image: Path, reference: Path, params: dict) -> dict:
             "warnings": list(res.warnings), "quality_counts": res.quality_counts()}
 
 
+def farneback_sweep(image: Path, reference: Path) -> dict:
+    """The Farneback peer over a grid of its settings: the peers' agreement area and glassdist's share in it."""
+    import itertools
+
+    from glassdist import analyze
+    from glassdist.io import read_image
+
+    ref, img = read_image(reference), read_image(image)
+    res = analyze(img, reference=ref, pattern="checkerboard", pitch_mm=5.0, distance_m=0.5, detrend_degree=3)
+    valid = res.valid
+    period = max(res.carriers.k1.period_px, res.carriers.k2.period_px)
+    fcd = fcd_displacement(ref, img)
+    rows = []
+    for win, it, (pn, ps) in itertools.product((11, 15, 21, 31), (10, 30), ((5, 1.1), (7, 1.5))):
+        with np.errstate(invalid="ignore"):
+            agree = np.max(np.abs(fcd - farneback(ref, img, win, it, pn, ps)), axis=-1) < TOL_PERIODS * period
+        rows.append({"winsize": win, "iterations": it, "poly_n": pn, "poly_sigma": ps, "agree_area": float(agree.mean()),
+                     "coverage": float((valid & agree).sum() / max(agree.sum(), 1)),
+                     "inside": float((valid & agree).sum() / max(valid.sum(), 1))})
+    return {"period_px": period, "analysed": float(valid.mean()), "default_winsize": int(2 * round(period)) + 1,
+            "rows": rows}
+
+
+def sweep_table(rec: dict) -> str:
+    best = max(rec["rows"], key=lambda r: r["agree_area"])
+    lines = [f"glassdist analyses {100 * rec['analysed']:.1f} % of the photo (carrier period {rec['period_px']:.2f} px). "
+             f"The benchmark's setting: window {rec['default_winsize']}, 10 iterations, polynomial 7 / 1.5.", "",
+             "| window px | iterations | polynomial n / sigma | peers agree (share of the photo) | coverage of it | "
+             "glassdist valid inside it |", "|---|---|---|---|---|---|"]
+    for r in rec["rows"]:
+        mark = " **(largest)**" if r is best else ""
+        lines.append(f"| {r['winsize']} | {r['iterations']} | {r['poly_n']} / {r['poly_sigma']} | "
+                     f"{100 * r['agree_area']:.1f} %{mark} | {100 * r['coverage']:.1f} % | {100 * r['inside']:.1f} % |")
+    lines += ["", f"Largest agreement area of the peers: {100 * best['agree_area']:.1f} % of the photo. Any region of "
+              f"glassdist's size ({100 * rec['analysed']:.1f} %) can then have at most "
+              f"{100 * min(1.0, best['agree_area'] / rec['analysed']):.1f} % of its pixels inside it."]
+    return "\n".join(lines)
+
+
 def table(rec: dict) -> str:
     lines = ["| method | correlation with the photo (ref warped by the field) | amplitude / FCD matched (+1 period smoothing) |",
              "|---|---|---|"]
@@ -200,7 +246,17 @@ def main(argv=None) -> int:
     ap.add_argument("--reference", type=Path, default=ROOT / "examples" / "data" / "reference.png")
     ap.add_argument("--params", default="{}", help="analyzer parameter overrides, JSON")
     ap.add_argument("--out", type=Path, help="write the table (markdown) and the record (FILE.json beside it)")
+    ap.add_argument("--farneback-sweep", action="store_true", help="the Farneback peer over a grid of its settings")
     a = ap.parse_args(argv)
+    if a.farneback_sweep:
+        rec = farneback_sweep(a.image, a.reference)
+        text = sweep_table(rec)
+        print(text)
+        if a.out:
+            cmd = "python benchmarks/bench_waves_peers.py " + shlex.join(argv if argv is not None else sys.argv[1:])
+            a.out.write_text(f"<!-- {cmd.strip()} -->\n{text}\n")
+            a.out.with_suffix(".json").write_text(json.dumps({"command": cmd.strip(), **rec}, indent=1))
+        return 0
     rec = run(a.image, a.reference, json.loads(a.params))
     text = table(rec)
     print(text)
