@@ -77,6 +77,26 @@ def test_independent_evaluation_closed_form():
     assert np.allclose(phi[15:-15, 15:-15], 2 * a / L * 1000, rtol=1e-4)
 
 
+def test_independent_evaluation_detrends_each_part_on_its_own():
+    """Two parts of the region, each carrying its own dilation of the same size and opposite sign, at
+    degree 1: each part's plane is its own A2 trend (as the Analyzer detrends its regions one by
+    one), so phi_eff is 0 in both. One plane over both parts would leave +-a in each: |phi_eff| = 2 a / L."""
+    from glassdist.experiments.transfer import independent_phi_eff
+
+    h, w, s, a, L = 60, 120, 2.0, 1e-3, 10.0
+    y, x = np.mgrid[0:h, 0:w].astype(float) * s
+    left = np.arange(w) < w // 2 - 3
+    right = np.arange(w) >= w // 2 + 3
+    sign = np.where(left, 1.0, -1.0)[None, :]
+    d = np.stack([sign * a * x, sign * a * y], -1)
+    region = np.broadcast_to(left | right, (h, w)).copy()
+    J = np.broadcast_to(s * np.eye(2), (h, w, 2, 2))
+    phi = independent_phi_eff(d, region, jacobian=J, sigma_px=2.0, degree=1, distance_m=L)
+    inner = np.zeros((h, w), bool)
+    inner[10:-10, 10 : w // 2 - 13] = inner[10:-10, w // 2 + 13 : -10] = True
+    assert np.nanmax(np.abs(phi[inner])) < 1e-6 * (2 * a / L * 1000)
+
+
 def test_ray_traced_ripple_reduced():
     """Reduced ray-traced ripple (6 carrier periods, sigma 2 periods, Comparative, 384 x 288 px): the
     Analyzer's phi_eff amplitude over the interior against the exact truth, through the Analyzer's

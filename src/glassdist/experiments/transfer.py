@@ -101,28 +101,33 @@ def _instrument(periods, pitch_px: float = 12.0):
 def independent_phi_eff(displacement_mm, region, *, jacobian, sigma_px: float, degree: int, distance_m: float):
     """phi_eff (mD) of a displacement field by a plain evaluation, independent of the Analyzer's code.
 
-    Least-squares polynomial detrend of total degree ``degree`` over ``region``, Gaussian
-    smoothing normalised by the smoothed mask (``scipy.ndimage.gaussian_filter``),
+    Each 4-connected part of ``region`` on its own, as the Analyzer treats its regions:
+    least-squares polynomial detrend of total degree ``degree`` over the part, Gaussian
+    smoothing normalised by the smoothed part (``scipy.ndimage.gaussian_filter``); then
     centred differences (``numpy.gradient``) and the chain rule through the glass-less
-    pixel -> backdrop Jacobian ``jacobian`` (mm per px).
+    pixel -> backdrop Jacobian ``jacobian`` (mm per px). One fit over several parts would
+    remove a polynomial the result never removed: on a Direct capture whose region falls
+    into three parts it read 0.8 % off.
     """
     h, w = region.shape
     yy, xx = np.mgrid[0:h, 0:w].astype(float)
     xs, ys = (xx - w / 2) / w, (yy - h / 2) / h
     cols = [xs**i * ys**j for i in range(degree + 1) for j in range(degree + 1 - i)]
-    A = np.stack([c[region] for c in cols], 1)
-    wgt = ndimage.gaussian_filter(region.astype(float), sigma_px, mode="constant")
-    grads = []
-    for c in range(2):
-        f = displacement_mm[..., c]
-        coef = np.linalg.lstsq(A, f[region], rcond=None)[0]
-        det = np.zeros((h, w))
-        det[region] = f[region] - A @ coef
-        with np.errstate(invalid="ignore", divide="ignore"):
-            sm = ndimage.gaussian_filter(det, sigma_px, mode="constant") / wgt
-        gy, gx = np.gradient(sm)
-        grads.append((gx, gy))
-    G = np.stack([np.stack(g, -1) for g in grads], -2)  # (h, w, comp, d/d(x, y))
+    parts, n = ndimage.label(region)
+    sm = np.full((h, w, 2), np.nan)
+    for k in range(1, n + 1):
+        part = parts == k
+        A = np.stack([c[part] for c in cols], 1)
+        wgt = ndimage.gaussian_filter(part.astype(float), sigma_px, mode="constant")
+        for c in range(2):
+            f = displacement_mm[..., c]
+            coef = np.linalg.lstsq(A, f[part], rcond=None)[0]
+            det = np.zeros((h, w))
+            det[part] = f[part] - A @ coef
+            with np.errstate(invalid="ignore", divide="ignore"):
+                sm[part, c] = (ndimage.gaussian_filter(det, sigma_px, mode="constant") / wgt)[part]
+    grads = [np.gradient(sm[..., c]) for c in range(2)]
+    G = np.stack([np.stack((gx, gy), -1) for gy, gx in grads], -2)  # (h, w, comp, d/d(x, y))
     Jinv = np.linalg.inv(jacobian)
     grad = G @ Jinv
     return (grad[..., 0, 0] + grad[..., 1, 1]) / distance_m * 1000.0
