@@ -6,6 +6,7 @@ polynomial detrend, a mask-normalised Gaussian and centred differences
 """
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -231,6 +232,34 @@ def test_centred_radially_symmetric_defect_is_said():
     truth = _truth(sc, res, 2)
     ok = res.trusted & np.isfinite(truth)
     assert np.mean(np.abs(res.phi_eff_mD[ok])) / np.mean(np.abs(truth[ok])) == pytest.approx(1.0, abs=0.02)
+
+
+@pytest.mark.slow
+def test_a_centred_lens_filling_the_view_is_said():
+    """A Gaussian lens wider than the view (no flat glass, pinhole camera) has the camera lens's form:
+    Block I's self-calibrated lens takes it whole (the Direct Method reads 0.093 of the truth, measured)
+    and passes Block I's checks. The Direct Method then says what the lens holds, read as glass
+    (measured 1.98 mD against the pane's 0.185 mD). With the lens model off the same capture reads 1.019
+    of the truth and nothing is said; the bundled waves photo at N = 3, whose lens holds 0.2 mD against
+    its 31 mD, says nothing either."""
+    from glassdist.io import read_image
+    from glassdist.theory import analysis_params
+
+    said = "holds a radial distortion centred on the optical axis"
+    sc = load_scene(SCENES / "wide_gaussian_lens.yaml")
+    img = render_scene(sc)
+    kw = dict(pitch_mm=sc.backdrop.pitch_mm, distance_m=sc.backdrop.distance_m)
+    res = glassdist.analyze(img, params=analysis_params(sc), **kw)
+    assert res.homography_fit.lens_model is not None  # the defect: the glass taken for the camera's lens
+    warned = [w for w in res.warnings if said in w]
+    assert len(warned) == 1 and "--lens-photo" in warned[0] and "Comparative Method" in warned[0]
+    held, pane = (float(v) for v in re.findall(r"([\d.]+) mD", warned[0])[:2])
+    assert held > 5 * pane
+    bare = glassdist.analyze(img, params=analysis_params(sc).model_copy(update={"lens_model": "none"}), **kw)
+    assert not any(said in w for w in bare.warnings)
+    waves = glassdist.analyze(read_image(REPO / "examples" / "data" / "distorted_waves.bmp"), pattern="checkerboard",
+                              pitch_mm=5, distance_m=0.5, detrend_degree=3)
+    assert waves.homography_fit.lens_model is not None and not any(said in w for w in waves.warnings)
 
 
 def test_centred_glass_lens_in_a_pinhole_view_is_not_taken_for_the_camera_lens():

@@ -613,6 +613,59 @@ def _warn_rig_floor(meas, ag: _AnalysisGrid, ch, warn: list[str]) -> None:
         )
 
 
+# The Direct Method says what the camera lens fitted from the photo takes for itself when, read as glass,
+# it would reach this share of the pane's own reading (mean |phi_eff|), and at least 0.01 mD.
+_LENS_SHARE_WARN = 1.0
+
+
+def _warn_lens_takes_power(meas, ag: _AnalysisGrid, ch, warn: list[str]) -> None:
+    """Direct: warn when the lens fitted from the photo holds more centred power than the pane reads.
+
+    A camera lens's distortion and glass power centred on the optical axis have one form
+    (docs/lens_calibration.md); Block I's checks (:func:`~glassdist.analyzer.homography.refit_with_lens`)
+    say so when the residual shows it, but a centred feature that fills the view passes them and
+    is taken whole for the lens (a Gaussian lens wider than the view reads 0.093 of its truth).
+    The photo cannot tell the two; what it can tell is how much is at stake: the
+    lens's own displacement relative to the bare homography, ``p_c (H^-1(L^-1(r)) - H^-1(r))``
+    (what Direct pass 2 removed with the lens), read as glass by Block A's rule (degree-N
+    detrend per region, the strain through the baseline's Jacobian, the reporting Gaussian;
+    order-0 smoothing, as :func:`_n_move`). Where its mean |phi_eff| reaches the pane's (over the
+    samples beyond the guard band), the reading rests on the lens being the camera's, and a
+    warning gives both figures. Only for a lens fitted from the photo and applied: a calibration
+    photo or a camera file pins the lens.
+    """
+    fit = meas.fit
+    lens = fit.lens_model
+    if lens is None or fit.lens.source != "self" or meas.inputs.params.a1_mode != "projective":
+        return
+    p = meas.inputs.params
+    ok = _beyond_guard(meas, ag) & np.isfinite(ch.phi_eff_mD)
+    if ok.sum() < 64:
+        return
+    p_c = meas.inputs.carrier_period_mm
+    yy, xx = ag.grid.coords()
+    u1, v1 = logical_coordinates(fit.matrix, lens, xx, yy)
+    u0, v0 = logical_coordinates(fit.matrix, None, xx, yy)
+    d = np.stack([u1 - u0, v1 - v0], axis=-1) * p_c
+    d = polynomial_detrend(d, np.where(ag.valid, ag.labels, 0), p.detrend_degree, ag.grid.step)
+    jac = p_c * logical_jacobian(meas.baseline, lens, xx, yy)
+    eps = strain_tensor(d, ag.grid.step, mm_per_px=meas.mm_per_px, jacobian=jac)
+    phi = (eps[..., 0, 0] + eps[..., 1, 1]) * (1000.0 / meas.distance_m)
+    sigma_px = meas.sigma_mm / meas.mm_per_px
+    phi = masked_gaussian(phi, np.isfinite(phi).astype(float), sigma_px**2 * np.eye(2), ag.grid.step, order=0)
+    ok &= np.isfinite(phi)
+    if ok.sum() < 64:
+        return
+    held, m = float(np.mean(np.abs(phi[ok]))), float(np.mean(np.abs(ch.phi_eff_mD[ok])))
+    if held >= _LENS_SHARE_WARN * m and held > 0.01:
+        warn.append(
+            f"Direct Method: the camera lens fitted from the photo holds a radial distortion centred on the optical axis "
+            f"that, read as glass, is mean |phi_eff| {held:.3g} mD, against this pane's {m:.3g} mD: the photo cannot tell "
+            "a camera lens from glass power centred on the optical axis, and this reading takes it for the lens's - "
+            "confirm with a calibration photo or a camera file (--lens-photo, --camera-file), or use the Comparative Method"
+        )
+
+
 def _n_move(meas, ag: _AnalysisGrid, ch, ks):
     """``(s0, s1, what)``: the statistic (mean or p95 |phi_eff|, mD) that moves most from N to N + 1, or None.
 
@@ -1116,6 +1169,7 @@ def _evaluate(meas: _Measurement, ag: _AnalysisGrid, warn: list[str]):
     if meas.fit is not None:
         _warn_n_dependence(meas, ag, ch, ks, warn)
         _warn_rig_floor(meas, ag, ch, warn)
+        _warn_lens_takes_power(meas, ag, ch, warn)
     fields = _result_fields(delta_cam, ch)
     fields.update(_uncertainty(ag, meas.phase_noise, ch, a1, meas.sigma_mm / meas.mm_per_px, meas.distance_m))
     valid_full, idx = _reported_region(fields, ag, meas.inputs.mask, meas.margin_px[1], warn)
