@@ -5,9 +5,11 @@ check, so the truth is written out here from the definitions in the README ("Con
 "A2", "A3") and imports nothing from ``glassdist`` (``tests/test_truth_layout.py`` pins
 that rule):
 
-* A2 detrend: the least-squares polynomial of total degree N (monomials x^i y^j,
-  i + j <= N) fitted to each component over the region, subtracted
-  (``numpy.linalg.lstsq`` on the region's samples).
+* A2 detrend, per region (README "A2"): each 4-connected part of the region on its own, the
+  least-squares polynomial of total degree N (monomials x^i y^j, i + j <= N) fitted to each
+  component over the part's samples in the detrend region the result documents
+  (``detrend_region``: the whole analysis blocks; the region adds a ring of partial ones), and
+  subtracted over the part (``numpy.linalg.lstsq``). Smoothing, likewise, per part.
 * Reporting smoothing: Gaussian of standard deviation sigma_px = sigma_mm / mm_per_px,
   normalised by the region (normalised convolution, Knutsson & Westin 1993): order 0
   divides the filtered field by the filtered mask; order 1 fits a plane per sample with
@@ -53,16 +55,21 @@ class TruthChannels:
     strain: np.ndarray
 
 
-def detrend(field: np.ndarray, mask: np.ndarray, degree: int) -> np.ndarray:
-    """Subtract from ``field`` (h, w) the least-squares polynomial of total degree ``degree`` over ``mask``."""
-    rows, cols = np.nonzero(mask)
+def detrend(field: np.ndarray, mask: np.ndarray, degree: int, fit_mask: np.ndarray | None = None) -> np.ndarray:
+    """Subtract from ``field`` (h, w) over ``mask`` the least-squares polynomial of total degree ``degree``
+    fitted over ``fit_mask`` (default ``mask``)."""
+    fit = mask if fit_mask is None else fit_mask
+    rows, cols = np.nonzero(fit)
     # pixel coordinates scaled to about [-1, 1] for a well-conditioned fit
-    x = (cols - cols.mean()) / max(np.ptp(cols), 1) * 2.0
-    y = (rows - rows.mean()) / max(np.ptp(rows), 1) * 2.0
-    basis = np.column_stack([x**i * y**(n - i) for n in range(degree + 1) for i in range(n + 1)])
-    coef = np.linalg.lstsq(basis, field[mask], rcond=None)[0]
+    c0, r0, sc, sr = cols.mean(), rows.mean(), max(np.ptp(cols), 1) / 2.0, max(np.ptp(rows), 1) / 2.0
+
+    def basis(r, c):
+        x, y = (c - c0) / sc, (r - r0) / sr
+        return np.column_stack([x**i * y**(n - i) for n in range(degree + 1) for i in range(n + 1)])
+
+    coef = np.linalg.lstsq(basis(rows, cols), field[fit], rcond=None)[0]
     out = np.full(field.shape, np.nan)
-    out[mask] = field[mask] - basis @ coef
+    out[mask] = field[mask] - basis(*np.nonzero(mask)) @ coef
     return out
 
 
@@ -131,30 +138,49 @@ def channels(eps: np.ndarray, distance_m: float):
 
 def evaluate(displacement_mm: np.ndarray, mask: np.ndarray, *, distance_m: float, mm_per_px: float,
              detrend_degree: int, sigma_mm: float, jacobian: np.ndarray | None = None,
-             order: int = 1) -> TruthChannels:
-    """The truth's detrend, smoothing and channels of ``displacement_mm`` (h, w, 2) over ``mask``."""
+             order: int = 1, fit_mask: np.ndarray | None = None) -> TruthChannels:
+    """The truth's detrend, smoothing and channels of ``displacement_mm`` (h, w, 2) over ``mask``.
+
+    Each 4-connected part of ``mask`` is detrended (fitted over its samples in ``fit_mask``,
+    default ``mask``) and smoothed on its own; a part with fewer fit samples than monomials is
+    left out (NaN).
+    """
     mask = np.asarray(mask, bool)
+    fit = mask if fit_mask is None else (np.asarray(fit_mask, bool) & mask)
     sigma_px = sigma_mm / mm_per_px
-    sm = np.stack([smooth(detrend(displacement_mm[..., c], mask, detrend_degree), mask, sigma_px, order)
-                   for c in range(2)], -1)
+    pad = int(np.ceil(4.0 * sigma_px)) + 2  # the Gaussian's reach (truncate = 4): the crop changes nothing
+    parts, _ = ndimage.label(mask)
+    n_terms = (detrend_degree + 1) * (detrend_degree + 2) // 2
+    sm = np.full(mask.shape + (2,), np.nan)
+    done = np.zeros_like(mask)
+    for k, box in enumerate(ndimage.find_objects(parts), 1):
+        box = tuple(slice(max(b.start - pad, 0), b.stop + pad) for b in box)
+        part = parts[box] == k
+        if (fit[box] & part).sum() < n_terms:
+            continue
+        for c in range(2):
+            det = detrend(displacement_mm[box][..., c], part, detrend_degree, fit[box] & part)
+            sm[box][..., c][part] = smooth(det, part, sigma_px, order)[part]
+        done[box] |= part
     grad = gradient_mm(sm, mm_per_px=mm_per_px, jacobian=jacobian)
     eps = 0.5 * (grad + np.swapaxes(grad, -1, -2))
     eff, shear, total, axis = channels(eps, distance_m)
     out = [eff, shear, total, axis, sm, eps]
     for a in out:
-        a[~mask] = np.nan
+        a[~done] = np.nan
     return TruthChannels(*out)
 
 
 def truth_for(cap, res, *, mask=None) -> TruthChannels:
     """The truth of a synthetic capture ``cap`` evaluated as the result ``res`` documents it.
 
-    Same region (``res.valid``), detrend degree, smoothing scale, distance and scale as
-    the result, and the capture's own Jacobian (perspective).
+    Same region (``res.valid``), detrend fitted on the same region (``res.detrend_region``),
+    detrend degree, smoothing scale, distance and scale as the result, and the capture's own
+    Jacobian (perspective).
     """
     return evaluate(cap.displacement_mm, res.valid if mask is None else mask, distance_m=res.distance_m,
                     mm_per_px=res.mm_per_px, detrend_degree=res.detrend_degree, sigma_mm=res.sigma_mm,
-                    jacobian=cap.jacobian)
+                    jacobian=cap.jacobian, fit_mask=res.detrend_region)
 
 
 def axis_difference_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -80,7 +80,7 @@ def test_detrend_degree_through_the_analyzer(method, degree):
     assert res.detrend_degree == degree
     tr = truth_for(cap, res)
     lower = evaluate(cap.displacement_mm, res.valid, distance_m=L, mm_per_px=res.mm_per_px,
-                     detrend_degree=degree - 1, sigma_mm=res.sigma_mm, jacobian=cap.jacobian)
+                     detrend_degree=degree - 1, sigma_mm=res.sigma_mm, jacobian=cap.jacobian, fit_mask=res.detrend_region)
     t = res.trusted
     # the polynomial matters: degree N - 1 leaves strain well above the wave's
     assert np.nanmean(np.abs(lower.phi_eff_mD[t] - tr.phi_eff_mD[t])) > 0.5 * np.nanmean(np.abs(tr.phi_eff_mD[t]))
@@ -139,3 +139,24 @@ def test_reporting_smoothing_width(method):
     assert _slope(res.phi_eff_mD, gain * phi, inner) == pytest.approx(1.0, abs=0.02)
     tr = truth_for(cap, res)
     assert _slope(res.phi_eff_mD, tr.phi_eff_mD, res.trusted) == pytest.approx(1.0, abs=0.02)
+
+
+def test_truth_detrends_each_part_on_the_documented_fit_region():
+    """The truth helper's A2, per region as README "A2" states: two parts of the region carrying opposite
+    dilations read 0 at degree 1 (one plane over both would leave +-a, |phi_eff| = 2 a / L); and the
+    fit is taken over ``fit_mask`` alone (a bump outside it is left in, whole)."""
+    h, w, a = 60, 120, 1e-3
+    y, x = np.mgrid[0:h, 0:w].astype(float)
+    left, right = x < w // 2 - 3, x >= w // 2 + 3
+    sign = np.where(left, 1.0, -1.0)
+    d = np.stack([sign * a * x, sign * a * y], -1)
+    tr = evaluate(d, left | right, distance_m=L, mm_per_px=1.0, detrend_degree=1, sigma_mm=2.0, order=0)
+    inner = np.zeros((h, w), bool)
+    inner[10:-10, 10 : w // 2 - 13] = inner[10:-10, w // 2 + 13 : -10] = True
+    assert np.nanmax(np.abs(tr.phi_eff_mD[inner])) < 1e-9 * (2 * a / L * 1000)
+    # fitted on the left part's left half only: a step on its right half stays in the detrended field
+    bump = np.where(left & (x >= 20), 0.5, 0.0)
+    f = np.stack([bump, np.zeros((h, w))], -1)
+    tr = evaluate(f, left, distance_m=L, mm_per_px=1.0, detrend_degree=0, sigma_mm=1.0, fit_mask=left & (x < 20), order=0)
+    assert np.nanmax(np.abs(tr.displacement_detrended_mm[5:-5, 3:15, 0])) < 1e-12
+    assert np.allclose(tr.displacement_detrended_mm[5:-5, 25:50, 0], 0.5)
