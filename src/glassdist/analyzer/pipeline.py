@@ -613,6 +613,18 @@ def _warn_rig_floor(meas, ag: _AnalysisGrid, ch, warn: list[str]) -> None:
         )
 
 
+def _plain_phi_eff(delta_mm: np.ndarray, jacobian, meas, ag: _AnalysisGrid) -> np.ndarray:
+    """phi_eff (mD) of a displacement on the analysis grid by Block A's rule without its transfer: the strain
+    through ``jacobian`` (None: ``mm_per_px``), its trace over L, smoothed by a plain Gaussian of the
+    reporting sigma (order-0 normalised convolution). What the Direct Method's checks read a trend with
+    (:func:`_n_move`, :func:`_warn_lens_takes_power`); NaN where the strain is.
+    """
+    eps = strain_tensor(delta_mm, ag.grid.step, mm_per_px=meas.mm_per_px, jacobian=jacobian)
+    phi = (eps[..., 0, 0] + eps[..., 1, 1]) * (1000.0 / meas.distance_m)  # phi_eff is the trace (metrics)
+    sigma_px = meas.sigma_mm / meas.mm_per_px
+    return masked_gaussian(phi, np.isfinite(phi).astype(float), sigma_px**2 * np.eye(2), ag.grid.step, order=0)
+
+
 # The Direct Method says what the camera lens fitted from the photo takes for itself when, read as glass,
 # it would reach this share of the pane's own reading (mean |phi_eff|), and at least 0.01 mD.
 _LENS_SHARE_WARN = 1.0
@@ -628,10 +640,9 @@ def _warn_lens_takes_power(meas, ag: _AnalysisGrid, ch, warn: list[str]) -> None
     The photo cannot tell the two; what it can tell is how much is at stake: the
     lens's own displacement relative to the bare homography, ``p_c (H^-1(L^-1(r)) - H^-1(r))``
     (what Direct pass 2 removed with the lens), read as glass by Block A's rule (degree-N
-    detrend per region, the strain through the baseline's Jacobian, the reporting Gaussian;
-    order-0 smoothing, as :func:`_n_move`). Where its mean |phi_eff| reaches the pane's (over the
-    samples beyond the guard band), the reading rests on the lens being the camera's, and a
-    warning gives both figures. Only for a lens fitted from the photo and applied: a calibration
+    detrend per region, then :func:`_plain_phi_eff` through the baseline's Jacobian). Where
+    its mean |phi_eff| reaches the pane's (over the samples beyond the guard band), the reading
+    rests on the lens being the camera's, and a warning gives both figures. Only for a lens fitted from the photo and applied: a calibration
     photo or a camera file pins the lens.
     """
     fit = meas.fit
@@ -648,11 +659,7 @@ def _warn_lens_takes_power(meas, ag: _AnalysisGrid, ch, warn: list[str]) -> None
     u0, v0 = logical_coordinates(fit.matrix, None, xx, yy)
     d = np.stack([u1 - u0, v1 - v0], axis=-1) * p_c
     d = polynomial_detrend(d, np.where(ag.valid, ag.labels, 0), p.detrend_degree, ag.grid.step)
-    jac = p_c * logical_jacobian(meas.baseline, lens, xx, yy)
-    eps = strain_tensor(d, ag.grid.step, mm_per_px=meas.mm_per_px, jacobian=jac)
-    phi = (eps[..., 0, 0] + eps[..., 1, 1]) * (1000.0 / meas.distance_m)
-    sigma_px = meas.sigma_mm / meas.mm_per_px
-    phi = masked_gaussian(phi, np.isfinite(phi).astype(float), sigma_px**2 * np.eye(2), ag.grid.step, order=0)
+    phi = _plain_phi_eff(d, p_c * logical_jacobian(meas.baseline, lens, xx, yy), meas, ag)
     ok &= np.isfinite(phi)
     if ok.sum() < 64:
         return
@@ -682,11 +689,7 @@ def _n_move(meas, ag: _AnalysisGrid, ch, ks):
     delta, jac = _components(ag, ks, meas.baseline, p, meas.inputs.carrier_period_mm, meas.mm_per_px,
                              lens=meas.fit.lens_model)
     labels = np.where(ag.valid, ag.labels, 0)
-    Q = detrend_increment(delta, labels, n, ag.grid.step)
-    eps = strain_tensor(Q, ag.grid.step, mm_per_px=meas.mm_per_px, jacobian=jac)
-    phi_q = (eps[..., 0, 0] + eps[..., 1, 1]) * (1000.0 / meas.distance_m)  # phi_eff is the trace (metrics)
-    sigma_px = meas.sigma_mm / meas.mm_per_px
-    b = a - masked_gaussian(phi_q, np.isfinite(phi_q).astype(float), sigma_px**2 * np.eye(2), ag.grid.step, order=0)
+    b = a - _plain_phi_eff(detrend_increment(delta, labels, n, ag.grid.step), jac, meas, ag)
     ok &= np.isfinite(b)
     if ok.sum() < 64:
         return None
