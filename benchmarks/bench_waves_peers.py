@@ -138,15 +138,27 @@ def matched(u: np.ndarray, res) -> np.ndarray:
     return D.phase_to_displacement_px(np.stack(out, axis=-1), ks)
 
 
-def run(image: Path, reference: Path, params: dict) -> dict:
+def analyze_waves(ref: np.ndarray, img: np.ndarray, params: dict | None = None):
+    """glassdist's Comparative analysis of the photo (the settings of the README's Quick start)."""
     from glassdist import analyze
+
+    return analyze(img, reference=ref, pattern="checkerboard", pitch_mm=5.0, distance_m=0.5, detrend_degree=3,
+                   params=params or None)
+
+
+def agree(a: np.ndarray, b: np.ndarray, period: float) -> np.ndarray:
+    """Pixels where two fields (px) agree within ``TOL_PERIODS`` carrier period on both components."""
+    with np.errstate(invalid="ignore"):
+        return np.max(np.abs(a - b), axis=-1) < TOL_PERIODS * period
+
+
+def run(image: Path, reference: Path, params: dict) -> dict:
     from glassdist.io import read_image
 
     ref = read_image(reference)
     img = read_image(image)
     t0 = time.perf_counter()
-    res = analyze(img, reference=ref, pattern="checkerboard", pitch_mm=5.0, distance_m=0.5, detrend_degree=3,
-                  params=params or None)
+    res = analyze_waves(ref, img, params)
     valid = res.valid
     t_gd = time.perf_counter() - t0
     period = max(res.carriers.k1.period_px, res.carriers.k2.period_px)
@@ -154,11 +166,7 @@ def run(image: Path, reference: Path, params: dict) -> dict:
               "Farneback": farneback(ref, img, int(2 * round(period)) + 1)}
     fields["glassdist"][~valid] = np.nan
 
-    def close(a, b):
-        with np.errstate(invalid="ignore"):
-            return np.max(np.abs(a - b), axis=-1) < TOL_PERIODS * period
-
-    agree = close(fields["FCD"], fields["Farneback"])
+    both = agree(fields["FCD"], fields["Farneback"], period)
     for k in ("FCD", "Farneback"):
         fields[f"{k} matched"] = matched(fields[k], res)
     # Smoothed over the same support (glassdist's region) for every method: a peer's values where
@@ -170,18 +178,18 @@ def run(image: Path, reference: Path, params: dict) -> dict:
             "correlation": correlation(warp_reference(ref, u), img, valid),
             "amplitude_vs_fcd": slope(sm[k], sm["FCD matched"], valid),
         }
-    cov = float((valid & agree).sum() / max(agree.sum(), 1))
-    inside = float((valid & agree).sum() / max(valid.sum(), 1))
-    acc = float((valid & close(fields["glassdist"], fields["FCD"])).sum() / max(valid.sum(), 1))
+    cov = float((valid & both).sum() / max(both.sum(), 1))
+    inside = float((valid & both).sum() / max(valid.sum(), 1))
+    acc = float((valid & agree(fields["glassdist"], fields["FCD"], period)).sum() / max(valid.sum(), 1))
     from scipy import ndimage
 
     from glassdist.analyzer.region import LABELS
 
     _, n_parts = ndimage.label(valid)
-    dropped = agree & ~valid
+    dropped = both & ~valid
     q = np.asarray(res.quality)[dropped]
     dropped_by = {LABELS[int(k)]: float(c / max(dropped.sum(), 1)) for k, c in zip(*np.unique(q, return_counts=True))}
-    return {"period_px": period, "analysed": float(valid.mean()), "agree_area": float(agree.mean()), "coverage": cov,
+    return {"period_px": period, "analysed": float(valid.mean()), "agree_area": float(both.mean()), "coverage": cov,
             "inside": inside, "accuracy": acc, "parts": int(n_parts), "dropped_by_label": dropped_by, "glassdist_s": t_gd, "methods": rows,
             "warnings": list(res.warnings), "quality_counts": res.quality_counts()}
 
@@ -190,21 +198,19 @@ def farneback_sweep(image: Path, reference: Path) -> dict:
     """The Farneback peer over a grid of its settings: the peers' agreement area and glassdist's share in it."""
     import itertools
 
-    from glassdist import analyze
     from glassdist.io import read_image
 
     ref, img = read_image(reference), read_image(image)
-    res = analyze(img, reference=ref, pattern="checkerboard", pitch_mm=5.0, distance_m=0.5, detrend_degree=3)
+    res = analyze_waves(ref, img)
     valid = res.valid
     period = max(res.carriers.k1.period_px, res.carriers.k2.period_px)
     fcd = fcd_displacement(ref, img)
     rows = []
     for win, it, (pn, ps) in itertools.product((11, 15, 21, 31), (10, 30), ((5, 1.1), (7, 1.5))):
-        with np.errstate(invalid="ignore"):
-            agree = np.max(np.abs(fcd - farneback(ref, img, win, it, pn, ps)), axis=-1) < TOL_PERIODS * period
-        rows.append({"winsize": win, "iterations": it, "poly_n": pn, "poly_sigma": ps, "agree_area": float(agree.mean()),
-                     "coverage": float((valid & agree).sum() / max(agree.sum(), 1)),
-                     "inside": float((valid & agree).sum() / max(valid.sum(), 1))})
+        both = agree(fcd, farneback(ref, img, win, it, pn, ps), period)
+        rows.append({"winsize": win, "iterations": it, "poly_n": pn, "poly_sigma": ps, "agree_area": float(both.mean()),
+                     "coverage": float((valid & both).sum() / max(both.sum(), 1)),
+                     "inside": float((valid & both).sum() / max(valid.sum(), 1))})
     return {"period_px": period, "analysed": float(valid.mean()), "default_winsize": int(2 * round(period)) + 1,
             "rows": rows}
 
@@ -240,6 +246,13 @@ def table(rec: dict) -> str:
     return "\n".join(lines)
 
 
+def write(out: Path, argv, text: str, rec: dict) -> None:
+    """The table (markdown, its command in a comment) and the record beside it (``.json``)."""
+    cmd = ("python benchmarks/bench_waves_peers.py " + shlex.join(argv if argv is not None else sys.argv[1:])).strip()
+    out.write_text(f"<!-- {cmd} -->\n{text}\n")
+    out.with_suffix(".json").write_text(json.dumps({"command": cmd, **rec}, indent=1))
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--image", type=Path, default=ROOT / "examples" / "data" / "distorted_waves.bmp")
@@ -253,18 +266,14 @@ def main(argv=None) -> int:
         text = sweep_table(rec)
         print(text)
         if a.out:
-            cmd = "python benchmarks/bench_waves_peers.py " + shlex.join(argv if argv is not None else sys.argv[1:])
-            a.out.write_text(f"<!-- {cmd.strip()} -->\n{text}\n")
-            a.out.with_suffix(".json").write_text(json.dumps({"command": cmd.strip(), **rec}, indent=1))
+            write(a.out, argv, text, rec)
         return 0
     rec = run(a.image, a.reference, json.loads(a.params))
     text = table(rec)
     print(text)
     print("warnings:", *rec["warnings"], sep="\n  ")
     if a.out:
-        cmd = "python benchmarks/bench_waves_peers.py " + shlex.join(argv if argv is not None else sys.argv[1:])
-        a.out.write_text(f"<!-- {cmd.strip()} -->\n{text}\n")
-        a.out.with_suffix(".json").write_text(json.dumps({"command": cmd.strip(), **rec}, indent=1))
+        write(a.out, argv, text, rec)
     return 0
 
 
