@@ -135,3 +135,17 @@ def test_a_full_disk_under_report_export_exits_2_saying_what_is_needed(pair, tmp
     m = re.search(r"no space left .* need up to (\d+) MB", err)
     assert m and int(m.group(1)) >= 1, err
     assert "Traceback" not in err
+
+
+_HEAVY = ("matplotlib", "sqlalchemy", "cv2", "scipy.ndimage", "skimage", "glassdist.analyzer.pipeline",
+          "glassdist.render.tracer")
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["analyze", "missing.png", "--pitch-mm", "5", "--distance-m", "0.5",
+                                               "--out", "out"]], ids=["help", "refused"])
+def test_help_and_a_refused_input_load_no_analysis_or_plotting_stack(argv, tmp_path):
+    """The package's names load on first use: neither the help nor a refused input pays for the stacks."""
+    code = ("import sys\nfrom glassdist.cli import main\ntry:\n    main(sys.argv[1:])\nexcept SystemExit:\n    pass\n"
+            f"print(sorted(m for m in {_HEAVY!r} if m in sys.modules))")
+    r = subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True, cwd=tmp_path)
+    assert r.stdout.strip().splitlines()[-1] == "[]", r.stdout[-500:] + r.stderr[-500:]

@@ -9,7 +9,7 @@ import glassdist
 
 SRC = Path(glassdist.__file__).parent
 #: top-level private modules that serve the whole package (README, "Code layout")
-SHARED = {"glassdist._version", "glassdist._cli_shared"}
+SHARED = {"glassdist._version", "glassdist._cli_shared", "glassdist._lazy"}
 
 
 def _subpackage(module: str) -> str:

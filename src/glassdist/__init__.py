@@ -16,24 +16,40 @@ Conventions (used everywhere in the package)
   backdrop mm: a converging lens reads ``phi_eff < 0``.
 """
 
+from ._lazy import lazy_exports
 from ._version import __version__
-from .analyzer import (
-    AnalysisResult,
-    AnalyzerParams,
-    analyze,
-    analyze_reflection,
-    ReflectionGeometry,
-    analyze_captures,
-    channel_statistics,
-    evaluate_displacement,
-    load_params,
-    prepare_reference,
-)
-from ._api import evaluate_spec, write_report
-from .errors import AnalysisError, GlassdistError, InputError
-from .io import read_image, read_mask
-from .storage import load_result, write_outputs
-from .history import history
+
+# Public names and the module that holds each. They load on first use (PEP 562), so that
+# ``glassdist --help``, a refused input and each batch pane's process do not pay for
+# the analysis, plotting and database stacks they never touch.
+_HOMES = {
+    "AnalysisResult": ".analyzer",
+    "AnalyzerParams": ".analyzer",
+    "analyze": ".analyzer",
+    "analyze_reflection": ".analyzer",
+    "ReflectionGeometry": ".analyzer",
+    "analyze_captures": ".analyzer",
+    "channel_statistics": ".analyzer",
+    "evaluate_displacement": ".analyzer",
+    "load_params": ".analyzer",
+    "prepare_reference": ".analyzer",
+    "evaluate_spec": "._api",
+    "write_report": "._api",
+    "AnalysisError": ".errors",
+    "GlassdistError": ".errors",
+    "InputError": ".errors",
+    "read_image": ".io",
+    "read_mask": ".io",
+    "load_result": ".storage",
+    "write_outputs": ".storage",
+}
+
+
+__getattr__, __dir__ = lazy_exports(__name__, _HOMES)
+
+# eager: the function must win over the subpackage of the same name, which any import of
+# glassdist.history.* would otherwise bind here (it loads no database driver)
+from .history import history  # noqa: E402
 
 __all__ = [
     "history",

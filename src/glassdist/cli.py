@@ -160,8 +160,7 @@ def _read_inputs(args):
     """
     from .acceptance.spec import load_spec, resolve_protocol
     from .analyzer import load_params
-    from .io import read_mask, read_photo
-    from .report.maps import preview
+    from .io import preview, read_mask, read_photo
     from .storage.record import InputFile, RunInputs, RunRequest
 
     if args.spec is None:
@@ -295,16 +294,17 @@ def _lens_source(args, pinned, protocol, params, images):
 
 def _run_analyze(args) -> int:
     """One run as a straight line: request, inputs, folder, analysis, record, files, console lines, exit code."""
-    from .analyzer import FIELDS, analyze, analyze_captures, prepare_reference
-    from .analyzer.reflection import reflect_result
-    from .report.console import run_lines, warning_lines
-    from .storage import open_output_folder, plan_outputs
-    from .storage.record import build_record
-    from .storage.writer import write_run
-
     with _stage_progress(not args.quiet) as step:
         step("reading the inputs")
         request, inputs, params, images, reference, optics, lens = _read_inputs(args)
+        # imported once the inputs are good: a refused run does not pay for the analysis and output stacks
+        from .analyzer import FIELDS, analyze, analyze_captures, prepare_reference
+        from .analyzer.reflection import reflect_result
+        from .report.console import run_lines, warning_lines
+        from .storage import open_output_folder, plan_outputs
+        from .storage.record import build_record
+        from .storage.writer import write_run
+
         planned = plan_outputs(FIELDS, fields=request.fields, report=request.report, export=request.export,
                                limits=request.limits)
         paths = (*args.image, args.reference, args.mask, args.spec, args.params, args.lens_photo, args.camera_file)

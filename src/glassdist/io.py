@@ -25,7 +25,7 @@ import numpy as np
 from .errors import InputError
 from .validation import check_input_file, limits, safe_text
 
-__all__ = ["Photo", "read_photo", "read_image", "image_shape", "read_mask", "write_png16", "prepare_output_dir", "open_with_pillow",
+__all__ = ["Photo", "read_photo", "read_image", "preview", "image_shape", "read_mask", "write_png16", "prepare_output_dir", "open_with_pillow",
            "camera_metadata", "to_jsonable"]
 
 _READABLE = {".png", ".tif", ".tiff", ".bmp", ".jpg", ".jpeg"}
@@ -467,3 +467,15 @@ def read_photo(path: str | os.PathLike, *, max_megapixels: float | None = None, 
     data = _read_bytes(p)
     image = _decoded(p, data, max_megapixels, dtype)
     return Photo(image, hashlib.sha256(data).hexdigest(), camera_metadata(_io.BytesIO(data)))
+
+
+def preview(image, max_px: int = 1200) -> np.ndarray:
+    """``image`` reduced by area averaging so that its longer side is at most ``max_px`` (float32)."""
+    import cv2
+
+    img = np.asarray(image, dtype=np.float32)
+    k = max(img.shape) / max_px
+    if k <= 1:
+        return img
+    size = (max(1, round(img.shape[1] / k)), max(1, round(img.shape[0] / k)))
+    return cv2.resize(img, size, interpolation=cv2.INTER_AREA)

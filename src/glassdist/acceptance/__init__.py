@@ -8,7 +8,11 @@
 * :mod:`~glassdist.acceptance.assess`: :func:`assess`, all of them for one result.
 """
 
-from .assess import METADATA_KEYS, Acceptance, assess
-from .spec import Spec, load_spec
+from .._lazy import lazy_exports
+
+# loaded on first use: reading a specification needs neither the statistics nor scipy.ndimage
+__getattr__, __dir__ = lazy_exports(__name__, {
+    "METADATA_KEYS": ".assess", "Acceptance": ".assess", "assess": ".assess", "Spec": ".spec", "load_spec": ".spec",
+})
 
 __all__ = ["METADATA_KEYS", "Acceptance", "Spec", "assess", "load_spec"]

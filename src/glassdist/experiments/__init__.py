@@ -18,24 +18,26 @@ table, figures); :func:`write_experiment` writes them. ``glassdist experiment NA
 one from the command line.
 """
 
-from ._common import (
-    ExperimentResult,
-    Inputs,
-    RunOptions,
-    SceneRun,
-    evaluate,
-    render_inputs,
-    run_scenes,
-    scaled_scene,
-    write_experiment,
-)
-from .accuracy import run_accuracy
-from .parity import run_parity
-from .pitch import run_pitch
-from .rotation import run_rotation
-from .transfer import run_transfer
+from .._lazy import lazy_exports
 
-EXPERIMENTS = {"parity": run_parity, "pitch": run_pitch, "rotation": run_rotation, "accuracy": run_accuracy, "transfer": run_transfer}
+_HOMES = {name: "._common" for name in ("ExperimentResult", "Inputs", "RunOptions", "SceneRun", "evaluate",
+                                         "render_inputs", "run_scenes", "scaled_scene", "write_experiment")}
+_HOMES.update(run_accuracy=".accuracy", run_parity=".parity", run_pitch=".pitch", run_rotation=".rotation",
+              run_transfer=".transfer")
+# loaded on first use: `glassdist --help` and the other commands register `experiment` without them
+_lazy_getattr, __dir__ = lazy_exports(__name__, _HOMES)
+
+
+#: the experiments' names, in the order of ``glassdist experiment --help``
+_NAMES = ("parity", "pitch", "rotation", "accuracy", "transfer")
+
+
+def __getattr__(name):
+    if name == "EXPERIMENTS":  # name -> run function
+        globals()[name] = {n: _lazy_getattr(f"run_{n}") for n in _NAMES}
+        return globals()[name]
+    return _lazy_getattr(name)
+
 
 __all__ = [
     "EXPERIMENTS",

@@ -12,11 +12,9 @@ from ..distributed import add_scheduler_options, open_executor
 from ..io import prepare_output_dir
 from .._cli_shared import folder_option, progress_reporter
 from ..validation import SIGMA_MM, Range, number_option
+from . import _NAMES
 
 __all__ = ["register", "run"]
-
-
-_NAMES = ("parity", "pitch", "rotation", "accuracy", "transfer")
 
 
 def register(subparsers):

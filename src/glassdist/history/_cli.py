@@ -93,8 +93,7 @@ def run(args) -> int:
     """List / export / chart; exit 0, or 2 with one line (bad filter, unreadable database, existing file)."""
     from ..errors import InputError
     from ..fs import atomic_write_bytes, atomic_write_text
-    from ..report.figures import figure_png
-    from . import COLUMNS, HistoryFilter, locate, plot_trends, trends
+    from . import COLUMNS, HistoryFilter, locate
     from . import history as read_history
 
     flt = {k: getattr(args, k) for k in ("pane_id", "lot", "site", "operator", "source", "verdict", "since", "until",
@@ -124,6 +123,9 @@ def run(args) -> int:
     else:
         sys.stdout.write(text)
     if args.chart is not None:
+        from ..report.figures import figure_png  # matplotlib: only for a chart
+        from . import plot_trends, trends
+
         found = trends(records)
         label = f"{records[0]['statistic']} ({records[0]['zone']})" if records else "value"
         atomic_write_bytes(args.chart, figure_png(plot_trends(found, label=label)))

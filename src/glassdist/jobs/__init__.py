@@ -6,7 +6,12 @@
   (:mod:`~glassdist.jobs.index_figures`: its thumbnails and trend plot).
 """
 
-from .batch import EXIT_PANE_ERRORS, Pane, read_manifest, run_batch
-from .runner import PaneOutcome, run_glassdist
+from .._lazy import lazy_exports
+
+# loaded on first use: `glassdist --help` and the other commands register `batch` without them
+__getattr__, __dir__ = lazy_exports(__name__, {
+    "EXIT_PANE_ERRORS": ".batch", "Pane": ".batch", "read_manifest": ".batch", "run_batch": ".batch",
+    "PaneOutcome": ".runner", "run_glassdist": ".runner",
+})
 
 __all__ = ["EXIT_PANE_ERRORS", "Pane", "PaneOutcome", "read_manifest", "run_batch", "run_glassdist"]

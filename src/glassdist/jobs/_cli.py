@@ -10,7 +10,6 @@ from pathlib import Path
 from .._cli_shared import folder_option
 from ..distributed import add_scheduler_options, open_executor
 from ..validation import DISTANCE_M, PITCH_MM, SIGMA_MM, number_option, safe_text
-from .batch import check_panes, pane_defaults, panes_from_folder, read_manifest, run_batch
 
 logger = logging.getLogger(__name__)
 
@@ -72,6 +71,7 @@ def _history_db(args):
 def run(args):
     """Run the batch; returns the exit status (see :mod:`glassdist.jobs.batch`)."""
     from ..errors import InputError
+    from .batch import check_panes, pane_defaults, panes_from_folder, read_manifest, run_batch
 
     defaults = pane_defaults(
         pitch_mm=args.pitch_mm, distance_m=args.distance_m, reference=args.reference, pattern=args.pattern,

@@ -21,10 +21,16 @@ from typing import Callable, Protocol, runtime_checkable
 
 import numpy as np
 
+from .._lazy import lazy_exports
 from ..errors import InputError
 from ..scene import Scene
-from .imaging import apply_imaging
-from .tracer import ExactTracer, Landing, TraceResult, landing_points, refract, render_intensity, trace_rays
+
+# the engine loads on first use: the sub-commands register without scipy.ndimage
+__getattr__, __dir__ = lazy_exports(__name__, {
+    "apply_imaging": ".imaging",
+    **dict.fromkeys(("ExactTracer", "Landing", "TraceResult", "landing_points", "refract", "render_intensity",
+                     "trace_rays"), ".tracer"),
+})
 
 __all__ = [
     "Renderer",

@@ -79,7 +79,6 @@ import numpy as np
 from ..errors import GlassdistError, InputError
 from ..validation import safe_text
 from ..scene import Scene, pixel_directions, straight_landing
-from .imaging import apply_imaging
 
 __all__ = [
     "CyclesRenderer",
@@ -699,6 +698,8 @@ class CyclesRenderer:
         finally:
             if cleanup:
                 shutil.rmtree(work, ignore_errors=True)
+        from .imaging import apply_imaging  # scipy.ndimage: not for `glassdist --help`
+
         return apply_imaging(np.clip(img, 0.0, None), scene.imaging, rng)
 
     @staticmethod

@@ -5,6 +5,9 @@ result, its acceptance, its measures) and never read or write a run folder
 (:mod:`glassdist.storage` writes what they render).
 """
 
-from .maps import preview, run_figures
+from .._lazy import lazy_exports
 
-__all__ = ["preview", "run_figures"]
+# loaded on first use: the console lines and the input checks need no plotting stack
+__getattr__, __dir__ = lazy_exports(__name__, {"run_figures": ".maps"})
+
+__all__ = ["run_figures"]

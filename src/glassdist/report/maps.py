@@ -15,21 +15,10 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from ..acceptance.stats import shared_limit
+from ..io import preview
 from . import figures as F
 
-__all__ = ["draw_overlays", "describe_clipping", "heatmap_axes", "preview", "run_figures"]
-
-def preview(image, max_px: int = 1200) -> np.ndarray:
-    """``image`` reduced by area averaging so that its longer side is at most ``max_px`` (float32)."""
-    import cv2
-
-    img = np.asarray(image, dtype=np.float32)
-    k = max(img.shape) / max_px
-    if k <= 1:
-        return img
-    size = (max(1, round(img.shape[1] / k)), max(1, round(img.shape[0] / k)))
-    return cv2.resize(img, size, interpolation=cv2.INTER_AREA)
-
+__all__ = ["draw_overlays", "describe_clipping", "heatmap_axes", "run_figures"]
 
 def _map_of(result, attr):
     """Field ``attr`` on the result's analysis grid (what every figure draws), NaN outside the region."""

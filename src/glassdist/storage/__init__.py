@@ -8,9 +8,14 @@
   line, ``glassdist batch`` and the Python API alike (:func:`write_outputs`).
 """
 
-from .fields import FIELD_LAYOUTS, GRID_KEYS, SUMMARY_NAME, StoredResult, load_result
-from .folder import OutputFolder, open_output_folder, plan_outputs
-from .writer import EXIT_OK, EXIT_SPEC_FAIL, write_outputs
+from .._lazy import lazy_exports
+
+# loaded on first use: a run's record and folder need neither the figures nor the report
+__getattr__, __dir__ = lazy_exports(__name__, {
+    **dict.fromkeys(("FIELD_LAYOUTS", "GRID_KEYS", "SUMMARY_NAME", "StoredResult", "load_result"), ".fields"),
+    **dict.fromkeys(("OutputFolder", "open_output_folder", "plan_outputs"), ".folder"),
+    **dict.fromkeys(("EXIT_OK", "EXIT_SPEC_FAIL", "write_outputs"), ".writer"),
+})
 
 __all__ = [
     "EXIT_OK",

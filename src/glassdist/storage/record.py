@@ -21,16 +21,19 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..acceptance.assess import Acceptance, assess
 from ..acceptance.spec import LoadedSpec
 from ..acceptance.stats import STATISTIC_FIELDS
 from ..errors import InputError
 from ..fs import file_sha256
 from ..io import read_photo
 from .fields import FIELD_LAYOUTS, GRID_KEYS
+
+if TYPE_CHECKING:
+    from ..acceptance.assess import Acceptance
 
 __all__ = ["EXIT_OK", "EXIT_SPEC_FAIL", "InputFile", "RunInputs", "RunRecord", "RunRequest", "build_record", "read_inputs"]
 
@@ -104,7 +107,7 @@ class RunInputs:
         The photo's EXIF camera facts (None: it has none; False: no photo known).
     preview : ndarray or None
         The photo reduced for the figure of the analysed region
-        (:func:`glassdist.report.maps.preview`).
+        (:func:`glassdist.io.preview`).
     """
 
     image: InputFile | None = None
@@ -128,7 +131,7 @@ def read_inputs(image_path=None, reference_path=None, mask_path=None, *, image=N
     the reference is hashed. ``image``: the photo's pixels when no ``image_path`` is given
     (drawn, not recorded).
     """
-    from ..report.maps import preview
+    from ..io import preview
 
     photo_file, camera, small = None, False, None if image is None else preview(image)
     if image_path is not None:
@@ -212,6 +215,8 @@ def build_record(request: RunRequest, inputs: RunInputs, result) -> RunRecord:
         The capture violates the protocol's capture limits (nothing is judged, nothing written).
     """
     from ..measures import standard_measures
+
+    from ..acceptance.assess import assess  # scipy.ndimage: not needed to check the inputs
 
     acc = assess(result, request.spec, protocol=request.protocol, mask=request.mask, metadata=request.metadata,
                  camera=inputs.camera)

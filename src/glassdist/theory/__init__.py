@@ -6,8 +6,13 @@ forward model of the deformed slab evaluated on the camera pixel grid
 passage through the shared evaluation stack (:func:`predict_channels`).
 """
 
-from .channels import analysis_params, carrier_period_mm, predict_channels, reflection_geometry
-from .model import Prediction, nominal_mm_per_px, predict_displacement, slab_shift
+from .._lazy import lazy_exports
+
+# loaded on first use: the sub-commands register without the analysis stack
+__getattr__, __dir__ = lazy_exports(__name__, {
+    **dict.fromkeys(("analysis_params", "carrier_period_mm", "predict_channels", "reflection_geometry"), ".channels"),
+    **dict.fromkeys(("Prediction", "nominal_mm_per_px", "predict_displacement", "slab_shift"), ".model"),
+})
 
 __all__ = [
     "Prediction",

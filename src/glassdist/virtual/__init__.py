@@ -7,9 +7,15 @@ same evaluation stack and reports the paper's Table 2 figures
 scene values (``glassdist sweep``).
 """
 
-from .figure import validation_figure
-from .sweep import Variant, expand_variants, parse_vary, run_sweep, write_sweep_index
-from .validate import CHANNELS, Validation, compare, compare_with_scene, exact_truth, procrustes, validate_scene
+from .._lazy import lazy_exports
+
+# loaded on first use: the sub-commands register without the render and analysis stacks
+__getattr__, __dir__ = lazy_exports(__name__, {
+    "validation_figure": ".figure",
+    **dict.fromkeys(("Variant", "expand_variants", "parse_vary", "run_sweep", "write_sweep_index"), ".sweep"),
+    **dict.fromkeys(("CHANNELS", "Validation", "compare", "compare_with_scene", "exact_truth", "procrustes",
+                     "validate_scene"), ".validate"),
+})
 
 __all__ = [
     "validate_scene",

@@ -1,0 +1,46 @@
+"""Public names of a package that load on first use (PEP 562).
+
+A package ``__init__`` that re-exports names from heavy submodules makes every import of
+the package pay for them: ``glassdist --help``, a refused input and each batch pane's
+child process would load the analysis, plotting and database stacks they never touch.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+__all__ = ["lazy_exports"]
+
+
+def lazy_exports(package: str, homes: dict[str, str]):
+    """``(__getattr__, __dir__)`` for ``package`` whose public name ``n`` lives in module ``homes[n]``.
+
+    Parameters
+    ----------
+    package : str
+        The package's ``__name__``.
+    homes : dict
+        ``{public name: module}``, the module relative to the package (``".batch"``);
+        ``".region:LABELS"`` exports the module's ``LABELS`` under the public name.
+
+    Returns
+    -------
+    (callable, callable)
+        Assign them to the package's ``__getattr__`` and ``__dir__``. A name is imported on
+        first access and then kept in the package's namespace as a plain attribute.
+    """
+    namespace = importlib.import_module(package).__dict__
+
+    def __getattr__(name):
+        home = homes.get(name)
+        if home is None:
+            raise AttributeError(f"module {package!r} has no attribute {name!r}")
+        module, _, attr = home.partition(":")
+        value = getattr(importlib.import_module(module, package), attr or name)
+        namespace[name] = value
+        return value
+
+    def __dir__():
+        return sorted(set(namespace) | set(homes))
+
+    return __getattr__, __dir__
