@@ -315,6 +315,29 @@ def test_debris_of_a_killed_run_is_removed_and_nothing_else(photos, tmp_path):
     assert not [p for p in out.iterdir() if p.name.endswith(".tmp") and p not in (alive, other)]
 
 
+def test_a_run_stopped_half_way_takes_back_its_files_and_the_next_run_goes_through(photos, tmp_path, monkeypatch):
+    """An internal error while the figures are drawn: exit 1, the files the run had written are gone
+    (the earlier run's untouched ones stay), and the same command then succeeds in that folder."""
+    from glassdist.cli import main
+    from glassdist.storage import writer
+
+    out = tmp_path / "out"
+    args = ["analyze", str(photos / "img.png"), "--pitch-mm", "8", "--distance-m", "10", "--out", str(out)]
+    assert main([*args, "--sigma-mm", "30"]) == 0
+    earlier = {p.name: p.read_bytes() for p in out.iterdir() if p.suffix == ".png"}
+
+    def broken(*a, **k):
+        raise RuntimeError("a figure failed")
+
+    monkeypatch.setattr(writer, "run_figures", broken)
+    assert main(args) == 1  # another sigma: a different result.npz and statistics
+    assert not (out / "result.npz").exists() and not (out / "statistics.csv").exists()
+    assert {p.name: p.read_bytes() for p in out.iterdir() if p.suffix == ".png"} == earlier
+    monkeypatch.undo()
+    assert main(args) == 0
+    assert json.loads((out / "summary.json").read_text())["outputs"].keys() >= {"result.npz", "phi_eff.png"}
+
+
 @pytest.mark.parametrize("name", ["phi_eff.png", "summary.json"])
 def test_an_input_named_like_an_output_is_never_overwritten(photos, tmp_path, name):
     import shutil

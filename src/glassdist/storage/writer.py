@@ -150,9 +150,31 @@ def write_run(record, folder: OutputFolder) -> dict:
 
 
 def _write_files(record, folder) -> dict:
-    result, request, acc = record.result, record.request, record.acceptance
     out = folder.path
     digests: dict = {}
+    try:
+        summary = _write_outputs(record, out, digests)
+    except BaseException:
+        # A run stopped half-way (an error, a full disk, Ctrl-C) takes back the files it wrote, where
+        # they still hold what it wrote: else they, recorded by no summary.json, would stand in the
+        # way of the next run into this folder as files glassdist did not write.
+        written = {Path(p).relative_to(out).as_posix(): d for p, d in digests.items()}
+        remove_outputs(out, written, written, keep=folder.inputs)
+        raise
+    # The earlier run's files that this one did not write again (its report, masks of another spec).
+    names = sorted(set(folder.previous) - set(summary["outputs"]))
+    folder.removed, folder.problems = remove_outputs(out, folder.previous, names, keep=folder.inputs)
+    if record.request.history is not False:  # once every file is in place: the history can cost the run nothing
+        from ..history import Recording, record_run
+
+        record_run(summary, exit_code=record.exit_code, out_dir=out, recording=record.request.history or Recording())
+    logger.info("outputs written to %s: %s", out, ", ".join(summary["outputs"]))
+    return summary
+
+
+def _write_outputs(record, out, digests) -> dict:
+    """Every file of the run into ``out``, ``summary.json`` last; ``digests`` collects what was written."""
+    result, request, acc = record.result, record.request, record.acceptance
     members = grid_members(result) if request.fields == "analysis" else pixel_members(result)
     atomic_write(out / "result.npz", lambda fh: write_npz(fh, members), digests=digests)
     files = [write_statistics_csv(acc.stats, out / "statistics.csv", digests=digests),
@@ -170,12 +192,4 @@ def _write_files(record, folder) -> dict:
     summary = to_jsonable(record.summary(files=[str(p.relative_to(out)) for p in files]))
     summary["outputs"] = dict(sorted((Path(p).relative_to(out).as_posix(), d) for p, d in digests.items()))
     atomic_write_text(out / SUMMARY_NAME, json.dumps(summary, indent=2, allow_nan=False) + "\n")
-    # The earlier run's files that this one did not write again (its report, masks of another spec).
-    names = sorted(set(folder.previous) - set(summary["outputs"]))
-    folder.removed, folder.problems = remove_outputs(out, folder.previous, names, keep=folder.inputs)
-    if request.history is not False:  # once every file is in place: the history can cost the run nothing
-        from ..history import Recording, record_run
-
-        record_run(summary, exit_code=record.exit_code, out_dir=out, recording=request.history or Recording())
-    logger.info("outputs written to %s: %s", out, ", ".join(summary["outputs"]))
     return summary
