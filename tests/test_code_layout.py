@@ -238,3 +238,19 @@ def test_layering_check_finds_an_upward_import():
                          ids=lambda p: str(p.relative_to(SRC)))
 def test_output_floor_modules_stay_under_900_lines(path):
     assert len(path.read_text().splitlines()) <= 900
+
+
+@pytest.mark.parametrize("package", ["glassdist", *sorted(f"glassdist.{p.parent.name}" for p in SRC.glob("*/__init__.py"))])
+def test_every_public_name_resolves(package):
+    """A package's names may load on first use (``_lazy``): each one in ``__all__`` must still be there."""
+    import importlib
+
+    mod = importlib.import_module(package)
+    missing = [n for n in mod.__all__ if n not in dir(mod)]
+    broken = []
+    for n in mod.__all__:
+        try:
+            getattr(mod, n)
+        except AttributeError:
+            broken.append(n)
+    assert missing == [] and broken == [], (missing, broken)

@@ -25,7 +25,7 @@ _HOMES = {name: "._common" for name in ("ExperimentResult", "Inputs", "RunOption
 _HOMES.update(run_accuracy=".accuracy", run_parity=".parity", run_pitch=".pitch", run_rotation=".rotation",
               run_transfer=".transfer")
 # loaded on first use: `glassdist --help` and the other commands register `experiment` without them
-_lazy_getattr, __dir__ = lazy_exports(__name__, _HOMES)
+_lazy_getattr, _lazy_dir = lazy_exports(__name__, _HOMES)
 
 
 #: the experiments' names, in the order of ``glassdist experiment --help``
@@ -37,6 +37,10 @@ def __getattr__(name):
         globals()[name] = {n: _lazy_getattr(f"run_{n}") for n in _NAMES}
         return globals()[name]
     return _lazy_getattr(name)
+
+
+def __dir__():
+    return sorted({*_lazy_dir(), "EXPERIMENTS"})
 
 
 __all__ = [

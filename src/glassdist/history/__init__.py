@@ -16,17 +16,12 @@ from __future__ import annotations
 
 import contextlib
 
+from .._lazy import lazy_exports
 from .store import HistoryUnavailable, Location, Recording, data_dir, locate, open_store, record_run
 
-_QUERY = ("COLUMNS", "HistoryFilter", "Trend", "plot_trends", "query_runs", "trends")
-
-
-def __getattr__(name):  # the query side (SQLAlchemy, numpy) is imported when first used
-    if name in _QUERY:
-        from . import query
-
-        return getattr(query, name)
-    raise AttributeError(f"module 'glassdist.history' has no attribute '{name}'")
+# the query side (SQLAlchemy, numpy) is imported when first used
+__getattr__, __dir__ = lazy_exports(__name__, dict.fromkeys(
+    ("COLUMNS", "HistoryFilter", "Trend", "plot_trends", "query_runs", "trends"), ".query"))
 
 __all__ = ["history", "COLUMNS", "HistoryFilter", "HistoryUnavailable", "Location", "Recording", "Trend", "data_dir",
            "locate", "open_store", "plot_trends", "query_runs", "record_run", "trends"]
