@@ -214,9 +214,8 @@ def build_record(request: RunRequest, inputs: RunInputs, result) -> RunRecord:
     InputError
         The capture violates the protocol's capture limits (nothing is judged, nothing written).
     """
-    from ..measures import standard_measures
-
     from ..acceptance.assess import assess  # scipy.ndimage: not needed to check the inputs
+    from ..measures import standard_measures
 
     acc = assess(result, request.spec, protocol=request.protocol, mask=request.mask, metadata=request.metadata,
                  camera=inputs.camera)
