@@ -83,20 +83,31 @@ def test_validate_command_on_a_small_wavy_slab(tmp_path, method):
         assert np.mean(np.abs(a)) / np.mean(np.abs(b)) == pytest.approx(want, abs=0.004), name
 
 
+@pytest.fixture(scope="module")
+def table_2_renders():
+    """The wavy slab's render pair at full size (exact engine), once for both methods, as in Table 2."""
+    from glassdist.render import render_scene
+
+    scene = load_scene(EXAMPLES / "wavy_slab.yaml")
+    return scene, (render_scene(scene), render_scene(scene, reference=True))
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("method", ["direct", "comparative"])
-def test_paper_table_2_at_full_size(method):
+def test_paper_table_2_at_full_size(method, table_2_renders):
     """README Table 2 (exact engine), at the figures it states.
 
     Wavy slab, 1024 x 768 px, 16 spp, analyzer / analytical: Direct 0.9960, 0.9962, 0.9962,
     rotation +0.038 deg, scale 0.9988; Comparative 0.9998 (three channels), +0.0004 deg,
     0.9995. The render is seeded and the exact tracer deterministic: the margins (0.002 on
     ratios and scale, 0.01 deg) cover the rounding of the stated figures and the platform's
-    arithmetic, not a change of method (re-measure and update the table then).
+    arithmetic, not a change of method (re-measure and update the table then). Both methods
+    read one render pair, as the table's rows do (``validate_scene(renders=...)``).
     """
     from glassdist.virtual import validate_scene
 
-    val, _ = validate_scene(load_scene(EXAMPLES / "wavy_slab.yaml"), method=method)
+    scene, renders = table_2_renders
+    val, _ = validate_scene(scene, method=method, renders=renders)
     m = val.metrics
     ratios, rot, scale = {"direct": ((0.9960, 0.9962, 0.9962), 0.038, 0.9988),
                           "comparative": ((0.9998, 0.9998, 0.9998), 0.0004, 0.9995)}[method]
@@ -104,6 +115,25 @@ def test_paper_table_2_at_full_size(method):
         assert m["ratios"][name] == pytest.approx(want, abs=0.002), (name, m["ratios"][name])
     assert m["procrustes"]["rotation_deg"] == pytest.approx(rot, abs=0.01)
     assert m["procrustes"]["scale"] == pytest.approx(scale, abs=0.002)
+
+
+def test_renders_given_are_judged_as_rendered_and_must_fit_the_camera():
+    """``validate_scene(renders=...)`` gives the record it would give rendering itself; a pair of another size is refused."""
+    from glassdist.errors import InputError
+    from glassdist.render import render_scene
+    from glassdist.virtual import validate_scene
+
+    scene = load_scene(EXAMPLES / "wavy_slab.yaml").with_changes(
+        camera={"pixels": [160, 120]}, backdrop={"pitch_mm": 96.8, "line_width_mm": 16}, render={"samples_per_pixel": 1})
+    pair = (render_scene(scene), render_scene(scene, reference=True))
+    _, own = validate_scene(scene, method="comparative")
+    _, given = validate_scene(scene, method="comparative", renders=pair)
+    np.testing.assert_array_equal(own["_distorted"], given["_distorted"])  # the seeded render: the same pair
+    assert given["ratios"] == own["ratios"] and given["procrustes"] == own["procrustes"]
+    _, flat = validate_scene(scene, method="comparative", renders=(pair[1], pair[1]))  # what is given is what is read
+    assert flat["ratios"]["phi_eff"] < 0.05 < own["ratios"]["phi_eff"]
+    with pytest.raises(InputError, match="camera"):
+        validate_scene(scene, renders=(pair[0][:-1], pair[1]))
 
 
 def test_render_and_predict_commands(tmp_path):

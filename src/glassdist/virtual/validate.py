@@ -189,6 +189,7 @@ def validate_scene(
     engine: str = "exact",
     params=None,
     progress: Callable[[str, int, int], None] | None = None,
+    renders: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[Validation, dict]:
     """Run both branches of the Virtual Pipeline on a scene and compare them.
 
@@ -203,6 +204,11 @@ def validate_scene(
     params : AnalyzerParams, optional
         Default :func:`glassdist.theory.analysis_params` of the scene.
     progress : callable(stage, done, total), optional
+    renders : (ndarray, ndarray), optional
+        ``(distorted, reference)`` images of this scene already rendered by ``engine``
+        (:func:`glassdist.render.render_scene`, without and with ``reference=True``), so that
+        both methods are judged on one render pair, as in the paper's Table 2; rendered here
+        when omitted. Their shape must be the scene camera's ``(rows, columns)``.
 
     Returns
     -------
@@ -219,8 +225,15 @@ def validate_scene(
     eng = get_renderer(engine)
     timings = {}
     t0 = time.perf_counter()
-    distorted, reference = _render_pair(scene, eng, progress)
-    timings["render_s"] = time.perf_counter() - t0
+    if renders is None:
+        distorted, reference = _render_pair(scene, eng, progress)
+        timings["render_s"] = time.perf_counter() - t0
+    else:
+        distorted, reference = (np.asarray(a) for a in renders)
+        want = tuple(scene.camera.pixels[::-1])
+        if distorted.shape != want or reference.shape != want:
+            raise InputError(f"the renders given are {distorted.shape} and {reference.shape} px, the scene's camera "
+                             f"{want}; render this scene (glassdist.render.render_scene) or leave renders out")
     t0 = time.perf_counter()
     ref = reference if method == "comparative" else None
     if scene.reflection:  # phi in reflective power on the pane (glassdist.analyzer.reflection)
