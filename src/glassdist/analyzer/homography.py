@@ -444,9 +444,8 @@ def refit_with_lens(
     global: refitted without the inner disc of the view or without any quadrant about the
     principal point (:func:`~glassdist.analyzer.lens.radial_consistency`), its radial profile
     moves by at most ``_LENS_CENTRED`` (inner disc) and ``_LENS_OFF_AXIS`` (quadrant); otherwise a
-    warning says that a centred radially
-    symmetric feature cannot be told from the lens, or that a local feature carries the
-    radial term, and the lens is not applied.
+    warning says that a centred radially symmetric feature cannot be told from the lens, or that
+    a local feature carries the radial term, and the lens is not applied.
     """
     warn = [] if warn is None else warn
     S = _strain_samples(U, V, y, x, valid, step_px, period_px)
