@@ -59,8 +59,7 @@ def through_block_i() -> None:
         xu, yu = lens.undistort_px(x, y)
         vx, vy = xu - 400.0, yu - 100.0  # the bump 174 px off the centre, towards a corner
         g = amp * np.exp(-(vx**2 + vy**2) / (2 * width**2)) / width
-        q = np.stack([xu - g * vx, yu - g * vy, np.ones_like(xu)], -1) @ np.linalg.inv(H).T
-        U, V = q[..., 0] / q[..., 2], q[..., 1] / q[..., 2]
+        U, V = hm.apply_inverse(H, xu - g * vx, yu - g * vy)
         fit = hm.refit_with_lens(hm.HomographyFit(H, 1.0, U.size, 0.0), U, V, y, x, np.ones(U.shape, bool), 1,
                                  period_px=8.0, step_px=(step, step), threshold_px=0.8, image_shape=(h, w), warn=[])
         cal = fit.lens

@@ -510,13 +510,13 @@ def refit_with_lens(
     mt = _thin(m)
     cons = radial_consistency(S.src[mt], S.dst[mt], H, lens, scale_px=scale, tangential=tangential,
                               principal_point=principal_point)
-    over = {"inner": cons["inner"] / _LENS_CENTRED, "quadrants": cons["quadrants"] / _LENS_OFF_AXIS}
-    if max(over.values()) > 1.0:
-        centred = over["inner"] >= over["quadrants"]  # the check exceeded by the wider margin names the cause
+    bounds = {"inner": _LENS_CENTRED, "quadrants": _LENS_OFF_AXIS}
+    key = max(bounds, key=lambda k: cons[k] / bounds[k])  # the check exceeded by the wider margin (ties: inner)
+    if cons[key] > bounds[key]:
+        centred, bound = key == "inner", bounds[key]
         what = ("a radially symmetric distortion centred on the optical axis has the form of a camera lens's own "
                 "distortion, and the Direct Method cannot tell the two apart" if centred else
                 "the radial term is carried by a local feature off the optical axis")
-        key, bound = ("inner", _LENS_CENTRED) if centred else ("quadrants", _LENS_OFF_AXIS)
         note = (f"the lens fitted without the {'inner disc' if centred else 'worst quadrant'} of the view differs by "
                 f"{100 * cons[key]:.0f}% (at most {100 * bound:.0f}% for a camera lens, whose distortion is global): "
                 + what)
