@@ -26,6 +26,38 @@ def real_data():
     }
 
 
+def run_cli(*args, cwd=None):
+    """``glassdist ARGS`` run in this process (``glassdist.cli.main``), as a ``subprocess.CompletedProcess``.
+
+    The command's own logic, exit status and output, without a child process's start-up
+    (imports and a first figure's fonts: about 3 s of a small run). What only a process of
+    its own shows is tested with one: the console script and ``python -m glassdist``
+    (``test_contracts.py``), exit 1 with and without ``--debug``, Ctrl-C, a folder locked by
+    another process, the documented commands as written (``test_docs_commands.py``).
+    ``cwd``: the folder relative paths are read from, as the child's working folder.
+    """
+    import contextlib
+    import io
+    import subprocess
+
+    from glassdist.cli import main
+
+    argv = [str(a) for a in args]
+    out, err = io.StringIO(), io.StringIO()
+    here = os.getcwd()
+    try:
+        if cwd is not None:
+            os.chdir(cwd)
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            try:
+                code = main(argv)
+            except SystemExit as exc:  # argparse: --help, --version, option errors
+                code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+    finally:
+        os.chdir(here)
+    return subprocess.CompletedProcess(["glassdist", *argv], code, out.getvalue(), err.getvalue())
+
+
 def truth_channels(cap, res):
     """The true displacement of ``cap`` evaluated independently of the analyzer (``tests/_truth.py``).
 

@@ -25,8 +25,8 @@ import numpy as np
 import pytest
 import tifffile
 import yaml
+from conftest import run_cli
 
-from glassdist.cli import main
 from glassdist.synthetic import synthetic_capture
 
 IS_ROOT = hasattr(os, "geteuid") and os.geteuid() == 0
@@ -73,19 +73,15 @@ def _snapshot(folder: Path) -> dict:
     return snap
 
 
-def _run(argv, capsys):
-    try:
-        code = main([str(a) for a in argv])
-    except SystemExit as exc:  # argparse
-        code = exc.code
-    out, err = capsys.readouterr()
-    return code, out, err
+def _run(argv):
+    r = run_cli(*argv)
+    return r.returncode, r.stdout, r.stderr
 
 
-def refused(argv, capsys, *folders, code=2):
+def refused(argv, *folders, code=2):
     """Run ``argv``: assert the exit status, one stderr line, no traceback, ``folders`` unchanged."""
     before = [_snapshot(f) for f in folders]
-    got, out, err = _run(argv, capsys)
+    got, out, err = _run(argv)
     lines = [ln for ln in err.splitlines() if ln.strip()]
     assert got == code, f"exit {got}, expected {code}: {err[-500:]}"
     assert len(lines) == 1, err[-2000:]
@@ -142,11 +138,11 @@ OPTION_CASES = [(c, o, v) for c, o in NUMBER_OPTIONS for v in NUM_BAD] + [(c, o,
 
 @pytest.mark.parametrize("command, option, value", OPTION_CASES,
                          ids=[f"{c}{o}={v[:12]!r}" for c, o, v in OPTION_CASES])
-def test_numbers_out_of_range_are_refused(base, tmp_path, capsys, command, option, value):
+def test_numbers_out_of_range_are_refused(base, tmp_path, command, option, value):
     argv = _cmd(command, base, tmp_path)
     if option in argv:
         del argv[argv.index(option):argv.index(option) + 2]
-    refused(argv + [f"{option}={value}"], capsys, base, tmp_path)
+    refused(argv + [f"{option}={value}"], base, tmp_path)
 
 
 VARY_BAD = ["backdrop.pitch_mm=inf", "backdrop.pitch_mm=.inf", "backdrop.pitch_mm=.nan", "backdrop.pitch_mm=1e308",
@@ -157,14 +153,14 @@ VARY_BAD = ["backdrop.pitch_mm=inf", "backdrop.pitch_mm=.inf", "backdrop.pitch_m
 
 
 @pytest.mark.parametrize("vary", VARY_BAD, ids=[v[:30] for v in VARY_BAD])
-def test_sweep_refuses_bad_variants_before_any_run(base, tmp_path, capsys, vary):
+def test_sweep_refuses_bad_variants_before_any_run(base, tmp_path, vary):
     argv = _cmd("sweep", base, tmp_path)
     argv[argv.index("--vary") + 1] = vary
-    refused(argv, capsys, base, tmp_path)
+    refused(argv, base, tmp_path)
 
 
-def test_sigma_larger_than_the_image_is_refused_before_the_analysis(base, tmp_path, capsys):
-    line = refused(_cmd("analyze", base, tmp_path) + ["--sigma-mm", "8000"], capsys, base, tmp_path)
+def test_sigma_larger_than_the_image_is_refused_before_the_analysis(base, tmp_path):
+    line = refused(_cmd("analyze", base, tmp_path) + ["--sigma-mm", "8000"], base, tmp_path)
     assert "extent" in line
 
 
@@ -222,10 +218,10 @@ DOC_CASES = ([("--params", c, k) for c in PARAMS_COMMANDS for k in PARAMS_BAD
 
 
 @pytest.mark.parametrize("option, command, case", DOC_CASES, ids=[f"{c}{o}-{k}" for o, c, k in DOC_CASES])
-def test_hostile_documents_are_refused(base, tmp_path, capsys, option, command, case):
+def test_hostile_documents_are_refused(base, tmp_path, option, command, case):
     f = tmp_path / "doc.json"
     f.write_bytes((PARAMS_BAD if option == "--params" else SPEC_BAD)[case])
-    line = refused(_cmd(command, base, tmp_path) + [option, f], capsys, base, tmp_path)
+    line = refused(_cmd(command, base, tmp_path) + [option, f], base, tmp_path)
     assert "VERDICT" not in line or "\\n" in line
 
 
@@ -283,7 +279,7 @@ SCENE_CASES = [(c, k) for c in ("render", "predict", "validate") for k in [*SCEN
 
 
 @pytest.mark.parametrize("command, case", SCENE_CASES, ids=[f"{c}-{k}" for c, k in SCENE_CASES])
-def test_hostile_scenes_are_refused(base, tmp_path, capsys, command, case):
+def test_hostile_scenes_are_refused(base, tmp_path, command, case):
     f = tmp_path / "scene.yaml"
     if case in SCENE_BYTES:
         f.write_bytes(SCENE_BYTES[case])
@@ -291,13 +287,13 @@ def test_hostile_scenes_are_refused(base, tmp_path, capsys, command, case):
         f.write_text(SCENE_BAD[case], encoding="utf-8")
     argv = _cmd(command, base, tmp_path)
     argv[1] = f
-    refused(argv, capsys, base, tmp_path)
+    refused(argv, base, tmp_path)
 
 
-def test_scene_json_with_nan_is_refused(base, tmp_path, capsys):
+def test_scene_json_with_nan_is_refused(base, tmp_path):
     f = tmp_path / "scene.json"
     f.write_text(json.dumps(SCENE).replace('"amplitude_mm": 0.3', '"amplitude_mm": NaN'))
-    refused(["predict", f, "--out", tmp_path / "out"], capsys, base, tmp_path)
+    refused(["predict", f, "--out", tmp_path / "out"], base, tmp_path)
 
 
 # ---------------------------------------------------------------- images
@@ -340,7 +336,7 @@ IMAGE_CASES = ([(s, k) for s in IMAGE_SLOTS for k in [*IMAGE_BAD, *IMAGE_DATA_BA
 
 
 @pytest.mark.parametrize("slot, case", IMAGE_CASES, ids=[f"{s}-{k}" for s, k in IMAGE_CASES])
-def test_hostile_images_are_refused(base, tmp_path, capsys, monkeypatch, slot, case):
+def test_hostile_images_are_refused(base, tmp_path, monkeypatch, slot, case):
     src = tmp_path / "src"
     src.mkdir()
     f = src / case
@@ -353,7 +349,7 @@ def test_hostile_images_are_refused(base, tmp_path, capsys, monkeypatch, slot, c
     else:
         argv = ["batch", base / "manifest.csv", "--reference", f, "--no-progress", *out]
     monkeypatch.chdir(tmp_path)
-    refused(argv, capsys, base, tmp_path)
+    refused(argv, base, tmp_path)
 
 
 # ---------------------------------------------------------------- batch manifests
@@ -390,7 +386,7 @@ MANIFEST_BYTES = {"not-utf8": b"image,pitch_mm,distance_m\ncaf\xe9.png,8,10\n"}
 
 
 @pytest.mark.parametrize("case", [*MANIFEST_BAD, *MANIFEST_BYTES])
-def test_hostile_manifests_are_refused_before_any_pane(base, tmp_path, capsys, monkeypatch, case):
+def test_hostile_manifests_are_refused_before_any_pane(base, tmp_path, monkeypatch, case):
     src = tmp_path / "src"
     src.mkdir()
     cv2.imwrite(str(src / "small.png"), np.zeros((40, 40), np.uint8))
@@ -400,36 +396,36 @@ def test_hostile_manifests_are_refused_before_any_pane(base, tmp_path, capsys, m
     else:
         m.write_text(MANIFEST_BAD[case].format(g=base / "grid.png", d=base, t=src))
     monkeypatch.chdir(src)
-    refused(["batch", "m.csv", "--no-progress", "--out", tmp_path / "out"], capsys, base, tmp_path)
+    refused(["batch", "m.csv", "--no-progress", "--out", tmp_path / "out"], base, tmp_path)
 
 
-def test_oversized_documents_are_refused_from_their_size(base, tmp_path, capsys, monkeypatch):
+def test_oversized_documents_are_refused_from_their_size(base, tmp_path, monkeypatch):
     monkeypatch.setenv("GLASSDIST_MAX_DOCUMENT_BYTES", "1000")
     monkeypatch.setenv("GLASSDIST_MAX_CSV_BYTES", "1000")
     big = tmp_path / "big.json"
     big.write_text('{"detrend_degree": 2, "$comment": "' + "x" * 5000 + '"}')
     for argv in (_cmd("analyze", base, tmp_path) + ["--params", big], _cmd("analyze", base, tmp_path) + ["--spec", big],
                  _cmd("predict", base, tmp_path) + ["--params", big]):
-        assert "MiB" in refused(argv, capsys, base, tmp_path)
+        assert "MiB" in refused(argv, base, tmp_path)
     m = tmp_path / "m.csv"
     m.write_text("image,pitch_mm,distance_m\n" + f"{base / 'grid.png'},8,10\n" * 100)
-    refused(["batch", m, "--out", tmp_path / "out"], capsys, base, tmp_path)
+    refused(["batch", m, "--out", tmp_path / "out"], base, tmp_path)
 
 
 # ---------------------------------------------------------------- render, cycles-setup
 
 @pytest.mark.parametrize("case", ["existing-file", "the-scene", "exact-engine"])
-def test_save_blend_never_overwrites(base, tmp_path, capsys, case):
+def test_save_blend_never_overwrites(base, tmp_path, case):
     other = tmp_path / "mine.blend"
     other.write_bytes(b"BLENDER user file")
     target = {"existing-file": other, "the-scene": base / "scene.yaml", "exact-engine": tmp_path / "new.blend"}[case]
     engine = "exact" if case == "exact-engine" else "cycles"
     refused(["render", base / "scene.yaml", "--engine", engine, "--save-blend", target, "--out", tmp_path / "out"],
-            capsys, base, tmp_path)
+            base, tmp_path)
 
 
 @pytest.mark.parametrize("case", ["missing", "folder", "not-executable", "not-python"])
-def test_cycles_setup_with_a_bad_python(tmp_path, capsys, monkeypatch, case):
+def test_cycles_setup_with_a_bad_python(tmp_path, monkeypatch, case):
     monkeypatch.delenv("GLASSDIST_CYCLES_PYTHON", raising=False)
     monkeypatch.delenv("GLASSDIST_CACHE_DIR", raising=False)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
@@ -442,7 +438,7 @@ def test_cycles_setup_with_a_bad_python(tmp_path, capsys, monkeypatch, case):
         py.write_text("#!/bin/sh\nexit 3\n")
         py.chmod(0o755)
     before = _snapshot(tmp_path)
-    code, _, err = _run(["cycles-setup", "--python", py], capsys)
+    code, _, err = _run(["cycles-setup", "--python", py])
     assert code == 2 and len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
     assert {k: v for k, v in _snapshot(tmp_path).items() if "/cache" not in k} == before
 

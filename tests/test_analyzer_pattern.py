@@ -2,12 +2,10 @@
 
 import json
 import math
-import subprocess
-import sys
 
 import numpy as np
 import pytest
-from conftest import DATA, REPO
+from conftest import DATA, REPO, run_cli
 
 import glassdist
 from glassdist.analyzer.pattern import detect_pattern
@@ -57,8 +55,7 @@ def test_a_contradicted_pattern_gets_a_warning_naming_both():
     assert any("'lines' was given" in w and "shows a checkerboard" in w for w in res.warnings), res.warnings
 
 
-def _cli(*args):
-    return subprocess.run([sys.executable, "-m", "glassdist", *map(str, args)], capture_output=True, text=True)
+_cli = run_cli  # in this process (conftest.run_cli)
 
 
 @pytest.mark.slow

@@ -7,13 +7,16 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import DATA
+from conftest import DATA, run_cli
 
 from glassdist.io import write_png16
 from glassdist.synthetic import synthetic_capture, wave_displacement
 
 
-def _cli(*args, cwd=None):
+_cli = run_cli  # in this process; _child where a process of its own is the point
+
+
+def _child(*args, cwd=None):
     return subprocess.run([sys.executable, "-m", "glassdist", *map(str, args)], capture_output=True, text=True, cwd=cwd)
 
 
@@ -73,7 +76,7 @@ def test_analyze_writes_the_contract(photos, tmp_path):
 
 
 def test_module_and_console_script_agree(photos):
-    r = _cli("--version")
+    r = _child("--version")
     assert r.returncode == 0 and "glassdist" in r.stdout
 
 
@@ -180,7 +183,7 @@ def test_every_command_reports_option_errors_in_one_line(capsys):
 
 
 def test_option_error_from_the_console(tmp_path):
-    r = _cli("analyze", "img.png", "--pitch-mm", -5, "--distance-m", 1, "--out", tmp_path / "o")
+    r = _child("analyze", "img.png", "--pitch-mm", -5, "--distance-m", 1, "--out", tmp_path / "o")
     assert r.returncode == 2 and r.stdout == ""
     assert r.stderr == ("glassdist analyze: error: argument --pitch-mm: must be positive, got -5 "
                         "(see glassdist analyze --help)\n")
@@ -291,7 +294,7 @@ def test_second_run_into_a_locked_folder_exits_2(photos, tmp_path):
     fd = os.open(out, os.O_RDONLY)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # as a run in progress holds it
-        r = _cli("analyze", photos / "img.png", "--pitch-mm", 8, "--distance-m", 10, "--out", out)
+        r = _child("analyze", photos / "img.png", "--pitch-mm", 8, "--distance-m", 10, "--out", out)
     finally:
         os.close(fd)
     assert r.returncode == 2 and "another glassdist run is writing to" in r.stderr

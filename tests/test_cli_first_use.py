@@ -6,12 +6,15 @@ import subprocess
 import sys
 
 import pytest
-from conftest import write_lens_pair
+from conftest import run_cli, write_lens_pair
 
 from glassdist import cli
 
 
-def _cli(*args, cwd=None):
+_cli = run_cli  # in this process (conftest.run_cli)
+
+
+def _child(*args, cwd=None):
     return subprocess.run([sys.executable, "-m", "glassdist", *map(str, args)], capture_output=True, text=True, cwd=cwd)
 
 
@@ -111,7 +114,7 @@ def test_the_tools_own_files_are_rewritten_but_an_edited_one_is_not(pair, tmp_pa
 
 
 def test_debug_keeps_exit_2_for_bad_input_and_adds_the_traceback(pair, tmp_path):
-    r = _cli("--debug", "analyze", pair / "pane.png", "--pitch-mm", 2, "--distance-m", 1, "--mask",
+    r = _child("--debug", "analyze", pair / "pane.png", "--pitch-mm", 2, "--distance-m", 1, "--mask",
              tmp_path / "missing.png", "--out", tmp_path / "o")
     assert r.returncode == 2
     assert "Traceback" in r.stderr and r.stderr.strip().splitlines()[-1].startswith("glassdist: error:")

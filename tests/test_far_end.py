@@ -5,11 +5,10 @@ exits 0, or 3 with a specification it cannot pass; never 1.
 """
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
+from conftest import run_cli
 from scipy import ndimage
 
 from glassdist import analyze
@@ -39,8 +38,7 @@ def photos(tmp_path_factory):
     return d
 
 
-def _cli(*args):
-    return subprocess.run([sys.executable, "-m", "glassdist", *map(str, args)], capture_output=True, text=True)
+_cli = run_cli  # in this process (conftest.run_cli)
 
 
 ARGS = ("--pattern", "checkerboard", "--pitch-mm", "1", "--distance-m", "0.5", "--sigma-mm", "8")

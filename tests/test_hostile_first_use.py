@@ -11,14 +11,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import DATA, REPO
+from conftest import DATA, REPO, run_cli
 
 from glassdist.io import write_png16
 from glassdist.synthetic import synthetic_capture, wave_displacement
 
 
-def _cli(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "glassdist", *map(str, args)], capture_output=True, text=True, cwd=cwd)
+_cli = run_cli  # in this process (conftest.run_cli)
 
 
 def _one_line_exit_2(r):

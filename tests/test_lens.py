@@ -19,7 +19,7 @@ from glassdist.experiments.transfer import independent_phi_eff
 from glassdist.render import landing_points, render_scene
 from glassdist.scene import landing_jacobian, load_scene, pixel_directions, scene_from_dict, straight_landing
 
-from conftest import REPO
+from conftest import REPO, run_cli
 
 SCENES = REPO / "examples" / "scenes"
 LENSES = {"barrel": "lens_barrel_50mm", "pincushion": "lens_pincushion_50mm", "moustache": "lens_moustache_24mm"}
@@ -303,9 +303,6 @@ def test_calibration_photo_and_camera_file_agree(tmp_path):
     """A calibration photo (no glass, another pose) and the camera file of the rendered lens give the
     same model within 5% (measured: k1 0.2%, k2 0.05% apart), through the command line as well; a
     specification requiring a calibration source refuses a run without one (exit 2)."""
-    import subprocess
-    import sys
-
     from glassdist.analyzer.lens import calibration_from_camera_file
     from glassdist.analyzer.pipeline import calibrate_from_photo
     from glassdist.io import write_png16
@@ -336,13 +333,13 @@ def test_calibration_photo_and_camera_file_agree(tmp_path):
     spec = {"name": "lens", "protocol": {"method": "direct", "lens_calibration": "photo_or_file"},
             "criteria": [{"channel": "phi_eff", "statistic": "p95_abs", "max_mD": 100}]}
     (tmp_path / "spec.json").write_text(json.dumps(spec))
-    base = [sys.executable, "-m", "glassdist", "analyze", str(tmp_path / "pane.png"), "--pattern", "checkerboard",
+    base = ["analyze", str(tmp_path / "pane.png"), "--pattern", "checkerboard",
             "--pitch-mm", str(sc.backdrop.pitch_mm), "--distance-m", str(sc.backdrop.distance_m), "-q"]
     means = {}
     for name, extra in (("photo", ["--lens-photo", str(tmp_path / "calib.png")]),
                         ("file", ["--camera-file", str(tmp_path / "camera.json")])):
         out = tmp_path / name
-        run = subprocess.run(base + extra + ["--out", str(out)], capture_output=True, text=True)
+        run = run_cli(*base, *extra, "--out", out)
         assert run.returncode == 0, run.stderr
         summary = json.loads((out / "summary.json").read_text())
         assert summary["homography"]["lens"]["source"] == name
@@ -350,8 +347,7 @@ def test_calibration_photo_and_camera_file_agree(tmp_path):
         assert not any("calibration photo (no glass)" in w for w in summary["warnings"])
         means[name] = summary["statistics"]["phi_eff_mD"]
     assert means["photo"]["mean_abs"] == pytest.approx(means["file"]["mean_abs"], rel=0.01)
-    refused = subprocess.run(base + ["--spec", str(tmp_path / "spec.json"), "--out", str(tmp_path / "no")],
-                             capture_output=True, text=True)
+    refused = run_cli(*base, "--spec", tmp_path / "spec.json", "--out", tmp_path / "no")
     assert refused.returncode == 2 and "lens_calibration" in refused.stderr and len(refused.stderr.strip().splitlines()) == 1
 
 
@@ -498,14 +494,11 @@ def test_pinned_bulk_of_a_turned_camera_reads_off_as_documented(tmp_path):
 def test_camera_distance_in_transmission_needs_a_camera_file(tmp_path):
     """--camera-distance-m without --optics reflection pins the Direct Method's magnification with a camera
     file's focal length: without --camera-file, or with --reference, it is refused with one line (exit 2)."""
-    import subprocess
-    import sys
-
     data = REPO / "examples" / "data"
-    base = [sys.executable, "-m", "glassdist", "analyze", str(data / "distorted_waves.bmp"), "--pitch-mm", "5",
+    base = ["analyze", str(data / "distorted_waves.bmp"), "--pitch-mm", "5",
             "--distance-m", "0.5", "--pattern", "checkerboard", "--camera-distance-m", "2", "-q"]
     for extra in ([], ["--reference", str(data / "reference.png")]):
-        run = subprocess.run(base + extra + ["--out", str(tmp_path / "o")], capture_output=True, text=True)
+        run = run_cli(*base, *extra, "--out", tmp_path / "o")
         assert run.returncode == 2 and "--camera-file" in run.stderr and len(run.stderr.strip().splitlines()) == 1
         assert not (tmp_path / "o").exists()
     from glassdist.errors import InputError

@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 import pytest
+from conftest import run_cli  # analyze in this process; the batches run as processes, their panes too
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")
 
@@ -44,7 +45,7 @@ def photos(tmp_path_factory):
 
 
 def _analyze(photos, out, *extra):
-    return glassdist("analyze", photos / "pane.png", "--reference", photos / "reference.png", "--pitch-mm", 2,
+    return run_cli("analyze", photos / "pane.png", "--reference", photos / "reference.png", "--pitch-mm", 2,
                      "--distance-m", 1, "--out", out, *extra)
 
 
