@@ -199,7 +199,8 @@ OUTPUT_FLOOR = (
     ("rendering", ("glassdist.report",)),
     ("storage", ("glassdist.storage",)),
     ("jobs", ("glassdist.jobs",)),
-    ("entry points", ("glassdist.cli", "glassdist._api", "glassdist.web", "glassdist.virtual.sweep")),
+    ("entry points", ("glassdist.cli", "glassdist._api", "glassdist.web", "glassdist.virtual.sweep",
+                      "glassdist._childserver")),
 )
 
 

@@ -1,0 +1,92 @@
+"""A process that has imported glassdist's stack once and forks a child per ``glassdist`` command.
+
+Run as ``python -m glassdist._childserver`` by :mod:`glassdist.jobs.runner`, which
+talks to it over its stdin and stdout, one JSON line each way:
+
+* at start, after the imports, it writes ``{"ready": true}``;
+* for each request ``{"args": [...], "env": {...}, "cwd": path or null, "out": path,
+  "err": path, "status": path}`` it forks a child and writes ``{"pid": N}``. The child takes
+  the request's environment and working folder, writes its stdout and stderr to ``out``
+  and ``err``, runs ``glassdist ARGS`` and writes its exit status to ``status`` (written
+  to a temporary name, then renamed: present means complete).
+
+A child is a process of its own, as ``python -m glassdist`` would be, without the 2.2-2.5 s
+of imports a fresh interpreter pays (``-X importtime``: SQLAlchemy, matplotlib's figure
+stack, scipy.fft). The server is single-threaded, so forking it is safe; it ignores
+Ctrl-C (its children do not) and ends when its stdin closes, i.e. when the process that
+started it ends. Children are reaped by the kernel (SIGCHLD ignored).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sys
+
+#: Imported once in the server (what a small ``glassdist analyze`` imports).
+PRELOAD = ("glassdist.cli", "glassdist.analyzer.pipeline", "glassdist.storage.writer", "glassdist.report.maps",
+           "glassdist.history.models", "glassdist.history.store")
+
+
+def _child(request: dict) -> None:
+    """Body of a forked child: never returns."""
+    code = 1
+    try:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        signal.signal(signal.SIGCHLD, signal.SIG_DFL)
+        os.environ.clear()
+        os.environ.update(request["env"])
+        if request.get("cwd"):
+            os.chdir(request["cwd"])
+        null = os.open(os.devnull, os.O_RDONLY)
+        os.dup2(null, 0)
+        os.close(null)
+        for fd, key in ((1, "out"), (2, "err")):
+            target = os.open(request[key], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+            os.dup2(target, fd)
+            os.close(target)
+        sys.stdin = open(0, closefd=False)  # noqa: SIM115 - the process's own descriptors
+        sys.stdout = open(1, "w", encoding="utf-8", errors="replace", buffering=1, closefd=False)  # noqa: SIM115
+        sys.stderr = open(2, "w", encoding="utf-8", errors="replace", buffering=1, closefd=False)  # noqa: SIM115
+        from glassdist.cli import main
+
+        try:
+            code = main(request["args"])
+        except SystemExit as exc:  # argparse: --help, --version, option errors
+            code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+        except KeyboardInterrupt:  # before main's own handler could see it
+            code = 130
+    finally:
+        try:
+            sys.stdout.flush()
+            sys.stderr.flush()
+            tmp = request["status"] + ".tmp"
+            with open(tmp, "w") as fh:
+                fh.write(str(int(code)))
+            os.rename(tmp, request["status"])
+        finally:
+            os._exit(int(code) & 0xFF)
+
+
+def serve() -> None:
+    """Import the stack, say ready, then fork one child per request line until stdin closes."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGCHLD, signal.SIG_IGN)  # the kernel reaps the children
+    for name in PRELOAD:
+        __import__(name)
+    reply = os.fdopen(os.dup(1), "w", buffering=1)
+    requests = os.fdopen(os.dup(0), "r")
+    reply.write(json.dumps({"ready": True}) + "\n")
+    for line in requests:
+        request = json.loads(line)
+        pid = os.fork()
+        if pid == 0:
+            requests.close()
+            reply.close()
+            _child(request)
+        reply.write(json.dumps({"pid": pid}) + "\n")
+
+
+if __name__ == "__main__":
+    serve()

@@ -1,0 +1,118 @@
+"""Child glassdist processes (jobs.runner): forked from the child server, each behaves as ``python -m glassdist``."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+from conftest import write_lens_pair
+
+from glassdist.jobs import runner
+from glassdist.jobs.runner import run_glassdist
+
+pytestmark = pytest.mark.skipif(not hasattr(os, "fork"), reason="no fork on this platform: children are processes")
+
+
+@pytest.fixture(scope="module")
+def pair(tmp_path_factory):
+    root = tmp_path_factory.mktemp("pair")
+    write_lens_pair(root)
+    (root / "strict.json").write_text('{"name": "strict", "criteria": [{"channel": "phi_eff", '
+                                      '"statistic": "max_abs", "max_mD": 1}]}')
+    return root
+
+
+def _forked_then_process(monkeypatch, make_args, **kw):
+    """``run_glassdist(make_args(name))`` forked from the server (name "f"), then as ``python -m glassdist`` ("p")."""
+    forked = run_glassdist(make_args("f"), **kw)
+    assert runner._SERVER._proc is not None  # it went through the server
+    monkeypatch.setenv("GLASSDIST_CHILD", "process")
+    assert runner._SERVER.run(["--version"], dict(os.environ), None, None) is None
+    process = run_glassdist(make_args("p"), **kw)
+    monkeypatch.delenv("GLASSDIST_CHILD")
+    return forked, process
+
+
+def test_a_forked_child_reads_relative_paths_in_its_folder_and_exits_as_a_process(pair, tmp_path, monkeypatch):
+    """Spec FAIL (exit 3) with the same output and the same result file; a refused input (exit 2) with the same line."""
+    def analyze(name, *extra):
+        return ["analyze", "pane.png", "--reference", "reference.png", "--pitch-mm", "2", "--distance-m", "1",
+                "--pattern", "lines", "--spec", "strict.json", "--out", str(tmp_path / name), *extra]
+
+    forked, process = _forked_then_process(monkeypatch, analyze, cwd=pair)
+    assert forked.exit_code == process.exit_code == 3 and forked.error == process.error == ""
+    assert "VERDICT: FAIL" in forked.log
+    body = [o.log.split("\n", 1)[1].replace(str(tmp_path / n), "OUT") for o, n in ((forked, "f"), (process, "p"))]
+    assert body[0] == body[1]
+    assert (tmp_path / "f" / "result.npz").read_bytes() == (tmp_path / "p" / "result.npz").read_bytes()
+    forked, process = _forked_then_process(monkeypatch, lambda n: analyze(n, "--mask", "missing.png"), cwd=pair)
+    assert forked.exit_code == process.exit_code == 2
+    assert forked.error == process.error and "missing.png" in forked.error
+
+
+def test_a_forked_child_sees_the_environment_of_the_call_not_of_the_server(pair, tmp_path, monkeypatch):
+    """The server started before the variable was set; the child still honours it (a 1 px photo limit)."""
+    run_glassdist(["--version"])  # the server is running
+    monkeypatch.setenv("GLASSDIST_MAX_MEGAPIXELS", "0.000001")
+    forked, process = _forked_then_process(monkeypatch, lambda n: [
+        "analyze", str(pair / "pane.png"), "--pitch-mm", "2", "--distance-m", "1", "--out", str(tmp_path / n)])
+    assert forked.exit_code == process.exit_code == 2
+    assert forked.error.replace(str(tmp_path / "f"), "OUT") == process.error.replace(str(tmp_path / "p"), "OUT")
+    assert "megapixel" in forked.error
+
+
+def test_a_forked_child_past_its_time_is_stopped_and_the_next_one_runs(pair, tmp_path):
+    args = ["analyze", str(pair / "pane.png"), "--pitch-mm", "2", "--distance-m", "1", "--out"]
+    out = run_glassdist([*args, str(tmp_path / "o")], timeout_s=0.05)
+    assert out.exit_code == 1 and "longer than 0.05 s" in out.error
+    assert not (tmp_path / "o" / "summary.json").exists()
+    assert run_glassdist([*args, str(tmp_path / "next")]).exit_code == 0
+    assert (tmp_path / "next" / "summary.json").exists()
+
+
+SCRIPT = """\
+# no `if __name__ == "__main__"` guard: a child must never run this script again
+import signal, sys
+from pathlib import Path
+from glassdist.jobs.batch import Pane, run_batch
+signal.signal(signal.SIGINT, signal.default_int_handler)  # a background start may have ignored it
+root = Path(sys.argv[1])
+panes = [Pane(id=f"p{i}", image=root / "pane.png", reference=root / "reference.png", pitch_mm=2.0, distance_m=1.0)
+         for i in range(3)]
+try:
+    sys.exit(run_batch(panes, root / "batch", progress=False))
+except KeyboardInterrupt:
+    print("interrupted", file=sys.stderr)
+    sys.exit(130)
+"""
+
+
+def test_ctrl_c_stops_a_batch_from_an_unguarded_script_with_its_children(pair, tmp_path):
+    """A user's script without a main guard: each pane runs once (no child re-runs the script); Ctrl-C
+    during the second pane exits 130 with the first pane kept, and leaves no process behind."""
+    import shutil
+
+    for name in ("pane.png", "reference.png"):
+        shutil.copy(pair / name, tmp_path / name)
+    (tmp_path / "run.py").write_text(SCRIPT)
+    env = {**os.environ, "GLASSDIST_DB": str(tmp_path / "history.sqlite")}
+    proc = subprocess.Popen([sys.executable, str(tmp_path / "run.py"), str(tmp_path)], env=env, text=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not (tmp_path / "batch" / "panes" / "p0" / "summary.json").exists():
+            assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+            time.sleep(0.05)
+        time.sleep(0.5)  # the second pane is under way
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130, err
+    assert sorted(p.name for p in (tmp_path / "batch" / "panes").iterdir() if not p.name.startswith(".")) == ["p0"]
+    time.sleep(0.5)
+    with pytest.raises(ProcessLookupError):  # the server and the interrupted child are gone with it
+        os.killpg(proc.pid, 0)
