@@ -115,7 +115,7 @@ def test_the_tools_own_files_are_rewritten_but_an_edited_one_is_not(pair, tmp_pa
 
 def test_debug_keeps_exit_2_for_bad_input_and_adds_the_traceback(pair, tmp_path):
     r = _child("--debug", "analyze", pair / "pane.png", "--pitch-mm", 2, "--distance-m", 1, "--mask",
-             tmp_path / "missing.png", "--out", tmp_path / "o")
+               tmp_path / "missing.png", "--out", tmp_path / "o")
     assert r.returncode == 2
     assert "Traceback" in r.stderr and r.stderr.strip().splitlines()[-1].startswith("glassdist: error:")
 

@@ -25,11 +25,6 @@ def _env():
     return env
 
 
-def glassdist(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "glassdist", *map(str, args)], capture_output=True, text=True,
-                          env=_env(), cwd=cwd, timeout=300)
-
-
 @pytest.fixture(scope="module")
 def photos(tmp_path_factory):
     """A small synthetic pane (a converging lens, -100 mD at its centre) and its reference."""
@@ -46,7 +41,7 @@ def photos(tmp_path_factory):
 
 def _analyze(photos, out, *extra):
     return run_cli("analyze", photos / "pane.png", "--reference", photos / "reference.png", "--pitch-mm", 2,
-                     "--distance-m", 1, "--out", out, *extra)
+                   "--distance-m", 1, "--out", out, *extra)
 
 
 def test_spec_fail_exits_3_with_report(photos, tmp_path):
