@@ -12,7 +12,7 @@ from conftest import write_lens_pair
 from glassdist.jobs import runner
 from glassdist.jobs.runner import run_glassdist
 
-pytestmark = pytest.mark.skipif(not hasattr(os, "fork"), reason="no fork on this platform: children are processes")
+pytestmark = pytest.mark.skipif(not runner._FORK_SAFE, reason="children fork from the server on Linux only")
 
 
 @pytest.fixture(scope="module")

@@ -1,10 +1,10 @@
 """Child ``glassdist`` processes and the job folders they write into: shared by batch, sweep and the web app.
 
 * :func:`run_glassdist` runs ``glassdist ARGS`` in a child process of its own (this
-  interpreter, this glassdist) and returns a :class:`PaneOutcome`. Where the platform can
-  fork, the child is forked from a server that has imported the stack once
-  (:mod:`glassdist._childserver`: 2.2-2.5 s of every fresh start saved); else, or
-  with ``GLASSDIST_CHILD=process``, it is ``python -m glassdist ARGS``;
+  interpreter, this glassdist) and returns a :class:`PaneOutcome`. On Linux the child
+  is forked from a server that has imported the stack once (:mod:`glassdist._childserver`:
+  2.2-2.5 s of every fresh start saved); elsewhere, or with ``GLASSDIST_CHILD=process``,
+  it is ``python -m glassdist ARGS``;
 * :func:`prepare_job_folder`, :func:`lock_job_folder`: a job folder marked
   ``.glassdist-COMMAND``, held by one job at a time;
 * :func:`place_folder`: a finished temporary folder renamed to its final name.
@@ -81,12 +81,18 @@ def _child_env():
     return env
 
 
+_FORK_SAFE = sys.platform.startswith("linux")
+
+
 class _ChildServer:
     """This process's :mod:`~glassdist._childserver`, started on first use; one request at a time.
 
     :meth:`run` returns ``(exit code, stdout, stderr)`` of a forked child, or None where no
-    server can serve it (no ``os.fork``, ``GLASSDIST_CHILD=process``, another thread's request
-    in flight, a server that failed): the caller then starts a fresh interpreter.
+    server can serve it (not Linux, ``GLASSDIST_CHILD=process``, another thread's request in
+    flight, a server that failed): the caller then starts a fresh interpreter. Linux only: on
+    macOS, system libraries that numpy and matplotlib load (Accelerate, CoreFoundation) are not
+    safe to fork once loaded, which is why Python itself stopped forking there by default
+    (3.8); Windows has no fork.
     """
 
     def __init__(self):
@@ -114,7 +120,7 @@ class _ChildServer:
         self._proc = None
 
     def run(self, args, env, cwd, timeout_s):
-        if not hasattr(os, "fork") or os.environ.get("GLASSDIST_CHILD") == "process" or self._failed:
+        if not _FORK_SAFE or os.environ.get("GLASSDIST_CHILD") == "process" or self._failed:
             return None
         if not self._lock.acquire(blocking=False):
             return None
