@@ -180,25 +180,25 @@ class _ChildServer:
 
 
 def _alive(pid):
+    """Whether process ``pid`` still runs (Linux: a zombie no reaper collects counts as ended)."""
     try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
+        with open(f"/proc/{pid}/stat", "rb") as fh:
+            return fh.read().rsplit(b")", 1)[1].split()[0] != b"Z"
+    except (OSError, IndexError):
         return False
-    except PermissionError:  # pragma: no cover - a pid reused by another user's process
-        return False
-    return True
 
 
 def _kill(pid):
+    """SIGKILL ``pid`` and wait (at most 10 s) until it has ended."""
     import signal
+    import time
 
     try:
         os.kill(pid, signal.SIGKILL)
     except ProcessLookupError:
         pass
-    while _alive(pid):
-        import time
-
+    deadline = time.monotonic() + 10.0
+    while _alive(pid) and time.monotonic() < deadline:
         time.sleep(0.01)
 
 
