@@ -57,6 +57,11 @@ def _child(request: dict) -> None:
             code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
         except KeyboardInterrupt:  # before main's own handler could see it
             code = 130
+        except BaseException:  # what --debug lets through: the traceback, as the interpreter would print it
+            import traceback
+
+            traceback.print_exc()
+            code = 1
     finally:
         try:
             sys.stdout.flush()
