@@ -134,7 +134,9 @@ class _ChildServer:
                     return None
             try:
                 return self._request(args, env, cwd, timeout_s)
-            except BaseException:  # a timeout, Ctrl-C: the exchange may be cut half-way, so start afresh next time
+            except subprocess.TimeoutExpired:  # the child was stopped after a complete exchange: the server serves on
+                raise
+            except BaseException:  # Ctrl-C may cut the exchange half-way: start afresh next time
                 self._stop()
                 raise
         finally:
@@ -156,17 +158,22 @@ class _ChildServer:
                 self._stop()
                 return None
             status = Path(paths["status"])
-            start = time.monotonic()
+
+            def wait(seconds):
+                """Whether the child ended (its status written, or gone) within ``seconds`` (None: no limit)."""
+                deadline = None if seconds is None else time.monotonic() + seconds
+                while not (status.exists() or not _alive(pid)):
+                    if deadline is not None and time.monotonic() > deadline:
+                        return False
+                    time.sleep(0.02)
+                return True
+
             try:
-                while not status.exists() and _alive(pid):
-                    if timeout_s is not None and time.monotonic() - start > timeout_s:
-                        _kill(pid)
-                        raise subprocess.TimeoutExpired(args, timeout_s)
-                    time.sleep(0.02)
+                if not wait(timeout_s):
+                    _kill(pid)
+                    raise subprocess.TimeoutExpired(args, timeout_s)
             except KeyboardInterrupt:  # Ctrl-C reached the child too: let it take back its files, then stop it
-                deadline = time.monotonic() + 2.0
-                while not status.exists() and _alive(pid) and time.monotonic() < deadline:
-                    time.sleep(0.02)
+                wait(2.0)
                 _kill(pid)
                 raise
             text = [Path(paths[k]).read_text(encoding="utf-8", errors="replace") if Path(paths[k]).exists() else ""
