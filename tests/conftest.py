@@ -26,6 +26,14 @@ def real_data():
     }
 
 
+def child_env():
+    """This environment for a child ``glassdist`` process: this tree's ``src`` first on PYTHONPATH, Agg plots."""
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(REPO / "src") + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    env["MPLBACKEND"] = "Agg"
+    return env
+
+
 def run_cli(*args, cwd=None):
     """``glassdist ARGS`` run in this process (``glassdist.cli.main``), as a ``subprocess.CompletedProcess``.
 

@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from conftest import child_env
 
 distributed = pytest.importorskip("distributed", reason="the distributed tests need glassdist[distributed]")
 
@@ -18,20 +19,12 @@ from glassdist.distributed import open_executor  # noqa: E402
 from glassdist.errors import InputError  # noqa: E402
 from glassdist.jobs.batch import Pane, run_batch  # noqa: E402
 
-SRC = str(Path(__file__).resolve().parents[1] / "src")
 SCENES = Path(__file__).resolve().parents[1] / "examples" / "scenes"
-
-
-def _env():
-    env = dict(os.environ)
-    env["PYTHONPATH"] = SRC + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-    env["MPLBACKEND"] = "Agg"
-    return env
 
 
 def glassdist(*args, cwd=None, env=None):
     return subprocess.run([sys.executable, "-m", "glassdist", *map(str, args)], capture_output=True, text=True,
-                          env={**_env(), **(env or {})}, cwd=cwd, timeout=600)
+                          env={**child_env(), **(env or {})}, cwd=cwd, timeout=600)
 
 
 @pytest.fixture(scope="module")

@@ -10,19 +10,9 @@ import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import pytest
-from conftest import run_cli  # analyze in this process; the batches run as processes, their panes too
-
-SRC = str(Path(__file__).resolve().parents[1] / "src")
-
-
-def _env():
-    env = dict(os.environ)
-    env["PYTHONPATH"] = SRC + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-    env["MPLBACKEND"] = "Agg"
-    return env
+from conftest import child_env, run_cli  # analyze in this process; the batches run as processes, their panes too
 
 
 @pytest.fixture(scope="module")
@@ -106,7 +96,7 @@ def test_batch_killed_then_resumed(photos, tmp_path):
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "glassdist", "batch", str(manifest), "--out", str(out), "--no-progress",
            "--spec", str(photos / "pass.json")]
-    proc = subprocess.Popen(cmd, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+    proc = subprocess.Popen(cmd, env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
     try:
         # the pane is placed first, then the index rewritten: kill once the index lists it
         _wait_for(out / "index.csv", proc, holds=lambda p: _indexed_done(p, "first"))
@@ -117,7 +107,7 @@ def test_batch_killed_then_resumed(photos, tmp_path):
     assert idx["first"]["status"] == "done" and idx["second"]["status"] == "pending"
     stamp = os.stat(out / "panes" / "first" / "pane.json").st_mtime_ns
 
-    r = subprocess.run(cmd, env=_env(), capture_output=True, text=True, timeout=300)
+    r = subprocess.run(cmd, env=child_env(), capture_output=True, text=True, timeout=300)
     assert r.returncode == 4, r.stdout + r.stderr  # every pane ran but one could not be analysed
     assert "resuming: 1 pane(s) already done, 2 to analyse" in r.stdout
     assert os.stat(out / "panes" / "first" / "pane.json").st_mtime_ns == stamp  # not redone
