@@ -5,6 +5,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 from conftest import write_lens_pair
@@ -113,6 +114,50 @@ def test_ctrl_c_stops_a_batch_from_an_unguarded_script_with_its_children(pair, t
             os.killpg(proc.pid, signal.SIGKILL)
     assert proc.returncode == 130, err
     assert sorted(p.name for p in (tmp_path / "batch" / "panes").iterdir() if not p.name.startswith(".")) == ["p0"]
-    time.sleep(0.5)
-    with pytest.raises(ProcessLookupError):  # the server and the interrupted child are gone with it
+    with pytest.raises(ProcessLookupError):  # the server and the child were reaped before the script ended
         os.killpg(proc.pid, 0)
+
+
+def _live_in_group(pgid):
+    """Pids of the running (not zombie) processes of process group ``pgid``, from /proc."""
+    live = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            state, _, group = stat.read_bytes().rsplit(b")", 1)[1].split()[:3]
+        except (OSError, ValueError):
+            continue
+        if int(group) == pgid and state != b"Z":
+            live.append(int(stat.parent.name))
+    return live
+
+
+def test_a_batch_killed_outright_leaves_no_child_running(pair, tmp_path):
+    """SIGKILL, which no handler sees: the server sees its stdin close and stops the pane under way
+    before it ends; no process of the batch runs on, and the second pane never completes."""
+    import shutil
+
+    for name in ("pane.png", "reference.png"):
+        shutil.copy(pair / name, tmp_path / name)
+    (tmp_path / "run.py").write_text(SCRIPT)
+    env = {**os.environ, "GLASSDIST_DB": str(tmp_path / "history.sqlite")}
+    proc = subprocess.Popen([sys.executable, str(tmp_path / "run.py"), str(tmp_path)], env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not (tmp_path / "batch" / "panes" / "p0" / "summary.json").exists():
+            assert proc.poll() is None and time.monotonic() < deadline
+            time.sleep(0.05)
+        time.sleep(0.5)  # the second pane is under way
+        proc.kill()  # the script alone, not its group
+        proc.wait()
+        deadline = time.monotonic() + 20
+        while _live_in_group(proc.pid) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert _live_in_group(proc.pid) == []
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    written = sorted(p.relative_to(tmp_path / "batch") for p in (tmp_path / "batch").rglob("summary.json"))
+    assert written == [Path("panes/p0/summary.json")]

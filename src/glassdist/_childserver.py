@@ -14,7 +14,10 @@ A child is a process of its own, as ``python -m glassdist`` would be, without th
 of imports a fresh interpreter pays (``-X importtime``: SQLAlchemy, matplotlib's figure
 stack, scipy.fft). The server is single-threaded, so forking it is safe; it ignores
 Ctrl-C (its children do not) and ends when its stdin closes, i.e. when the process that
-started it ends. Children are reaped by the kernel (SIGCHLD ignored).
+started it ends or closes it. It reaps its children itself, so that a child's pid stays
+its own until then; when its stdin closes it stops any child still running and reaps it
+before it ends: no child outlives the server, and none is left to a reaper that a
+container may lack.
 """
 
 from __future__ import annotations
@@ -34,7 +37,6 @@ def _child(request: dict) -> None:
     code = 1
     try:
         signal.signal(signal.SIGINT, signal.default_int_handler)
-        signal.signal(signal.SIGCHLD, signal.SIG_DFL)
         os.environ.clear()
         os.environ.update(request["env"])
         if request.get("cwd"):
@@ -74,23 +76,43 @@ def _child(request: dict) -> None:
             os._exit(int(code) & 0xFF)
 
 
+def _reap(children: set, *, block: bool = False) -> None:
+    """Collect the exit status of the ``children`` that ended (all of them with ``block``)."""
+    for pid in list(children):
+        try:
+            done, _ = os.waitpid(pid, 0 if block else os.WNOHANG)
+        except ChildProcessError:
+            done = pid
+        if done:
+            children.discard(pid)
+
+
 def serve() -> None:
     """Import the stack, say ready, then fork one child per request line until stdin closes."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGCHLD, signal.SIG_IGN)  # the kernel reaps the children
     for name in PRELOAD:
         __import__(name)
     reply = os.fdopen(os.dup(1), "w", buffering=1)
     requests = os.fdopen(os.dup(0), "r")
     reply.write(json.dumps({"ready": True}) + "\n")
+    children: set[int] = set()
     for line in requests:
+        _reap(children)
         request = json.loads(line)
         pid = os.fork()
         if pid == 0:
             requests.close()
             reply.close()
             _child(request)
+        children.add(pid)
         reply.write(json.dumps({"pid": pid}) + "\n")
+    # stdin closed: the caller is done or gone; a child still running has no one left to report to
+    for pid in children:
+        try:
+            os.kill(pid, signal.SIGKILL)  # unreaped, so the pid is still this child's
+        except ProcessLookupError:
+            pass
+    _reap(children, block=True)
 
 
 if __name__ == "__main__":

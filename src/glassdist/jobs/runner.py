@@ -111,13 +111,30 @@ class _ChildServer:
             proc.kill()
             proc.wait()
             raise OSError("the child server did not start")
+        if self._owner is None:
+            import atexit
+
+            atexit.register(self._close_at_exit)
         self._proc, self._owner = proc, os.getpid()
 
     def _stop(self):
-        if self._proc is not None:
-            self._proc.kill()
-            self._proc.wait()
-        self._proc = None
+        """Close the server's stdin: it stops its running children, reaps them and ends (else it is killed)."""
+        proc, self._proc = self._proc, None
+        if proc is None:
+            return
+        try:
+            proc.stdin.close()
+            proc.wait(timeout=10)
+        except (OSError, subprocess.TimeoutExpired):
+            proc.kill()
+            proc.wait()
+        finally:
+            proc.stdout.close()
+
+    def _close_at_exit(self):
+        """At interpreter exit: the server and its children end before this process does (no orphan)."""
+        if self._owner == os.getpid():
+            self._stop()
 
     def run(self, args, env, cwd, timeout_s):
         if not _FORK_SAFE or os.environ.get("GLASSDIST_CHILD") == "process" or self._failed:
