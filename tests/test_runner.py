@@ -161,3 +161,31 @@ def test_a_batch_killed_outright_leaves_no_child_running(pair, tmp_path):
             pass
     written = sorted(p.relative_to(tmp_path / "batch") for p in (tmp_path / "batch").rglob("summary.json"))
     assert written == [Path("panes/p0/summary.json")]
+
+
+@pytest.mark.parametrize("debug", [False, True])
+def test_a_forked_child_reports_an_internal_error_as_a_process_does(pair, tmp_path, monkeypatch, debug):
+    """Exit 1: one line without ``--debug``; with it, the traceback the interpreter would print
+    (``main`` lets the exception through and the child prints it). The fault is planted in this
+    process, which then forks the child body itself, as the server does."""
+    from glassdist import _childserver
+    import glassdist.analyzer as analyzer
+
+    def fault(*args, **kwargs):
+        raise RuntimeError("planted fault")
+
+    monkeypatch.setattr(analyzer, "analyze", fault)
+    paths = {k: str(tmp_path / k) for k in ("out", "err", "status")}
+    args = (["--debug"] if debug else []) + ["analyze", str(pair / "pane.png"), "--pitch-mm", "2",
+                                             "--distance-m", "1", "--out", str(tmp_path / "o")]
+    pid = os.fork()
+    if pid == 0:
+        _childserver._child({"args": args, "env": dict(os.environ), "cwd": None, **paths})
+    _, status = os.waitpid(pid, 0)
+    err = Path(paths["err"]).read_text()
+    assert os.waitstatus_to_exitcode(status) == 1 and Path(paths["status"]).read_text() == "1", err
+    if debug:
+        assert "Traceback (most recent call last)" in err and "RuntimeError: planted fault" in err
+    else:
+        lines = err.strip().splitlines()
+        assert len(lines) == 1 and "internal error" in lines[0] and "planted fault" in lines[0], err
