@@ -118,6 +118,18 @@ def test_ctrl_c_stops_a_batch_from_an_unguarded_script_with_its_children(pair, t
         os.killpg(proc.pid, 0)
 
 
+def test_the_server_ends_before_the_process_that_started_it(tmp_path):
+    """A script that ran one command and ended: its server (and the child) were reaped before it
+    ended, so nothing of its group is left, not even a zombie for a reaper a container may lack."""
+    script = ("import sys\nfrom glassdist.jobs.runner import _SERVER, run_glassdist\n"
+              "assert run_glassdist(['--version']).exit_code == 0 and _SERVER._proc is not None\n")
+    proc = subprocess.Popen([sys.executable, "-c", script], stderr=subprocess.PIPE, text=True, start_new_session=True)
+    err = proc.communicate(timeout=120)[1]
+    assert proc.returncode == 0, err
+    with pytest.raises(ProcessLookupError):
+        os.killpg(proc.pid, 0)
+
+
 def _live_in_group(pgid):
     """Pids of the running (not zombie) processes of process group ``pgid``, from /proc."""
     live = []
