@@ -143,13 +143,17 @@ def _live_in_group(pgid):
     return live
 
 
-def test_a_batch_killed_outright_leaves_no_child_running(pair, tmp_path):
+def test_a_batch_killed_outright_leaves_no_child_running(tmp_path):
     """SIGKILL, which no handler sees: the server sees its stdin close and stops the pane under way
     before it ends; no process of the batch runs on, and the second pane never completes."""
-    import shutil
+    from glassdist.io import write_png16
+    from glassdist.synthetic import lens_displacement, synthetic_capture
 
-    for name in ("pane.png", "reference.png"):
-        shutil.copy(pair / name, tmp_path / name)
+    # panes larger than the shared pair's (seconds each): the second is surely under way when killed
+    cap = synthetic_capture((640, 640), pitch_mm=2.0, mm_per_px=0.25,
+                            displacement=lens_displacement(0.05, 1.0, radius_mm=28.0), rng=0)
+    write_png16(tmp_path / "pane.png", cap.image)
+    write_png16(tmp_path / "reference.png", cap.reference)
     (tmp_path / "run.py").write_text(SCRIPT)
     env = {**os.environ, "GLASSDIST_DB": str(tmp_path / "history.sqlite")}
     proc = subprocess.Popen([sys.executable, str(tmp_path / "run.py"), str(tmp_path)], env=env,
