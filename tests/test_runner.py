@@ -90,14 +90,23 @@ except KeyboardInterrupt:
 """
 
 
-def test_ctrl_c_stops_a_batch_from_an_unguarded_script_with_its_children(pair, tmp_path):
+def _write_script_and_panes(root):
+    """``root/run.py`` (:data:`SCRIPT`) and its pane pair, 640 x 640 px: seconds a pane, so that the
+    second pane is surely under way half a second after the first is written, on any machine."""
+    from glassdist.io import write_png16
+    from glassdist.synthetic import lens_displacement, synthetic_capture
+
+    cap = synthetic_capture((640, 640), pitch_mm=2.0, mm_per_px=0.25,
+                            displacement=lens_displacement(0.05, 1.0, radius_mm=28.0), rng=0)
+    write_png16(root / "pane.png", cap.image)
+    write_png16(root / "reference.png", cap.reference)
+    (root / "run.py").write_text(SCRIPT)
+
+
+def test_ctrl_c_stops_a_batch_from_an_unguarded_script_with_its_children(tmp_path):
     """A user's script without a main guard: each pane runs once (no child re-runs the script); Ctrl-C
     during the second pane exits 130 with the first pane kept, and leaves no process behind."""
-    import shutil
-
-    for name in ("pane.png", "reference.png"):
-        shutil.copy(pair / name, tmp_path / name)
-    (tmp_path / "run.py").write_text(SCRIPT)
+    _write_script_and_panes(tmp_path)
     env = {**os.environ, "GLASSDIST_DB": str(tmp_path / "history.sqlite")}
     proc = subprocess.Popen([sys.executable, str(tmp_path / "run.py"), str(tmp_path)], env=env, text=True,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
@@ -146,15 +155,7 @@ def _live_in_group(pgid):
 def test_a_batch_killed_outright_leaves_no_child_running(tmp_path):
     """SIGKILL, which no handler sees: the server sees its stdin close and stops the pane under way
     before it ends; no process of the batch runs on, and the second pane never completes."""
-    from glassdist.io import write_png16
-    from glassdist.synthetic import lens_displacement, synthetic_capture
-
-    # panes larger than the shared pair's (seconds each): the second is surely under way when killed
-    cap = synthetic_capture((640, 640), pitch_mm=2.0, mm_per_px=0.25,
-                            displacement=lens_displacement(0.05, 1.0, radius_mm=28.0), rng=0)
-    write_png16(tmp_path / "pane.png", cap.image)
-    write_png16(tmp_path / "reference.png", cap.reference)
-    (tmp_path / "run.py").write_text(SCRIPT)
+    _write_script_and_panes(tmp_path)
     env = {**os.environ, "GLASSDIST_DB": str(tmp_path / "history.sqlite")}
     proc = subprocess.Popen([sys.executable, str(tmp_path / "run.py"), str(tmp_path)], env=env,
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
