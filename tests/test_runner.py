@@ -206,3 +206,50 @@ def test_a_forked_child_reports_an_internal_error_as_a_process_does(pair, tmp_pa
     else:
         lines = err.strip().splitlines()
         assert len(lines) == 1 and "internal error" in lines[0] and "planted fault" in lines[0], err
+
+
+def _children_of(ppid):
+    """Pids of the running children of process ``ppid``, from /proc."""
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            state, parent = stat.read_bytes().rsplit(b")", 1)[1].split()[:2]
+        except (OSError, ValueError):
+            continue
+        if int(parent) == ppid and state != b"Z":
+            found.append(int(stat.parent.name))
+    return found
+
+
+@pytest.mark.parametrize("how", ["forked", "process"])
+def test_a_child_killed_from_outside_says_which_signal(tmp_path, monkeypatch, how):
+    """SIGTERM sent to the running child: exit -15 and a line naming it, forked as from ``python -m glassdist``."""
+    import threading
+
+    from glassdist.io import write_png16
+    from glassdist.synthetic import lens_displacement, synthetic_capture
+
+    cap = synthetic_capture((640, 640), pitch_mm=2.0, mm_per_px=0.25,
+                            displacement=lens_displacement(0.05, 1.0, radius_mm=28.0), rng=0)
+    write_png16(tmp_path / "pane.png", cap.image)
+    if how == "process":
+        monkeypatch.setenv("GLASSDIST_CHILD", "process")
+        parent = os.getpid()
+    else:
+        run_glassdist(["--version"])  # the server is running
+        parent = runner._SERVER._proc.pid
+    before = set(_children_of(parent))
+    outcome = []
+    worker = threading.Thread(target=lambda: outcome.append(run_glassdist(
+        ["analyze", str(tmp_path / "pane.png"), "--pitch-mm", "2", "--distance-m", "1", "--out", str(tmp_path / "o")])))
+    worker.start()
+    deadline = time.monotonic() + 60
+    while not (set(_children_of(parent)) - before) and time.monotonic() < deadline:
+        time.sleep(0.02)
+    time.sleep(0.3)  # under way
+    for pid in set(_children_of(parent)) - before:
+        os.kill(pid, signal.SIGTERM)
+    worker.join(120)
+    (out,) = outcome
+    assert out.exit_code == -15, out.log
+    assert out.error == "glassdist: error: the child process was killed by SIGTERM before it finished"

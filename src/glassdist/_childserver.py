@@ -8,7 +8,10 @@ talks to it over its stdin and stdout, one JSON line each way:
   "err": path, "status": path}`` it forks a child and writes ``{"pid": N}``. The child takes
   the request's environment and working folder, writes its stdout and stderr to ``out``
   and ``err``, runs ``glassdist ARGS`` and writes its exit status to ``status`` (written
-  to a temporary name, then renamed: present means complete).
+  to a temporary name, then renamed: present means complete);
+* for ``{"wait": N}``, asked of a child that ended without writing its status (a signal
+  killed it), it reaps child N and writes ``{"exit": code}``, negative for a signal as
+  :attr:`subprocess.Popen.returncode` is (null if N is not a child it holds).
 
 A child is a process of its own, as ``python -m glassdist`` would be, without the 2.2-2.5 s
 of imports a fresh interpreter pays (``-X importtime``: SQLAlchemy, matplotlib's figure
@@ -97,8 +100,18 @@ def serve() -> None:
     reply.write(json.dumps({"ready": True}) + "\n")
     children: set[int] = set()
     for line in requests:
-        _reap(children)
         request = json.loads(line)
+        if "wait" in request:  # the exit status of a child that ended without writing its own (killed)
+            code = None
+            if request["wait"] in children:
+                children.discard(request["wait"])
+                try:
+                    code = os.waitstatus_to_exitcode(os.waitpid(request["wait"], 0)[1])
+                except ChildProcessError:
+                    pass
+            reply.write(json.dumps({"exit": code}) + "\n")
+            continue
+        _reap(children)
         pid = os.fork()
         if pid == 0:
             requests.close()

@@ -65,12 +65,26 @@ def run_glassdist(args, *, cwd=None, timeout_s=None):
         return PaneOutcome(1, f"$ {' '.join(cmd)}\n(stopped after {timeout_s:g} s)",
                            f"glassdist: error: the analysis took longer than {timeout_s:g} s and was stopped")
     code, out, err = ran
+    if code < 0:  # killed by a signal: no line of its own says so
+        err += f"glassdist: error: {_killed(-code)}\n"
     log = f"$ {' '.join(cmd)}\n{out}{err}"
     error = ""
     if code not in (0, EXIT_SPEC_FAIL):
         lines = [ln for ln in err.splitlines() if ln.strip()]
         error = lines[-1] if lines else f"glassdist exited with status {code}"
     return PaneOutcome(code, log, error)
+
+
+def _killed(signum):
+    """What to say of a child that signal ``signum`` killed."""
+    import signal
+
+    try:
+        name = signal.Signals(signum).name
+    except ValueError:
+        name = f"signal {signum}"
+    why = " (the system's out-of-memory killer sends it)" if name == "SIGKILL" else ""
+    return f"the child process was killed by {name}{why} before it finished"
 
 
 def _child_env():
@@ -195,12 +209,17 @@ class _ChildServer:
                 raise
             text = [Path(paths[k]).read_text(encoding="utf-8", errors="replace") if Path(paths[k]).exists() else ""
                     for k in ("out", "err")]
-            if status.exists():
-                code = int(status.read_text())
-            else:  # ended without writing its status: killed (the kernel's OOM killer, a signal)
-                code = -9
-                text[1] += "glassdist: error: the child process was killed before it finished\n"
+            code = int(status.read_text()) if status.exists() else self._exit_status(pid)
         return code, text[0], text[1]
+
+    def _exit_status(self, pid):
+        """The exit status of child ``pid``, which ended without writing it (a signal killed it), from the server."""
+        try:
+            self._proc.stdin.write(json.dumps({"wait": pid}) + "\n")
+            code = json.loads(self._proc.stdout.readline() or "{}").get("exit")
+        except (OSError, ValueError):
+            code = None
+        return code if isinstance(code, int) else -9  # unknown: what the kernel's out-of-memory killer sends
 
 
 def _alive(pid):
