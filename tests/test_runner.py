@@ -139,6 +139,25 @@ def test_the_server_ends_before_the_process_that_started_it(tmp_path):
         os.killpg(proc.pid, 0)
 
 
+def test_a_forked_copy_does_not_keep_the_parents_server(tmp_path):
+    """The script forks a copy that lives on (as a pool worker would) and ends: its server still
+    sees its stdin close and ends at once, instead of after the 10 s the script waits before it
+    kills it."""
+    script = ("import os, sys, time\nfrom glassdist.jobs.runner import _SERVER, run_glassdist\n"
+              "run_glassdist(['--version'])\n"
+              "if os.fork() == 0:\n    time.sleep(60)\n    os._exit(0)\n"
+              "print(_SERVER._proc.pid, flush=True)\n")
+    proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        server = int(proc.stdout.readline())
+        started = time.monotonic()
+        proc.wait(timeout=60)
+        assert time.monotonic() - started < 5
+        assert proc.returncode == 0 and server not in _live_in_group(proc.pid)
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)  # the copy
+
+
 def _live_in_group(pgid):
     """Pids of the running (not zombie) processes of process group ``pgid``, from /proc."""
     live = []

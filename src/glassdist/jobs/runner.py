@@ -248,6 +248,26 @@ def _kill(pid):
 _SERVER = _ChildServer()
 
 
+def _let_go_of_the_parents_server():
+    """In a forked copy of this process: point the copied pipe ends of the parent's server at
+    /dev/null, so that the server still sees its stdin close when the parent ends (a copy that
+    runs a command starts a server of its own). Lock-free on purpose: another thread may have
+    held a pipe's buffer at the fork."""
+    proc = _SERVER._proc
+    if proc is None or proc.stdin is None or proc.stdout is None:
+        return
+    null = os.open(os.devnull, os.O_RDWR)
+    try:
+        for fd in (proc.stdin.fileno(), proc.stdout.fileno()):
+            os.dup2(null, fd)
+    finally:
+        os.close(null)
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_let_go_of_the_parents_server)
+
+
 def subprocess_runner(pane, out_dir, *, report=False, export=False, cwd=None):
     """Run ``glassdist analyze`` for ``pane`` in a child process writing into ``out_dir``.
 
