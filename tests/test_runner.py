@@ -152,7 +152,7 @@ def test_a_forked_copy_does_not_keep_the_parents_server(tmp_path):
         server = int(proc.stdout.readline())
         started = time.monotonic()
         proc.wait(timeout=60)
-        assert time.monotonic() - started < 5
+        assert time.monotonic() - started < 8  # well under the 10 s wait, whatever the machine's load
         assert proc.returncode == 0 and server not in _live_in_group(proc.pid)
     finally:
         os.killpg(proc.pid, signal.SIGKILL)  # the copy
