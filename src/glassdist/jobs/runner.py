@@ -180,11 +180,7 @@ class _ChildServer:
         with tempfile.TemporaryDirectory(prefix="glassdist-child-") as tmp:
             paths = {k: str(Path(tmp) / k) for k in ("out", "err", "status")}
             request = {"args": args, "env": env, "cwd": None if cwd is None else str(Path(cwd).resolve()), **paths}
-            try:
-                self._proc.stdin.write(json.dumps(request) + "\n")
-                pid = json.loads(self._proc.stdout.readline() or "{}").get("pid")
-            except (OSError, ValueError):
-                pid = None
+            pid = self._ask(request).get("pid")
             if not isinstance(pid, int):
                 self._stop()
                 return None
@@ -214,16 +210,20 @@ class _ChildServer:
 
     def _exit_status(self, pid):
         """The exit status of child ``pid``, which ended without writing it (a signal killed it), from the server."""
-        try:
-            self._proc.stdin.write(json.dumps({"wait": pid}) + "\n")
-            code = json.loads(self._proc.stdout.readline() or "{}").get("exit")
-        except (OSError, ValueError):
-            code = None
+        code = self._ask({"wait": pid}).get("exit")
         return code if isinstance(code, int) else -9  # unknown: what the kernel's out-of-memory killer sends
+
+    def _ask(self, message):
+        """One exchange with the server: ``message`` as a JSON line, its JSON line back ({} if it broke)."""
+        try:
+            self._proc.stdin.write(json.dumps(message) + "\n")
+            return json.loads(self._proc.stdout.readline() or "{}")
+        except (OSError, ValueError):
+            return {}
 
 
 def _alive(pid):
-    """Whether process ``pid`` still runs (Linux: a zombie no reaper collects counts as ended)."""
+    """Whether process ``pid`` still runs (Linux: a zombie, ended but not yet reaped by the server, counts as ended)."""
     try:
         with open(f"/proc/{pid}/stat", "rb") as fh:
             return fh.read().rsplit(b")", 1)[1].split()[0] != b"Z"
