@@ -90,9 +90,9 @@ except KeyboardInterrupt:
 """
 
 
-def _write_script_and_panes(root):
-    """``root/run.py`` (:data:`SCRIPT`) and its pane pair, 640 x 640 px: seconds a pane, so that the
-    second pane is surely under way half a second after the first is written, on any machine."""
+def _write_large_pair(root):
+    """``root/pane.png`` and ``root/reference.png``, 640 x 640 px: seconds a pane to analyse, so that
+    a pane is surely still under way a fraction of a second after it started, on any machine."""
     from glassdist.io import write_png16
     from glassdist.synthetic import lens_displacement, synthetic_capture
 
@@ -100,22 +100,32 @@ def _write_script_and_panes(root):
                             displacement=lens_displacement(0.05, 1.0, radius_mm=28.0), rng=0)
     write_png16(root / "pane.png", cap.image)
     write_png16(root / "reference.png", cap.reference)
+
+
+def _start_batch(root, **streams):
+    """:data:`SCRIPT` started on the large pair in ``root``, in a process group of its own."""
+    _write_large_pair(root)
     (root / "run.py").write_text(SCRIPT)
+    env = {**os.environ, "GLASSDIST_DB": str(root / "history.sqlite")}
+    return subprocess.Popen([sys.executable, str(root / "run.py"), str(root)], env=env, start_new_session=True,
+                            **streams)
+
+
+def _wait_for_the_second_pane(root, proc, why=lambda: ""):
+    """Return once the first pane is written and the second has been under way for half a second."""
+    deadline = time.monotonic() + 120
+    while not (root / "batch" / "panes" / "p0" / "summary.json").exists():
+        assert proc.poll() is None and time.monotonic() < deadline, why()
+        time.sleep(0.05)
+    time.sleep(0.5)
 
 
 def test_ctrl_c_stops_a_batch_from_an_unguarded_script_with_its_children(tmp_path):
     """A user's script without a main guard: each pane runs once (no child re-runs the script); Ctrl-C
     during the second pane exits 130 with the first pane kept, and leaves no process behind."""
-    _write_script_and_panes(tmp_path)
-    env = {**os.environ, "GLASSDIST_DB": str(tmp_path / "history.sqlite")}
-    proc = subprocess.Popen([sys.executable, str(tmp_path / "run.py"), str(tmp_path)], env=env, text=True,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+    proc = _start_batch(tmp_path, text=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     try:
-        deadline = time.monotonic() + 120
-        while not (tmp_path / "batch" / "panes" / "p0" / "summary.json").exists():
-            assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
-            time.sleep(0.05)
-        time.sleep(0.5)  # the second pane is under way
+        _wait_for_the_second_pane(tmp_path, proc, proc.communicate)
         os.killpg(proc.pid, signal.SIGINT)
         _, err = proc.communicate(timeout=60)
     finally:
@@ -153,43 +163,38 @@ def test_a_forked_copy_does_not_keep_the_parents_server(tmp_path):
         started = time.monotonic()
         proc.wait(timeout=60)
         assert time.monotonic() - started < 8  # well under the 10 s wait, whatever the machine's load
-        assert proc.returncode == 0 and server not in _live_in_group(proc.pid)
+        assert proc.returncode == 0 and server not in _running(group=proc.pid)
     finally:
         os.killpg(proc.pid, signal.SIGKILL)  # the copy
 
 
-def _live_in_group(pgid):
-    """Pids of the running (not zombie) processes of process group ``pgid``, from /proc."""
-    live = []
+def _running(*, group=None, parent=None):
+    """Pids of the running (not zombie) processes of process group ``group``, or children of
+    process ``parent``, from /proc."""
+    field, wanted = (2, group) if group is not None else (1, parent)  # fields after the name: state, ppid, pgrp
+    found = []
     for stat in Path("/proc").glob("[0-9]*/stat"):
         try:
-            state, _, group = stat.read_bytes().rsplit(b")", 1)[1].split()[:3]
-        except (OSError, ValueError):
+            fields = stat.read_bytes().rsplit(b")", 1)[1].split()
+            if fields[0] != b"Z" and int(fields[field]) == wanted:
+                found.append(int(stat.parent.name))
+        except (OSError, ValueError, IndexError):
             continue
-        if int(group) == pgid and state != b"Z":
-            live.append(int(stat.parent.name))
-    return live
+    return found
 
 
 def test_a_batch_killed_outright_leaves_no_child_running(tmp_path):
     """SIGKILL, which no handler sees: the server sees its stdin close and stops the pane under way
     before it ends; no process of the batch runs on, and the second pane never completes."""
-    _write_script_and_panes(tmp_path)
-    env = {**os.environ, "GLASSDIST_DB": str(tmp_path / "history.sqlite")}
-    proc = subprocess.Popen([sys.executable, str(tmp_path / "run.py"), str(tmp_path)], env=env,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    proc = _start_batch(tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
-        deadline = time.monotonic() + 120
-        while not (tmp_path / "batch" / "panes" / "p0" / "summary.json").exists():
-            assert proc.poll() is None and time.monotonic() < deadline
-            time.sleep(0.05)
-        time.sleep(0.5)  # the second pane is under way
+        _wait_for_the_second_pane(tmp_path, proc)
         proc.kill()  # the script alone, not its group
         proc.wait()
         deadline = time.monotonic() + 20
-        while _live_in_group(proc.pid) and time.monotonic() < deadline:
+        while _running(group=proc.pid) and time.monotonic() < deadline:
             time.sleep(0.05)
-        assert _live_in_group(proc.pid) == []
+        assert _running(group=proc.pid) == []
     finally:
         try:
             os.killpg(proc.pid, signal.SIGKILL)
@@ -227,46 +232,28 @@ def test_a_forked_child_reports_an_internal_error_as_a_process_does(pair, tmp_pa
         assert len(lines) == 1 and "internal error" in lines[0] and "planted fault" in lines[0], err
 
 
-def _children_of(ppid):
-    """Pids of the running children of process ``ppid``, from /proc."""
-    found = []
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            state, parent = stat.read_bytes().rsplit(b")", 1)[1].split()[:2]
-        except (OSError, ValueError):
-            continue
-        if int(parent) == ppid and state != b"Z":
-            found.append(int(stat.parent.name))
-    return found
-
-
 @pytest.mark.parametrize("how", ["forked", "process"])
 def test_a_child_killed_from_outside_says_which_signal(tmp_path, monkeypatch, how):
     """SIGTERM sent to the running child: exit -15 and a line naming it, forked as from ``python -m glassdist``."""
     import threading
 
-    from glassdist.io import write_png16
-    from glassdist.synthetic import lens_displacement, synthetic_capture
-
-    cap = synthetic_capture((640, 640), pitch_mm=2.0, mm_per_px=0.25,
-                            displacement=lens_displacement(0.05, 1.0, radius_mm=28.0), rng=0)
-    write_png16(tmp_path / "pane.png", cap.image)
+    _write_large_pair(tmp_path)
     if how == "process":
         monkeypatch.setenv("GLASSDIST_CHILD", "process")
         parent = os.getpid()
     else:
         run_glassdist(["--version"])  # the server is running
         parent = runner._SERVER._proc.pid
-    before = set(_children_of(parent))
+    before = set(_running(parent=parent))
     outcome = []
     worker = threading.Thread(target=lambda: outcome.append(run_glassdist(
         ["analyze", str(tmp_path / "pane.png"), "--pitch-mm", "2", "--distance-m", "1", "--out", str(tmp_path / "o")])))
     worker.start()
     deadline = time.monotonic() + 60
-    while not (set(_children_of(parent)) - before) and time.monotonic() < deadline:
+    while not (set(_running(parent=parent)) - before) and time.monotonic() < deadline:
         time.sleep(0.02)
     time.sleep(0.3)  # under way
-    for pid in set(_children_of(parent)) - before:
+    for pid in set(_running(parent=parent)) - before:
         os.kill(pid, signal.SIGTERM)
     worker.join(120)
     (out,) = outcome
