@@ -8,7 +8,7 @@ import time
 from pathlib import Path
 
 import pytest
-from conftest import write_lens_pair
+from conftest import child_env, write_lens_pair
 
 from glassdist.jobs import runner
 from glassdist.jobs.runner import run_glassdist
@@ -106,7 +106,7 @@ def _start_batch(root, **streams):
     """:data:`SCRIPT` started on the large pair in ``root``, in a process group of its own."""
     _write_large_pair(root)
     (root / "run.py").write_text(SCRIPT)
-    env = {**os.environ, "GLASSDIST_DB": str(root / "history.sqlite")}
+    env = {**child_env(), "GLASSDIST_DB": str(root / "history.sqlite")}
     return subprocess.Popen([sys.executable, str(root / "run.py"), str(root)], env=env, start_new_session=True,
                             **streams)
 
@@ -142,7 +142,8 @@ def test_the_server_ends_before_the_process_that_started_it(tmp_path):
     ended, so nothing of its group is left, not even a zombie for a reaper a container may lack."""
     script = ("import sys\nfrom glassdist.jobs.runner import _SERVER, run_glassdist\n"
               "assert run_glassdist(['--version']).exit_code == 0 and _SERVER._proc is not None\n")
-    proc = subprocess.Popen([sys.executable, "-c", script], stderr=subprocess.PIPE, text=True, start_new_session=True)
+    proc = subprocess.Popen([sys.executable, "-c", script], stderr=subprocess.PIPE, text=True, env=child_env(),
+                            start_new_session=True)
     err = proc.communicate(timeout=120)[1]
     assert proc.returncode == 0, err
     with pytest.raises(ProcessLookupError):
@@ -157,7 +158,8 @@ def test_a_forked_copy_does_not_keep_the_parents_server(tmp_path):
               "run_glassdist(['--version'])\n"
               "if os.fork() == 0:\n    time.sleep(60)\n    os._exit(0)\n"
               "print(_SERVER._proc.pid, flush=True)\n")
-    proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True, start_new_session=True)
+    proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True, env=child_env(),
+                            start_new_session=True)
     try:
         server = int(proc.stdout.readline())
         started = time.monotonic()
