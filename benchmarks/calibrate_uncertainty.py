@@ -42,26 +42,6 @@ def _get(res, key):
     return getattr(res, key)
 
 
-def _minus_projective(d: np.ndarray, region: np.ndarray) -> np.ndarray:
-    """``d`` less its best fit over ``region`` by a small change of homography (8 parameters).
-
-    To first order a homography's change moves a pixel by an affine term per component
-    plus the two projective terms shared by both, ``g1 x^2 + g2 x y`` along x and
-    ``g1 x y + g2 y^2`` along y: the family Block I's baseline error lies in.
-    """
-    h, w = d.shape[:2]
-    yy, xx = np.mgrid[0:h, 0:w]
-    x, y = (xx - w / 2) / w, (yy - h / 2) / h
-    xr, yr, one, zero = x[region], y[region], np.ones(int(region.sum())), np.zeros(int(region.sum()))
-    A = np.concatenate([np.stack([one, xr, yr, zero, zero, zero, xr * xr, xr * yr], 1),
-                        np.stack([zero, zero, zero, one, xr, yr, xr * yr, yr * yr], 1)])
-    coef, *_ = np.linalg.lstsq(A, np.concatenate([d[..., 0][region], d[..., 1][region]]), rcond=None)
-    out = d.copy()
-    out[..., 0] -= coef[0] + coef[1] * x + coef[2] * y + coef[6] * x * x + coef[7] * x * y
-    out[..., 1] -= coef[3] + coef[4] * x + coef[5] * y + coef[6] * x * y + coef[7] * y * y
-    return out
-
-
 def scenes(quick: bool = False):
     """(name, pattern, period_px, noise_std, sigma_periods, method)."""
     grid = itertools.product(("lines", "checkerboard"), (8.0, 12.0), (0.02, 0.05), (2.0, 3.0), ("comparative", "direct"))
@@ -71,6 +51,7 @@ def scenes(quick: bool = False):
 
 def calibrate(pattern, period_px, noise, sigma_periods, method, *, n=30, size=256, seed=0) -> dict:
     from glassdist import analyze
+    from glassdist.experiments.transfer import minus_homography_change
     from glassdist.synthetic import synthetic_capture, wave_displacement
 
     pitch = period_px / (np.sqrt(2.0) if pattern == "checkerboard" else 1.0)  # mm, at 1 mm/px
@@ -93,7 +74,7 @@ def calibrate(pattern, period_px, noise, sigma_periods, method, *, n=30, size=25
         if method == "direct":
             # Block I's baseline moves with the noise too: an image-wide smooth term outside
             # the per-pixel uncertainty, removed per realisation (best-fit change of homography).
-            d_mm = _minus_projective(d_mm, res.trusted)
+            d_mm = minus_homography_change(d_mm, res.trusted)
         for k in FIELDS:
             val = d_mm[..., FIELDS[k][1]] if isinstance(FIELDS[k], tuple) else _get(res, FIELDS[k]).astype(float)
             stacks[k].append(val)

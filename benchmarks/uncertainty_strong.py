@@ -85,10 +85,9 @@ def ratios(results, *, minus_projective: bool = False) -> dict:
            "noise_estimated": float(np.median([r.noise_std[0] for r in results]))}
     vals = {k: [_value(r, k) for r in results] for k in FIELDS}
     if minus_projective:
-        sys.path.insert(0, str(Path(__file__).resolve().parent))
-        from calibrate_uncertainty import _minus_projective
+        from glassdist.experiments.transfer import minus_homography_change
 
-        disp = [_minus_projective(r.displacement_mm.astype(float), r.trusted) for r in results]
+        disp = [minus_homography_change(r.displacement_mm, r.trusted) for r in results]
         vals["disp_x"], vals["disp_y"] = [d[..., 0] for d in disp], [d[..., 1] for d in disp]
         vals["phi_eff"] = [_minus_plane(v, r.trusted) for v, r in zip(vals["phi_eff"], results)]
     for k in FIELDS:

@@ -86,10 +86,11 @@ def _direct(sc, N=2):
                              params={"detrend_degree": N, "pattern": sc.backdrop.pattern})  # lens_model: the default, "radial"
 
 
-def _truth(sc, res, N):
+def _truth(sc, res, N, minus_homography=False):
     land = landing_points(sc)
     return independent_phi_eff(np.nan_to_num(land.displacement_mm), res.valid, jacobian=landing_jacobian(sc),
-                               sigma_px=res.sigma_mm / res.mm_per_px, degree=N, distance_m=res.distance_m)
+                               sigma_px=res.sigma_mm / res.mm_per_px, degree=N, distance_m=res.distance_m,
+                               minus_homography=minus_homography)
 
 
 def _slope(m, t):
@@ -143,18 +144,27 @@ def test_direct_through_camera_lenses_at_n2(lens):
 
 
 @pytest.mark.slow
-def test_direct_through_the_moustache_lens_at_n1():
-    """N = 1, the moustache wide-angle lens: 3 sigma inside the analysed region mean |phi_eff|
-    1.0003 of the truth, slope 0.9917, r 0.994. (The barrel and pincushion lenses read 0.976 /
-    0.979 there at N = 1, a miss whose cause is not established.)"""
-    sc = _render(LENSES["moustache"])
+@pytest.mark.parametrize("lens", list(LENSES))
+def test_direct_through_camera_lenses_at_n1(lens):
+    """N = 1: the Direct Method reads the glass less the best change of homography.
+
+    Block I's one homography also takes, from the glass's own displacement, the two
+    projective terms of a change of homography (``g1 x^2 + g2 x y`` along x, ``g1 x y +
+    g2 y^2`` along y), which a degree-1 detrend keeps and degree 2 spans. Against the truth
+    with that family removed (``minus_homography``), 3 sigma inside the analysed region,
+    measured: mean |phi_eff| 0.9930 / 0.9975 / 1.0046, slope 0.9951 / 0.9994 / 1.0046, r 0.9996 /
+    0.9997 / 0.9995 (barrel / pincushion / moustache). Against the plain degree-1 truth the barrel
+    reads 0.976 (r 0.996), and 0.953 (r 0.985) with the rendered lens given as a camera file:
+    the lens fit is not the cause.
+    """
+    sc = _render(LENSES[lens])
     res = _direct(sc, N=1)
-    truth = _truth(sc, res, 1)
+    truth = _truth(sc, res, 1, minus_homography=True)
     ok = res.trusted & np.isfinite(truth) & np.isfinite(res.phi_eff_mD) & _inside(res, 3.0)
     m, t = res.phi_eff_mD[ok], truth[ok]
-    assert np.mean(np.abs(m)) / np.mean(np.abs(t)) == pytest.approx(1.0, abs=0.015)
-    assert _slope(m, t) == pytest.approx(1.0, abs=0.015)
-    assert np.corrcoef(m, t)[0, 1] > 0.99
+    assert np.mean(np.abs(m)) / np.mean(np.abs(t)) == pytest.approx(1.0, abs=0.01)
+    assert _slope(m, t) == pytest.approx(1.0, abs=0.01)
+    assert np.corrcoef(m, t)[0, 1] > 0.999
 
 
 @pytest.mark.slow

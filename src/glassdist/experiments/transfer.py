@@ -40,7 +40,8 @@ from ..scene import load_scene
 from ..theory import analysis_params, predict_channels
 from ._common import ExperimentResult, RunOptions, evaluate, render_inputs, share_fig_ax
 
-__all__ = ["measured_transfer", "independent_phi_eff", "run_transfer", "RIPPLE_PERIODS", "SIGMA_PERIODS"]
+__all__ = ["measured_transfer", "independent_phi_eff", "minus_homography_change", "run_transfer", "RIPPLE_PERIODS",
+           "SIGMA_PERIODS"]
 
 _SCENES = __import__("pathlib").Path(__file__).resolve().parents[3] / "examples" / "scenes"
 RIPPLE_PERIODS = (2.5, 3.0, 4.0, 6.0, 10.0)
@@ -98,7 +99,45 @@ def _instrument(periods, pitch_px: float = 12.0):
     return np.exp(-2 * np.pi**2 * var * f**2)
 
 
-def independent_phi_eff(displacement_mm, region, *, jacobian, sigma_px: float, degree: int, distance_m: float):
+def minus_homography_change(displacement_mm, region):
+    """``displacement_mm`` less its best fit over ``region`` by a small change of homography (8 parameters).
+
+    To first order a change of homography moves a pixel by an affine term per component
+    plus the two projective terms shared by both, ``g1 x^2 + g2 x y`` along x and
+    ``g1 x y + g2 y^2`` along y (one least-squares fit of both components, in pixel
+    coordinates normalised by the image size). The Direct Method's baseline (Block I,
+    one homography for the whole view) takes that family from the glass's displacement,
+    or moves by it between captures.
+
+    Parameters
+    ----------
+    displacement_mm : ndarray, shape (H, W, 2)
+        (x, y) displacement; finite on ``region``.
+    region : ndarray of bool, shape (H, W)
+        Pixels the fit is made on.
+
+    Returns
+    -------
+    ndarray, shape (H, W, 2)
+        A new array; the input is not changed.
+    """
+    d = np.asarray(displacement_mm, dtype=float)
+    region = np.asarray(region, bool)
+    h, w = d.shape[:2]
+    yy, xx = np.mgrid[0:h, 0:w]
+    x, y = (xx - w / 2) / w, (yy - h / 2) / h
+    xr, yr, one, zero = x[region], y[region], np.ones(int(region.sum())), np.zeros(int(region.sum()))
+    A = np.concatenate([np.stack([one, xr, yr, zero, zero, zero, xr * xr, xr * yr], 1),
+                        np.stack([zero, zero, zero, one, xr, yr, xr * yr, yr * yr], 1)])
+    coef, *_ = np.linalg.lstsq(A, np.concatenate([d[..., 0][region], d[..., 1][region]]), rcond=None)
+    out = d.copy()
+    out[..., 0] -= coef[0] + coef[1] * x + coef[2] * y + coef[6] * x * x + coef[7] * x * y
+    out[..., 1] -= coef[3] + coef[4] * x + coef[5] * y + coef[6] * x * y + coef[7] * y * y
+    return out
+
+
+def independent_phi_eff(displacement_mm, region, *, jacobian, sigma_px: float, degree: int, distance_m: float,
+                        minus_homography: bool = False):
     """phi_eff (mD) of a displacement field by a plain evaluation, independent of the Analyzer's code.
 
     Each 4-connected part of ``region`` on its own, as the Analyzer treats its regions:
@@ -108,7 +147,14 @@ def independent_phi_eff(displacement_mm, region, *, jacobian, sigma_px: float, d
     pixel -> backdrop Jacobian ``jacobian`` (mm per px). One fit over several parts would
     remove a polynomial the result never removed: on a Direct capture whose region falls
     into three parts it read 0.8 % off.
+
+    ``minus_homography``: first remove the best change of homography over the whole region
+    (:func:`minus_homography_change`), what the Direct Method's one baseline takes from the
+    glass. At ``degree`` >= 2 the detrend spans it anyway (to first order); at 1 it keeps
+    the two projective terms, which the Direct Method does not report.
     """
+    if minus_homography:
+        displacement_mm = minus_homography_change(displacement_mm, region)
     h, w = region.shape
     yy, xx = np.mgrid[0:h, 0:w].astype(float)
     xs, ys = (xx - w / 2) / w, (yy - h / 2) / h
