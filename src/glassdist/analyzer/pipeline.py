@@ -44,7 +44,8 @@ from .region import (
 )
 from .resample import image_grid_valid
 from .result import AnalysisResult
-from .uncertainty import channel_uncertainty, displacement_sigma, gradient_covariance, noise_std, phase_variance
+from .uncertainty import (channel_uncertainty, deformation_noise_gains, displacement_sigma, gradient_covariance, noise_std,
+                          phase_variance)
 from .unwrap import unwrap
 
 __all__ = ["AnalysisResult", "ReferenceModel", "analyze", "calibrate_from_photo", "prepare_reference"]
@@ -810,36 +811,49 @@ def _channels(ag: _AnalysisGrid, ks, H_jac, p: AnalyzerParams, p_c, mm_per_px, s
     return delta_cam, ch, {"T": T, "W": np.eye(2) / mm_per_px, "R": None, "blur": iso_blur}
 
 
-def _phase_noise(demod: _Demodulation, refm, agrid: F.SamplingGrid, p: AnalyzerParams) -> tuple:
-    """Phase noise levels ``s^2 / (2 |b|^2)`` per carrier (image, plus reference) on the Block A grid, rad^2 px^2,
-    and the covariance (px^2 per carrier) of the low-pass they went through up to that grid."""
-    s_img = demod.noise_std
-    s_ref = refm.noise_std if refm is not None else 0.0
-    white = []
-    for i in range(2):
-        w_ = s_img**2 / (2 * np.maximum(demod.mods[i].astype(np.float64), 1e-12) ** 2)
-        if refm is not None:
-            w_ = w_ + s_ref**2 / (2 * np.maximum(demod.mods[2 + i].astype(np.float64), 1e-12) ** 2)
-        white.append(w_.astype(np.float32))
+def _phase_noise(demod: _Demodulation, refm, agrid: F.SamplingGrid, p: AnalyzerParams) -> dict:
+    """Phase noise levels ``s^2 / (2 |b|^2)`` per carrier on the Block A grid, rad^2 px^2, and the filters they went through.
+
+    ``{"photo": (w1, w2), "reference": (w1, w2) or None, "blur": (2, 2, 2), "bandpass": (2, 2, 2)}``:
+    the photo's and the reference's levels (independent noises), the spatial covariance (px^2
+    per carrier) of the low-pass up to that grid, and that of the bandpass alone (F5's
+    reference term, :func:`~glassdist.analyzer.uncertainty.deformation_noise_gains`).
+    """
     m = demod.grid.shape[0] // agrid.shape[0]
+    ones = np.ones(demod.grid.shape, np.float32)
+
+    def level(s, mods):
+        out = []
+        for mod in mods:
+            w_ = (s**2 / (2 * np.maximum(mod.astype(np.float64), 1e-12) ** 2)).astype(np.float32)
+            out.append(F.block_mean(w_, ones, m)[0] if m > 1 else w_)
+        return tuple(out)
+
     blur = _demodulation_blur_px2(demod.carriers, demod.covariances, p)
     if m > 1:
-        ones = np.ones(demod.grid.shape, np.float32)
-        white = [F.block_mean(w_, ones, m)[0] for w_ in white]
         blur = blur + (m * max(demod.grid.step)) ** 2 / 12.0 * np.eye(2)
-    return tuple(white), blur
+    return {"photo": level(demod.noise_std, demod.mods[:2]),
+            "reference": None if refm is None else level(refm.noise_std, demod.mods[2:4]),
+            "blur": blur, "bandpass": np.array([np.linalg.inv(c) / (4 * np.pi**2) for c in demod.covariances])}
 
 
-def _uncertainty(ag: _AnalysisGrid, phase_noise, ch, a1: dict, sigma_px: float, distance_m: float) -> dict:
+def _uncertainty(ag: _AnalysisGrid, phase_noise: dict, ch, a1: dict, sigma_px: float, distance_m: float) -> dict:
     """Standard uncertainties of the displacement and the channels from the image noise (registered fields).
 
-    The phase noise (:func:`_phase_noise`) through Block F's kernel (and the block means)
-    gives the displacement's; through the whole chain, the metric smoothing included, and
-    the differentiation, the channels' (:mod:`~glassdist.analyzer.uncertainty`).
+    The phase noise (:func:`_phase_noise`) through Block F's kernel (and the block means),
+    times F5's gains when its passes ran, gives the displacement's; through the whole chain,
+    the metric smoothing included, and the differentiation, the channels'
+    (:mod:`~glassdist.analyzer.uncertainty`).
     """
-    white, blur = phase_noise
-    var = tuple(phase_variance(w_, b) for w_, b in zip(white, blur))
-    disp = displacement_sigma(var, a1["T"], a1["R"])
+    blur, photo, ref = phase_noise["blur"], phase_noise["photo"], phase_noise["reference"]
+    white = photo if ref is None else tuple(a + b for a, b in zip(photo, ref))
+    var = []
+    for i in range(2):
+        g_photo, g_ref = (1.0, 1.0) if ag.transfer is None else deformation_noise_gains(ag.transfer, i,
+                                                                                       phase_noise["bandpass"][i])
+        w_ = photo[i] * np.float32(g_photo) + (0.0 if ref is None else ref[i] * np.float32(g_ref))
+        var.append(phase_variance(w_, blur[i]))
+    disp = displacement_sigma(tuple(var), a1["T"], a1["R"])
     grad_cov = []
     for i in range(2):
         metric = sigma_px**2 * np.eye(2)
@@ -1087,7 +1101,7 @@ class _Measurement:
     margin_px: tuple[float, float]
     guard_px: float
     noise_std: tuple[float, float | None]
-    phase_noise: tuple
+    phase_noise: dict
 
 
 def _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn: list[str], lens=None) -> _Measurement:

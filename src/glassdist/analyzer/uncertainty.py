@@ -30,6 +30,25 @@ Propagation (all operators linear, Gaussian kernels, so every step is closed for
   (for a shear smaller than about twice its uncertainty it is Rice-distributed, biased
   upwards, and the value given is the linearised one).
 
+* **F5** (iterative deformation): each pass demodulates the photo against a reference
+  synthesised from the prediction, so the same noise re-enters every pass. In the linear
+  regime of the transfer module (:mod:`~glassdist.analyzer.transfer`), after ``n``
+  demodulations the photo's phase noise has gone through ``k_n`` and the reference's
+  through ``r_n``:
+
+  .. math:: k_1 = r_1 = C, \\quad k_{j+1} = k_j + C\\,(1 - B k_j), \\quad
+            r_{j+1} = r_j + C B\\,(B_1 - r_j),
+
+  ``C`` the Gaussian stages, ``B`` the bilinear interpolation of the prediction and of the
+  reference's baseband into the synthesised reference, ``B_1`` the bandpass alone (the
+  reference enters through its baseband, :func:`deformation_noise_gains`). ``k_n`` tends to
+  ``1 / B``: the converged displacement keeps the photo's noise that one pass smoothed away
+  (1.7 times the one-pass sigma after 5 demodulations on a strong wave); the reference's
+  stays near ``B_1``. The displacement's variance is the one-pass closed form times these
+  gains. Block A divides out the signal's response and applies ``G_sigma``, so the
+  channels' noise follows ``G_sigma`` as before (the reference's term, slightly less:
+  not modelled).
+
 The carriers' noises are independent (disjoint bands of a white spectrum), and so are
 the image's and the reference's. Near region borders the first-order normalised
 convolution averages fewer samples than the formula assumes (the uncertainty there is
@@ -67,6 +86,7 @@ __all__ = [
     "ChannelUncertainty",
     "channel_uncertainty",
     "displacement_sigma",
+    "deformation_noise_gains",
 ]
 
 
@@ -213,3 +233,51 @@ def displacement_sigma(phase_var: tuple[np.ndarray, np.ndarray], T: np.ndarray, 
     A = T if R is None else R.T @ T  # delta_cam = A phi
     var = A[:, 0] ** 2 * phase_var[0][..., None] + A[:, 1] ** 2 * phase_var[1][..., None]
     return np.sqrt(var).astype(np.float32)
+
+
+def deformation_noise_gains(transfer, component: int, bandpass_px2: np.ndarray, *, samples: int = 256) -> tuple[float, float]:
+    """Variance gains of a displacement component's phase noise after F5's passes: ``(photo, reference)``.
+
+    Relative to one pass (module notes, **F5**): ``int |k_n N|^2 / int |C N|^2`` and
+    ``int |r_n N|^2 / int |C N|^2``, ``N`` the block means and the interpolation to the
+    pixel grid, summed on a frequency grid that resolves ``C``.
+
+    Parameters
+    ----------
+    transfer : InstrumentTransfer
+        The Analyzer's transfer (:mod:`~glassdist.analyzer.transfer`): the Gaussian stages'
+        covariance ``C`` per carrier, the demodulation grid's step (``B``), the block means,
+        the interpolation step and ``passes`` (``n``).
+    component : int
+        Carrier 0 or 1.
+    bandpass_px2 : ndarray (2, 2)
+        Spatial covariance (px^2) of that carrier's bandpass alone (``B_1``).
+    samples : int
+        Frequency samples per axis.
+
+    Returns
+    -------
+    (float, float)
+        ``(1.0, 1.0)`` for one pass.
+    """
+    from .transfer import gaussian_response
+
+    n = int(transfer.passes)
+    if n <= 1:
+        return 1.0, 1.0
+    cov = np.asarray(transfer.gaussian_px2[component], float)
+    # C is negligible beyond 5 of its frequency sigmas (1 / (2 pi sigma_px)) along its narrowest spatial axis
+    f_max = min(0.5, 5.0 / (2 * np.pi * np.sqrt(float(np.linalg.eigvalsh(cov)[0]))))
+    f = np.linspace(-f_max, f_max, samples, endpoint=False)
+    fy, fx = f[:, None], f[None, :]
+    C = gaussian_response(cov, fy, fx)
+    B1 = gaussian_response(np.asarray(bandpass_px2, float), fy, fx)
+    sy, sx = transfer.fine_step_px
+    B = np.sinc(sy * fy) ** 2 * np.sinc(sx * fx) ** 2
+    k, r = C.copy(), C.copy()
+    for _ in range(n - 1):
+        k = k + C * (1.0 - B * k)
+        r = r + C * B * (B1 - r)
+    N2 = np.abs(transfer.non_gaussian(fy, fx)) ** 2
+    one = float(np.sum(C**2 * N2))
+    return float(np.sum(k**2 * N2)) / one, float(np.sum(r**2 * N2)) / one
