@@ -44,8 +44,8 @@ from .region import (
 )
 from .resample import image_grid_valid
 from .result import AnalysisResult
-from .uncertainty import (channel_uncertainty, deformation_noise_gains, displacement_sigma, gradient_covariance, noise_std,
-                          phase_variance)
+from .uncertainty import (channel_uncertainty, deformation_channel_gain, deformation_noise_gains, displacement_sigma,
+                          gradient_covariance, noise_std, phase_variance)
 from .unwrap import unwrap
 
 __all__ = ["AnalysisResult", "ReferenceModel", "analyze", "calibrate_from_photo", "prepare_reference"]
@@ -845,22 +845,22 @@ def _uncertainty(ag: _AnalysisGrid, phase_noise: dict, ch, a1: dict, sigma_px: f
     the metric smoothing included, and the differentiation, the channels'
     (:mod:`~glassdist.analyzer.uncertainty`).
     """
-    blur, photo, ref = phase_noise["blur"], phase_noise["photo"], phase_noise["reference"]
-    white = photo if ref is None else tuple(a + b for a, b in zip(photo, ref))
-    var = []
+    blur, photo, ref, bandpass = (phase_noise[k] for k in ("blur", "photo", "reference", "bandpass"))
+    tr = ag.transfer
+    var, grad_cov = [], []
     for i in range(2):
-        g_photo, g_ref = (1.0, 1.0) if ag.transfer is None else deformation_noise_gains(ag.transfer, i,
-                                                                                       phase_noise["bandpass"][i])
-        w_ = photo[i] * np.float32(g_photo) + (0.0 if ref is None else ref[i] * np.float32(g_ref))
-        var.append(phase_variance(w_, blur[i]))
-    disp = displacement_sigma(tuple(var), a1["T"], a1["R"])
-    grad_cov = []
-    for i in range(2):
+        g_photo, g_ref = (1.0, 1.0) if tr is None else deformation_noise_gains(tr, i, bandpass[i])
+        g_chan = 1.0 if tr is None or ref is None else deformation_channel_gain(tr, i, bandpass[i],
+                                                                                tr.effective_sigma_px(sigma_px))
+        var.append(phase_variance(photo[i] * np.float32(g_photo) + (0.0 if ref is None else ref[i] * np.float32(g_ref)),
+                                  blur[i]))
         metric = sigma_px**2 * np.eye(2)
         if a1["blur"] is not None:  # the metric smoothing tops the demodulation blur up to sigma
             ev, V = np.linalg.eigh(metric - a1["blur"][i])
             metric = (V * np.clip(ev, 0.0, None)) @ V.T
-        grad_cov.append(gradient_covariance(white[i], blur[i] + metric))
+        white = photo[i] if ref is None else photo[i] + ref[i] * np.float32(g_chan)
+        grad_cov.append(gradient_covariance(white, blur[i] + metric))
+    disp = displacement_sigma(tuple(var), a1["T"], a1["R"])
     strain = ch.strain if a1["R"] is None else a1["R"] @ ch.strain @ a1["R"].T  # back to the component frame
     unc = channel_uncertainty(tuple(grad_cov), a1["T"], a1["W"], strain, distance_m)
     out = {"phi_eff_sigma_mD": unc.phi_eff_sigma_mD, "phi_shear_sigma_mD": unc.phi_shear_sigma_mD,

@@ -45,9 +45,9 @@ Propagation (all operators linear, Gaussian kernels, so every step is closed for
   ``1 / B``: the converged displacement keeps the photo's noise that one pass smoothed away
   (1.7 times the one-pass sigma after 5 demodulations on a strong wave); the reference's
   stays near ``B_1``. The displacement's variance is the one-pass closed form times these
-  gains. Block A divides out the signal's response and applies ``G_sigma``, so the
-  channels' noise follows ``G_sigma`` as before (the reference's term, slightly less:
-  not modelled).
+  gains. Block A divides out the signal's response (``k_n``) and applies ``G_sigma``, so
+  the photo's term reaches the channels through ``G_sigma`` as in one pass, and the
+  reference's through ``(r_n / k_n) G_sigma``, a little less (:func:`deformation_channel_gain`).
 
 The carriers' noises are independent (disjoint bands of a white spectrum), and so are
 the image's and the reference's. Near region borders the first-order normalised
@@ -87,6 +87,7 @@ __all__ = [
     "channel_uncertainty",
     "displacement_sigma",
     "deformation_noise_gains",
+    "deformation_channel_gain",
 ]
 
 
@@ -260,24 +261,56 @@ def deformation_noise_gains(transfer, component: int, bandpass_px2: np.ndarray, 
     (float, float)
         ``(1.0, 1.0)`` for one pass.
     """
-    from .transfer import gaussian_response
-
-    n = int(transfer.passes)
-    if n <= 1:
+    if int(transfer.passes) <= 1:
         return 1.0, 1.0
     cov = np.asarray(transfer.gaussian_px2[component], float)
     # C is negligible beyond 5 of its frequency sigmas (1 / (2 pi sigma_px)) along its narrowest spatial axis
-    f_max = min(0.5, 5.0 / (2 * np.pi * np.sqrt(float(np.linalg.eigvalsh(cov)[0]))))
-    f = np.linspace(-f_max, f_max, samples, endpoint=False)
-    fy, fx = f[:, None], f[None, :]
-    C = gaussian_response(cov, fy, fx)
+    fy, fx = _frequencies(5.0 / (2 * np.pi * np.sqrt(float(np.linalg.eigvalsh(cov)[0]))), samples)
+    C, k, r = _pass_responses(transfer, component, bandpass_px2, fy, fx)
+    N2 = np.abs(transfer.non_gaussian(fy, fx)) ** 2
+    one = float(np.sum(C**2 * N2))
+    return float(np.sum(k**2 * N2)) / one, float(np.sum(r**2 * N2)) / one
+
+
+def deformation_channel_gain(transfer, component: int, bandpass_px2: np.ndarray, sigma_px: float, *,
+                             samples: int = 256) -> float:
+    """Variance gain of the reference's term in the channels' gradient noise after F5's passes.
+
+    Block A divides out the signal's response ``k_n`` (the photo's noise goes through it too)
+    and applies ``G_sigma``: the photo's term reaches the channels through ``G_sigma`` alone,
+    the reference's through ``(r_n / k_n) G_sigma`` (module notes, **F5**). Returned:
+    ``int |nu|^2 |r_n / k_n|^2 G_sigma^2 / int |nu|^2 G_sigma^2`` (1.0 for one pass).
+
+    Parameters
+    ----------
+    transfer, component, bandpass_px2, samples
+        As :func:`deformation_noise_gains`.
+    sigma_px : float
+        The reporting smoothing's sigma reached, px.
+    """
+    if int(transfer.passes) <= 1:
+        return 1.0
+    fy, fx = _frequencies(5.0 / (2 * np.pi * float(sigma_px)), samples)
+    _, k, r = _pass_responses(transfer, component, bandpass_px2, fy, fx)
+    w = (fx**2 + fy**2) * np.exp(-4.0 * np.pi**2 * float(sigma_px) ** 2 * (fx**2 + fy**2))
+    return float(np.sum(w * (r / k) ** 2) / np.sum(w))
+
+
+def _frequencies(f_max: float, samples: int):
+    f = np.linspace(-min(0.5, f_max), min(0.5, f_max), samples, endpoint=False)
+    return f[:, None], f[None, :]
+
+
+def _pass_responses(transfer, component: int, bandpass_px2, fy, fx):
+    """``(C, k_n, r_n)`` at ``(fy, fx)`` cycles/px: the Gaussian stages and the photo's and the reference's noise transfer."""
+    from .transfer import gaussian_response
+
+    C = gaussian_response(np.asarray(transfer.gaussian_px2[component], float), fy, fx)
     B1 = gaussian_response(np.asarray(bandpass_px2, float), fy, fx)
     sy, sx = transfer.fine_step_px
     B = np.sinc(sy * fy) ** 2 * np.sinc(sx * fx) ** 2
     k, r = C.copy(), C.copy()
-    for _ in range(n - 1):
+    for _ in range(int(transfer.passes) - 1):
         k = k + C * (1.0 - B * k)
         r = r + C * B * (B1 - r)
-    N2 = np.abs(transfer.non_gaussian(fy, fx)) ** 2
-    one = float(np.sum(C**2 * N2))
-    return float(np.sum(k**2 * N2)) / one, float(np.sum(r**2 * N2)) / one
+    return C, k, r
