@@ -2,8 +2,8 @@
 
 Each mutant changes one operator or constant of one function of a core module (Block F
 ``analyzer/fourier.py`` and its F5 deformation ``analyzer/deform.py``, the unwrapping ``analyzer/unwrap.py``, Block I
-``analyzer/homography.py`` and its lens model ``analyzer/lens.py``, Block A ``analyzer/metrics.py`` and its bulk
-channel ``analyzer/bulk.py``, the acceptance checks
+``analyzer/homography.py`` and its lens model ``analyzer/lens.py``, Block A ``analyzer/metrics.py``, its bulk
+channel ``analyzer/bulk.py`` and the uncertainty maps ``analyzer/uncertainty.py``, the acceptance checks
 ``acceptance/assess.py`` and ``acceptance/spec.py``). It is written into a scratch copy of
 ``src/`` and the module's targeted tests run against it (``PYTHONPATH``, first failure
 stops the run). A mutant is *killed* when a test fails (or the run exceeds the time
@@ -63,6 +63,14 @@ MODULES = {
                                  "tests/test_lens.py::test_bulk_channel_of_the_pillowed_igu"]),
     "metrics": ("analyzer/metrics.py", ["tests/test_analyzer_metrics.py", "tests/test_streamed_statistics.py",
                                        "tests/test_accuracy_truth.py"]),
+    "uncertainty": ("analyzer/uncertainty.py", [
+        "tests/test_analyzer_quality.py::test_deformation_noise_gains_closed_form",
+        "tests/test_analyzer_quality.py::test_deformation_channel_gain_against_a_radial_integral",
+        "tests/test_analyzer_quality.py::test_deformation_noise_gains_against_a_double_integral",
+        "tests/test_analyzer_quality.py::test_channel_uncertainty_of_an_oblique_shear_against_the_strain_covariance",
+        "tests/test_analyzer_quality.py::test_uncertainty_matches_monte_carlo",
+        "tests/test_analyzer_quality.py::test_uncertainty_scales_with_noise_and_fields_are_registered",
+        "tests/test_analyzer_quality.py::test_uncertainty_matches_the_scatter_of_single_captures_of_a_strong_wave"]),
     "acceptance": ("acceptance/assess.py", ["tests/test_acceptance.py"]),
     "spec": ("acceptance/spec.py", ["tests/test_spec.py", "tests/test_acceptance.py"]),
 }

@@ -290,6 +290,81 @@ def test_deformation_channel_gain_against_a_radial_integral():
     assert truth < 0.95  # the reference's term is smaller after the passes
 
 
+def test_channel_uncertainty_of_an_oblique_shear_against_the_strain_covariance():
+    """phi_eff and phi_shear sigma against the strain's covariance written out as a Kronecker product.
+
+    ``strain[c, a] = sum_i T[c, i] (W^T grad phi_i)[a]``, so ``cov(vec strain) = sum_i (t_i t_i^T) kron
+    (W^T Q_i W)``; phi_eff = trace, phi_shear linearised along the shear's direction ``(a, b) / |(a, b)|``
+    with ``a = (s00 - s11) / 2``, ``b = (s01 + s10) / 2``, times 2. Non-diagonal T, W and Q, and shears in
+    every direction (an axis-aligned shear leaves the cross terms unseen)."""
+    from glassdist.analyzer.uncertainty import channel_uncertainty
+
+    rng = np.random.default_rng(11)
+    T = np.array([[0.9, 0.3], [-0.2, 1.1]])
+    W = np.array([[1.3, 0.4], [-0.1, 0.8]])
+    Q = []
+    for _ in range(2):
+        A = rng.normal(size=(2, 2))
+        Q.append(A @ A.T + 0.3 * np.eye(2))
+    angles = np.linspace(0.0, np.pi, 7)
+    strain = np.zeros((1, angles.size, 2, 2))
+    strain[0, :, 0, 0], strain[0, :, 1, 1] = 0.5 + 0.3 * np.cos(angles), 0.5 - 0.3 * np.cos(angles)
+    strain[0, :, 0, 1] = strain[0, :, 1, 0] = 0.3 * np.sin(angles)
+    L = 2.0
+    out = channel_uncertainty(tuple(np.broadcast_to(q, (1, angles.size, 2, 2)) for q in Q), T, W, strain, L)
+    cov = sum(np.kron(np.outer(T[:, i], T[:, i]), W.T @ Q[i] @ W) for i in range(2))  # vec order (c, a)
+    trace = np.array([1.0, 0, 0, 1.0])
+    assert np.allclose(out.phi_eff_sigma_mD[0], 1000.0 / L * np.sqrt(trace @ cov @ trace), rtol=1e-5)
+    for j, th in enumerate(angles):
+        g = np.array([np.cos(th), 0.0, 0.0, -np.cos(th)]) / 2 + np.array([0.0, np.sin(th), np.sin(th), 0.0]) / 2
+        assert out.phi_shear_sigma_mD[0, j] == pytest.approx(1000.0 / L * 2 * np.sqrt(g @ cov @ g), rel=1e-5), th
+
+
+def test_deformation_noise_gains_against_a_double_integral():
+    """F5's gains with everything the closed forms leave out: an anisotropic, tilted kernel, a coarse
+    demodulation grid (``B`` = sinc^2 of its step), a bandpass narrower than the kernel, block means, and a
+    kernel wide enough in frequency to reach the pixel grid's Nyquist band (the noise has no power beyond
+    0.5 cycle/px). Truth: the documented recursion integrated by ``scipy.integrate.dblquad`` over the band."""
+    from scipy.integrate import dblquad
+
+    from glassdist.analyzer.transfer import InstrumentTransfer, dirichlet_response, gaussian_response
+    from glassdist.analyzer.uncertainty import deformation_channel_gain, deformation_noise_gains
+
+    for cov, band, step, block, sigma in ((np.array([[9.0, 3.0], [3.0, 16.0]]), np.array([[5.0, 2.0], [2.0, 10.0]]),
+                                          (2.0, 1.5), 2, 6.0),
+                                         (np.diag([1.2, 1.0]), np.diag([0.4, 0.3]), (1.0, 1.0), 1, 2.0)):
+        t = InstrumentTransfer(np.array([cov, cov]), fine_step_px=step, block=block, passes=4)
+        f_top = min(0.5, 6.0 / (2 * np.pi * np.sqrt(np.linalg.eigvalsh(cov)[0])))
+
+        def parts(fy, fx):
+            C = gaussian_response(cov, fy, fx)
+            B1 = gaussian_response(band, fy, fx)
+            B = np.sinc(step[0] * fy) ** 2 * np.sinc(step[1] * fx) ** 2
+            k, r = C, C
+            for _ in range(3):
+                k, r = k + C * (1 - B * k), r + C * B * (B1 - r)
+            N2 = (dirichlet_response(block, step[0], fy) * dirichlet_response(block, step[1], fx)) ** 2
+            return C, k, r, N2
+
+        def integral(fn, top):
+            return dblquad(lambda fx, fy: fn(fy, fx), -top, top, -top, top, epsabs=0, epsrel=1e-7)[0]
+
+        one = integral(lambda fy, fx: parts(fy, fx)[0] ** 2 * parts(fy, fx)[3], f_top)
+        photo = integral(lambda fy, fx: parts(fy, fx)[1] ** 2 * parts(fy, fx)[3], f_top) / one
+        ref = integral(lambda fy, fx: parts(fy, fx)[2] ** 2 * parts(fy, fx)[3], f_top) / one
+        got = deformation_noise_gains(t, 0, band, samples=512)
+        assert got[0] == pytest.approx(photo, rel=5e-3) and got[1] == pytest.approx(ref, rel=5e-3), (photo, ref, got)
+        g_top = min(0.5, 8.0 / (2 * np.pi * sigma))
+
+        def chan(fy, fx):
+            _, k, r, _ = parts(fy, fx)
+            return (fx * fx + fy * fy) * np.exp(-4 * np.pi**2 * sigma**2 * (fx * fx + fy * fy)) * (r / k) ** 2
+
+        truth = integral(chan, g_top) / integral(lambda fy, fx: (fx * fx + fy * fy) * np.exp(
+            -4 * np.pi**2 * sigma**2 * (fx * fx + fy * fy)), g_top)
+        assert deformation_channel_gain(t, 0, band, sigma, samples=512) == pytest.approx(truth, rel=5e-3)
+
+
 @pytest.mark.parametrize("method", ["comparative", "direct"])
 def test_uncertainty_matches_the_scatter_of_single_captures_of_a_strong_wave(method):
     """A roller wave of strain 0.31 (F5 runs, its region grown), 12 independent captures of the same scene (noise
