@@ -811,14 +811,18 @@ def _channels(ag: _AnalysisGrid, ks, H_jac, p: AnalyzerParams, p_c, mm_per_px, s
     return delta_cam, ch, {"T": T, "W": np.eye(2) / mm_per_px, "R": None, "blur": iso_blur}
 
 
-def _phase_noise(demod: _Demodulation, refm, agrid: F.SamplingGrid, p: AnalyzerParams) -> dict:
-    """Phase noise levels ``s^2 / (2 |b|^2)`` per carrier on the Block A grid, rad^2 px^2, and the filters they went through.
+@dataclass(frozen=True)
+class _PhaseNoise:
+    """Phase noise levels ``s^2 / (2 |b|^2)`` per carrier on the Block A grid (rad^2 px^2), and the filters they went through."""
 
-    ``{"photo": (w1, w2), "reference": (w1, w2) or None, "blur": (2, 2, 2), "bandpass": (2, 2, 2)}``:
-    the photo's and the reference's levels (independent noises), the spatial covariance (px^2
-    per carrier) of the low-pass up to that grid, and that of the bandpass alone (F5's
-    reference term, :func:`~glassdist.analyzer.uncertainty.deformation_noise_gains`).
-    """
+    photo: tuple[np.ndarray, np.ndarray]
+    reference: tuple[np.ndarray, np.ndarray] | None  # independent of the photo's; None: Direct Method
+    blur: np.ndarray  # (2, 2, 2): per carrier, spatial covariance (px^2) of the low-pass up to that grid
+    bandpass: np.ndarray  # (2, 2, 2): that of the bandpass alone (F5's reference term)
+
+
+def _phase_noise(demod: _Demodulation, refm, agrid: F.SamplingGrid, p: AnalyzerParams) -> _PhaseNoise:
+    """The photo's and the reference's phase noise levels on the Block A grid and Block F's filters (:class:`_PhaseNoise`)."""
     m = demod.grid.shape[0] // agrid.shape[0]
     ones = np.ones(demod.grid.shape, np.float32)
 
@@ -832,12 +836,12 @@ def _phase_noise(demod: _Demodulation, refm, agrid: F.SamplingGrid, p: AnalyzerP
     blur = _demodulation_blur_px2(demod.carriers, demod.covariances, p)
     if m > 1:
         blur = blur + (m * max(demod.grid.step)) ** 2 / 12.0 * np.eye(2)
-    return {"photo": level(demod.noise_std, demod.mods[:2]),
-            "reference": None if refm is None else level(refm.noise_std, demod.mods[2:4]),
-            "blur": blur, "bandpass": np.array([np.linalg.inv(c) / (4 * np.pi**2) for c in demod.covariances])}
+    return _PhaseNoise(level(demod.noise_std, demod.mods[:2]),
+                       None if refm is None else level(refm.noise_std, demod.mods[2:4]),
+                       blur, np.array([np.linalg.inv(c) / (4 * np.pi**2) for c in demod.covariances]))
 
 
-def _uncertainty(ag: _AnalysisGrid, phase_noise: dict, ch, a1: dict, sigma_px: float, distance_m: float) -> dict:
+def _uncertainty(ag: _AnalysisGrid, phase_noise: _PhaseNoise, ch, a1: dict, sigma_px: float, distance_m: float) -> dict:
     """Standard uncertainties of the displacement and the channels from the image noise (registered fields).
 
     The phase noise (:func:`_phase_noise`) through Block F's kernel (and the block means),
@@ -845,7 +849,7 @@ def _uncertainty(ag: _AnalysisGrid, phase_noise: dict, ch, a1: dict, sigma_px: f
     the metric smoothing included, and the differentiation, the channels'
     (:mod:`~glassdist.analyzer.uncertainty`).
     """
-    blur, photo, ref, bandpass = (phase_noise[k] for k in ("blur", "photo", "reference", "bandpass"))
+    blur, photo, ref, bandpass = phase_noise.blur, phase_noise.photo, phase_noise.reference, phase_noise.bandpass
     tr = ag.transfer
     var, grad_cov = [], []
     for i in range(2):
@@ -1101,7 +1105,7 @@ class _Measurement:
     margin_px: tuple[float, float]
     guard_px: float
     noise_std: tuple[float, float | None]
-    phase_noise: dict
+    phase_noise: _PhaseNoise
 
 
 def _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn: list[str], lens=None) -> _Measurement:
