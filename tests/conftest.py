@@ -48,7 +48,7 @@ def run_cli(*args, cwd=None):
     import io
     import subprocess
 
-    from glassdist.cli import main
+    from glassdist.cli import exit_status, main
 
     argv = [str(a) for a in args]
     out, err = io.StringIO(), io.StringIO()
@@ -60,7 +60,7 @@ def run_cli(*args, cwd=None):
             try:
                 code = main(argv)
             except SystemExit as exc:  # argparse: --help, --version, option errors
-                code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+                code = exit_status(exc)
     finally:
         os.chdir(here)
     return subprocess.CompletedProcess(["glassdist", *argv], code, out.getvalue(), err.getvalue())

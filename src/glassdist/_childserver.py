@@ -54,12 +54,12 @@ def _child(request: dict) -> None:
         sys.stdin = open(0, closefd=False)  # noqa: SIM115 - the process's own descriptors
         sys.stdout = open(1, "w", encoding="utf-8", errors="replace", buffering=1, closefd=False)  # noqa: SIM115
         sys.stderr = open(2, "w", encoding="utf-8", errors="replace", buffering=1, closefd=False)  # noqa: SIM115
-        from glassdist.cli import main
+        from glassdist.cli import exit_status, main
 
         try:
             code = main(request["args"])
         except SystemExit as exc:  # argparse: --help, --version, option errors
-            code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+            code = exit_status(exc)
         except KeyboardInterrupt:  # before main's own handler could see it
             code = 130
         except BaseException:  # what --debug lets through: the traceback, as the interpreter would print it

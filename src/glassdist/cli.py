@@ -24,7 +24,7 @@ from .errors import GlassdistError, InputError
 from .history.options import add_recording_options, recording
 from .validation import DISTANCE_M, PITCH_MM, SIGMA_MM, check_sigma_extent, number_option, safe_text
 
-__all__ = ["main", "build_parser"]
+__all__ = ["main", "build_parser", "exit_status"]
 
 log = logging.getLogger("glassdist")
 
@@ -347,6 +347,14 @@ def build_parser() -> argparse.ArgumentParser:
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(sub)
     return parser
+
+
+def exit_status(exc: SystemExit) -> int:
+    """The status a process ends with on ``exc`` (argparse's ``--help``, ``--version``, option errors), as the interpreter maps it.
+
+    For callers that run :func:`main` inside a process of their own (the batch's forked children, the tests).
+    """
+    return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
 
 
 def main(argv: list[str] | None = None) -> int:
