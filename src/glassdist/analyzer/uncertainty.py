@@ -236,7 +236,7 @@ def displacement_sigma(phase_var: tuple[np.ndarray, np.ndarray], T: np.ndarray, 
     return np.sqrt(var).astype(np.float32)
 
 
-def deformation_noise_gains(transfer, component: int, bandpass_px2: np.ndarray, *, samples: int = 256) -> tuple[float, float]:
+def deformation_noise_gains(transfer, component: int, bandpass_px2: np.ndarray, *, samples: int = 128) -> tuple[float, float]:
     """Variance gains of a displacement component's phase noise after F5's passes: ``(photo, reference)``.
 
     Relative to one pass (module notes, **F5**): ``int |k_n N|^2 / int |C N|^2`` and
@@ -254,7 +254,8 @@ def deformation_noise_gains(transfer, component: int, bandpass_px2: np.ndarray, 
     bandpass_px2 : ndarray (2, 2)
         Spatial covariance (px^2) of that carrier's bandpass alone (``B_1``).
     samples : int
-        Frequency samples per axis.
+        Frequency samples per axis (the sums of Gaussians converge fast: 128 and 1024 agree to 5 digits
+        on the strong wave's transfer, a 1 px kernel and a 30 px one).
 
     Returns
     -------
@@ -273,7 +274,7 @@ def deformation_noise_gains(transfer, component: int, bandpass_px2: np.ndarray, 
 
 
 def deformation_channel_gain(transfer, component: int, bandpass_px2: np.ndarray, sigma_px: float, *,
-                             samples: int = 256) -> float:
+                             samples: int = 128) -> float:
     """Variance gain of the reference's term in the channels' gradient noise after F5's passes.
 
     Block A divides out the signal's response ``k_n`` (the photo's noise goes through it too)
