@@ -131,13 +131,17 @@ class InstrumentTransfer:
             r = r * bspline_response(iy, fy) * bspline_response(ix, fx)
         return r
 
+    def prediction_interpolation(self, fy: np.ndarray, fx: np.ndarray) -> np.ndarray:
+        """``B``: the bilinear interpolation by which F5's synthesised reference receives the prediction from the demodulation grid."""
+        sy, sx = self.fine_step_px
+        return np.sinc(sy * fy) ** 2 * np.sinc(sx * fx) ** 2
+
     def demodulation(self, component: int, fy: np.ndarray, fx: np.ndarray) -> np.ndarray:
         """Response of the demodulation's Gaussian stages: ``G_i``, or ``(1 - (1 - G_i B)^n) / B`` after F5."""
         g = gaussian_response(self.gaussian_px2[component], fy, fx)
         if self.passes <= 1:
             return g
-        sy, sx = self.fine_step_px
-        b = np.sinc(sy * fy) ** 2 * np.sinc(sx * fx) ** 2  # bilinear interpolation from the demodulation grid
+        b = self.prediction_interpolation(fy, fx)
         return (1.0 - (1.0 - g * b) ** self.passes) / b
 
     def response(self, component: int, fy: np.ndarray, fx: np.ndarray) -> np.ndarray:

@@ -303,15 +303,15 @@ def _frequencies(f_max: float, samples: int):
 
 
 def _pass_responses(transfer, component: int, bandpass_px2, fy, fx):
-    """``(C, k_n, r_n)`` at ``(fy, fx)`` cycles/px: the Gaussian stages and the photo's and the reference's noise transfer."""
+    """``(C, k_n, r_n)`` at ``(fy, fx)`` cycles/px: the Gaussian stages and the photo's and the reference's noise transfer.
+
+    The recursions of the module notes in closed form: ``k_n`` is the signal's own response
+    (:meth:`~glassdist.analyzer.transfer.InstrumentTransfer.demodulation`), and
+    ``r_n = B_1 + (C - B_1) (1 - C B)^(n - 1)``.
+    """
     from .transfer import gaussian_response
 
     C = gaussian_response(np.asarray(transfer.gaussian_px2[component], float), fy, fx)
     B1 = gaussian_response(np.asarray(bandpass_px2, float), fy, fx)
-    sy, sx = transfer.fine_step_px
-    B = np.sinc(sy * fy) ** 2 * np.sinc(sx * fx) ** 2
-    k, r = C.copy(), C.copy()
-    for _ in range(int(transfer.passes) - 1):
-        k = k + C * (1.0 - B * k)
-        r = r + C * B * (B1 - r)
-    return C, k, r
+    r = B1 + (C - B1) * (1.0 - C * transfer.prediction_interpolation(fy, fx)) ** (int(transfer.passes) - 1)
+    return C, transfer.demodulation(component, fy, fx), r
