@@ -12,6 +12,7 @@ import contextlib
 import difflib
 import importlib
 import logging
+import os
 import sys
 import traceback
 from pathlib import Path
@@ -357,8 +358,57 @@ def exit_status(exc: SystemExit) -> int:
     return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
 
 
+class _ReaderGone:
+    """``sys.stdout`` / ``sys.stderr`` for the duration of a command: once the reader of a pipe has gone
+    (``glassdist batch ... | head``, a pager quit, a dead ``tee``), the rest of the output is dropped and
+    the work goes on; the exit status stays the work's own.
+
+    Without it the first line written after that raised ``BrokenPipeError``: a batch stopped
+    between panes and the command exited 1 as an internal error, with its outputs written.
+    """
+
+    def __init__(self, stream):
+        self._stream, self.gone = stream, False
+
+    def _drop(self):
+        self.gone = True
+        try:  # what the stream still buffers goes nowhere at exit, instead of raising again
+            null = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(null, self._stream.fileno())
+            os.close(null)
+        except (OSError, ValueError, AttributeError):
+            pass
+
+    def write(self, text):
+        if not self.gone:
+            try:
+                return self._stream.write(text)
+            except BrokenPipeError:
+                self._drop()
+        return len(text)
+
+    def flush(self):
+        if not self.gone:
+            try:
+                self._stream.flush()
+            except BrokenPipeError:
+                self._drop()
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit code."""
+    streams = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = _ReaderGone(sys.stdout), _ReaderGone(sys.stderr)
+    try:
+        return _main(argv)
+    finally:
+        sys.stdout, sys.stderr = streams
+
+
+def _main(argv: list[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.debug else logging.ERROR, format="%(levelname)s: %(message)s")
