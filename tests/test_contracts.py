@@ -138,7 +138,8 @@ def test_console_script(pair, tmp_path):
 def test_a_reader_that_leaves_stops_neither_a_batch_nor_an_analysis(pair, tmp_path):
     """``glassdist batch ... | head -1``: the pipe's reader is gone before the first line. Every pane is still
     analysed and indexed, and the exit status is the work's (0), not an internal error (it was 1, the
-    batch stopped at its first printed line and the analysis said BrokenPipeError)."""
+    batch stopped at its first printed line and the analysis said BrokenPipeError). Descriptors closed
+    before the start: the work and its status too."""
     manifest = tmp_path / "manifest.csv"
     manifest.write_text("id,image,reference,pitch_mm,distance_m\n"
                         f"a,{pair / 'pane.png'},{pair / 'reference.png'},2,1\nb,{pair / 'pane.png'},,2,1\n")
@@ -154,6 +155,13 @@ def test_a_reader_that_leaves_stops_neither_a_batch_nor_an_analysis(pair, tmp_pa
     index = (tmp_path / "b" / "index.csv").read_text().splitlines()
     assert [row.split(",")[1] for row in index[1:]] == ["done", "done"]
     assert json.loads((tmp_path / "a" / "summary.json").read_text())["method"] == "comparative"
+    # started with both descriptors closed (``>&- 2>&-``, as from some schedulers): the same (it was exit 1)
+    closed = [*_analyze_args(pair, tmp_path / "c"), "--reference", str(pair / "reference.png")]
+    shell = f'"{SCRIPT}" "$@" >&- 2>&-'
+    assert subprocess.run(["bash", "-c", shell, "_", *closed], env=ENV, timeout=300).returncode == 0
+    assert (tmp_path / "c" / "summary.json").is_file()
+    bad = [*_analyze_args(pair, tmp_path / "d"), "--distance-m", "-1"]
+    assert subprocess.run(["bash", "-c", shell, "_", *bad], env=ENV, timeout=300).returncode == 2
 
 
 # ----- inputs unchanged after every successful command -----

@@ -401,11 +401,12 @@ class _ReaderGone:
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit code."""
     streams = sys.stdout, sys.stderr
-    sys.stdout, sys.stderr = _ReaderGone(sys.stdout), _ReaderGone(sys.stderr)
-    try:
-        return _main(argv)
-    finally:
-        sys.stdout, sys.stderr = streams
+    with open(os.devnull, "w") as null:  # None: a descriptor closed at start (``2>&-``), written to nowhere
+        sys.stdout, sys.stderr = (_ReaderGone(null if s is None else s) for s in streams)
+        try:
+            return _main(argv)
+        finally:
+            sys.stdout, sys.stderr = streams
 
 
 def _main(argv: list[str] | None) -> int:
