@@ -8,20 +8,16 @@ import numpy as np
 import pytest
 from conftest import DATA
 
-from glassdist.analyzer import FIELDS
-from glassdist.analyzer.fourier import SamplingGrid
 from glassdist.acceptance.stats import shared_limit
 from glassdist.report import figures
 
 
-def fake_result(shape=(96, 128), *, eff_mD=-40.0, shear_mD=12.0, seed=0, method="comparative"):
-    """A stand-in for an AnalysisResult with simple known fields.
+def known_fields(shape=(96, 128), *, eff_mD=-40.0, shear_mD=12.0, seed=0):
+    """Simple known channels for the drawing functions: ``(phi_eff, phi_shear, axis_deg, valid)``.
 
-    ``phi_eff`` is a Gaussian dip of depth ``eff_mD`` at the centre, ``phi_shear``
-    a constant ``shear_mD`` plus seeded noise, axis 30 degrees; the top 8 rows
-    are invalid (NaN). Like a real result, the parameters leave ``sigma_mm`` at its
-    default (``None``) while ``sigma_mm`` holds the value used; ``method="direct"``
-    adds a homography and its fit.
+    ``phi_eff`` is a Gaussian dip of depth ``eff_mD`` at the centre, ``phi_shear`` a
+    constant ``shear_mD`` plus seeded noise, the axis 30 degrees; the top 8 rows are
+    invalid (NaN).
     """
     rng = np.random.default_rng(seed)
     h, w = shape
@@ -31,46 +27,34 @@ def fake_result(shape=(96, 128), *, eff_mD=-40.0, shear_mD=12.0, seed=0, method=
     eff = eff_mD * np.exp(-((x - w / 2) ** 2 + (y - h / 2) ** 2) / (2 * (h / 6) ** 2))
     shear = shear_mD + rng.normal(0.0, 0.5, shape).clip(-shear_mD, None)
     axis = np.full(shape, 30.0)
-    disp = np.stack([x * 1e-3, y * 1e-3], axis=-1).astype(float)
     for f in (eff, shear, axis):
         f[~valid] = np.nan
-    disp[~valid] = np.nan
-    direct = method == "direct"
-    fields = {"displacement_mm": disp.astype(np.float32), "displacement_detrended_mm": disp.astype(np.float32),
-              "phi_eff_mD": eff.astype(np.float32), "phi_shear_mD": shear.astype(np.float32),
-              "phi_total_mD": np.hypot(eff, shear).astype(np.float32), "axis_deg": axis.astype(np.float32)}
-    # the result interface on a 1 px analysis grid (the pixel grid itself)
-    return SimpleNamespace(
-        field_specs=lambda: tuple(f for f in FIELDS if f.name in fields), grid_field=fields.__getitem__,
-        pixel_field=lambda name: fields[name].copy(), grid_valid=valid, grid_trusted=valid, trusted=valid,
-        analysis_grid=SamplingGrid(shape, shape),
-        method=method, phi_eff_mD=eff, phi_shear_mD=shear, phi_total_mD=np.hypot(eff, shear),
-        axis_deg=axis, valid=valid, displacement_mm=disp, displacement_detrended_mm=disp,
-        mm_per_px=0.5, sigma_mm=2.0, detrend_degree=2, pitch_mm=5.0, distance_m=1.5,
-        carriers=SimpleNamespace(to_dict=lambda: {"period_px": [9.8, 9.8]}),
-        homography=np.diag([9.8, 9.8, 1.0]) if direct else None,
-        homography_fit=SimpleNamespace(inlier_fraction=0.875, n_points=400, rms_inlier_px=0.125) if direct else None,
-        params=SimpleNamespace(resolved=lambda: {"pattern": "checkerboard", "sigma_mm": None, "detrend_degree": 2}),
-        warnings=(), version="0.1.0",
-    )
+    return SimpleNamespace(phi_eff_mD=eff, phi_shear_mD=shear, axis_deg=axis, valid=valid)
 
 
 def test_save_channel_heatmaps_writes_pngs(tmp_path):
-    paths = figures.save_channel_heatmaps(fake_result(), tmp_path)
+    """A real analysis (a small synthetic lens, Comparative Method), not a stand-in for one."""
+    import glassdist
+    from glassdist.synthetic import lens_displacement, synthetic_capture
+
+    cap = synthetic_capture((160, 160), pitch_mm=2.0, mm_per_px=0.25,
+                            displacement=lens_displacement(0.05, 1.0, radius_mm=7.0), rng=0)
+    res = glassdist.analyze(cap.image, reference=cap.reference, pitch_mm=2.0, distance_m=1.0)
+    paths = figures.save_channel_heatmaps(res, tmp_path)
     assert [p.name for p in paths] == ["phi_eff.png", "phi_shear.png", "axis.png"]
     for p in paths:
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_shared_limit_ignores_invalid_and_covers_both_channels():
-    r = fake_result()
+    r = known_fields()
     v = shared_limit(r.phi_eff_mD, r.phi_shear_mD, valid=r.valid, percentile=100)
     assert v == pytest.approx(max(np.nanmax(np.abs(r.phi_eff_mD)), np.nanmax(r.phi_shear_mD)))
     assert shared_limit(np.full((4, 4), np.nan)) == 1.0
 
 
 def test_diverging_limits_are_symmetric_and_sequential_start_at_zero():
-    r = fake_result()
+    r = known_fields()
     _, ax = figures.plot_channel(r.phi_eff_mD, r.valid, signed=True, vmax=25.0)
     assert ax.images[0].get_clim() == (-25.0, 25.0)
     _, ax = figures.plot_channel(r.phi_shear_mD, r.valid, signed=False, vmax=25.0)
@@ -81,7 +65,7 @@ def test_diverging_limits_are_symmetric_and_sequential_start_at_zero():
 def test_plots_accept_an_existing_axes():
     from matplotlib.figure import Figure
 
-    r = fake_result()
+    r = known_fields()
     fig = Figure()
     axes = fig.subplots(2, 3)
     calls = [
