@@ -122,6 +122,12 @@ def test_exports_npz_and_float32_tiff(analysed):
     np.testing.assert_allclose(dx, ref.displacement_mm[..., 0], rtol=1e-6)
     with tifffile.TiffFile(out / "tiff" / "phi_shear_mD.tif") as t:
         assert json.loads(t.pages[0].description)["unit"] == "mD"
+        assert t.pages[0].predictor == 3  # floating-point predictor before deflate (smaller, as fast)
+    import zipfile
+
+    with zipfile.ZipFile(out / "fields.npz") as z:  # floats stored (deflate barely shrank them), masks deflated
+        how = {i.filename: i.compress_type for i in z.infolist()}
+    assert how["phi_eff_mD.npy"] == zipfile.ZIP_STORED and how["valid.npy"] == zipfile.ZIP_DEFLATED
 
 
 def test_report_is_self_contained_with_hash_version_verdict(analysed):

@@ -107,10 +107,15 @@ def _pixel_arrays(result):
 
 
 def write_fields_npz(result, path, *, digests=None):
-    """Write every field (pixel grid), ``valid`` and the scalars as a compressed NPZ, one field at a time; returns the path."""
+    """Write every field (pixel grid), ``valid`` and the scalars as an NPZ, one field at a time; returns the path.
+
+    The label maps and ``valid`` are deflated (to a few per cent); the float fields are stored
+    as they are, as in a pixel-grid ``result.npz``: deflate took them to 0.79-0.86 of their size
+    only, for 2 s per Mpx (the bundled waves photo: 2.1 s of a 12 s ``--report --export`` run).
+    """
     def members():
         for spec, a in _pixel_arrays(result):
-            yield spec.name, a, True
+            yield spec.name, a, spec.kind != "float"
         yield "valid", np.asarray(result.valid, dtype=bool), True
         for name in ("mm_per_px", "distance_m", "pitch_mm", "sigma_mm"):
             yield name, np.float64(getattr(result, name)), False
@@ -129,8 +134,11 @@ def write_fields_tiff(result, folder, *, digests=None):
     def tiff(data, name, unit):
         buf = io.BytesIO()
         meta = {"field": name, "unit": unit, "glassdist_version": result.version, "invalid": "NaN"}
-        tifffile.imwrite(buf, np.ascontiguousarray(data), description=json.dumps(meta), compression="zlib",
-                         compressionargs={"level": 1})
+        data = np.ascontiguousarray(data)
+        # the floating-point predictor (TIFF Technical Note 3, Predictor = 3, which GDAL and libtiff read)
+        # before deflate: smooth float fields to about 0.65 of their size instead of 0.86, a little faster
+        tifffile.imwrite(buf, data, description=json.dumps(meta), compression="zlib", compressionargs={"level": 1},
+                         predictor=3 if data.dtype.kind == "f" else None)
         return atomic_write_bytes(folder / f"{name}.tif", buf.getbuffer(), digests=digests)
 
     written = []
