@@ -197,6 +197,8 @@ def test_manifest_paths_defaults_and_comments(tmp_path):
     "text, words",
     [
         ("image,pitch,distance_m\na.png,5,1\n", "unknown column(s) pitch"),
+        ("image;pitch_mm;distance_m\na.png;2,5;1\n", "separates its columns with ';', not commas"),  # where ',' is the decimal mark
+        ("image\tpitch_mm\tdistance_m\na.png\t5\t1\n", "separates its columns with '\\t', not commas"),
         ("image,pitch_mm,distance_m\na.png,five,1\n", "line 2: 'pitch_mm' must be a number"),
         ("image,pitch_mm,distance_m\na.png,-5,1\n", "must be positive"),
         ("image,distance_m\na.png,1\n", "no 'pitch_mm'"),
