@@ -137,24 +137,21 @@ def test_console_script(pair, tmp_path):
 @pytest.mark.skipif(not SCRIPT.exists(), reason="the glassdist console script is not installed in this environment")
 def test_a_reader_that_leaves_stops_neither_a_batch_nor_an_analysis(pair, tmp_path):
     """``glassdist batch ... | head -1``: the pipe's reader is gone before the first line. Every pane is still
-    analysed and indexed, and the exit status is the work's (0), not an internal error (it was 1, the
-    batch stopped at its first printed line and the analysis said BrokenPipeError). Descriptors closed
-    before the start: the work and its status too."""
+    analysed and indexed, and the exit status is the work's (0), not an internal error (it was 1: the
+    batch stopped at its first printed line; ``analyze`` takes the same guard in ``cli.main``).
+    Descriptors closed before the start: the work and its status too."""
     manifest = tmp_path / "manifest.csv"
     manifest.write_text("id,image,reference,pitch_mm,distance_m\n"
                         f"a,{pair / 'pane.png'},{pair / 'reference.png'},2,1\nb,{pair / 'pane.png'},,2,1\n")
-    runs = {"batch": ["batch", str(manifest), "--out", str(tmp_path / "b"), "--no-progress"],
-            "analyze": [*_analyze_args(pair, tmp_path / "a"), "--reference", str(pair / "reference.png")]}
-    for name, args in runs.items():
-        with open(tmp_path / f"{name}.err", "w") as err:
-            proc = subprocess.Popen([str(SCRIPT), *args], stdout=subprocess.PIPE, stderr=err, env=ENV)
-            proc.stdout.close()  # the reader leaves before reading anything
-            code = proc.wait(timeout=300)
-        said = (tmp_path / f"{name}.err").read_text()
-        assert code == 0 and "BrokenPipe" not in said and "internal error" not in said, (name, code, said)
+    with open(tmp_path / "err", "w") as err:
+        proc = subprocess.Popen([str(SCRIPT), "batch", str(manifest), "--out", str(tmp_path / "b"), "--no-progress"],
+                                stdout=subprocess.PIPE, stderr=err, env=ENV)
+        proc.stdout.close()  # the reader leaves before reading anything
+        code = proc.wait(timeout=300)
+    said = (tmp_path / "err").read_text()
+    assert code == 0 and "BrokenPipe" not in said and "internal error" not in said, (code, said)
     index = (tmp_path / "b" / "index.csv").read_text().splitlines()
     assert [row.split(",")[1] for row in index[1:]] == ["done", "done"]
-    assert json.loads((tmp_path / "a" / "summary.json").read_text())["method"] == "comparative"
     # started with both descriptors closed (``>&- 2>&-``, as from some schedulers): the same (it was exit 1)
     closed = [*_analyze_args(pair, tmp_path / "c"), "--reference", str(pair / "reference.png")]
     shell = f'"{SCRIPT}" "$@" >&- 2>&-'
