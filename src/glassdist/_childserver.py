@@ -15,7 +15,8 @@ talks to it over its stdin and stdout, one JSON line each way:
 
 A child is a process of its own, as ``python -m glassdist`` would be, without the 2.2-2.5 s
 of imports a fresh interpreter pays (``-X importtime``: SQLAlchemy, matplotlib's figure
-stack, scipy.fft). The server is single-threaded, so forking it is safe; it ignores
+stack, scipy.fft). The server starts no thread of its own (the BLAS library's workers are
+re-made in a child by the library's fork handlers), so forking it is safe; it ignores
 Ctrl-C (its children do not) and ends when its stdin closes, i.e. when the process that
 started it ends or closes it. It reaps its children itself, so that a child's pid stays
 its own until then; when its stdin closes it stops any child still running and reaps it
@@ -31,7 +32,7 @@ import signal
 import sys
 
 #: Imported once in the server (what a small ``glassdist analyze`` imports). Not OpenCV: its import
-#: starts a thread, and the server must stay as it is, threads included, for fork to be safe.
+#: starts a thread that a forked child would lack, with whatever state that thread held.
 PRELOAD = ("glassdist.cli", "glassdist.analyzer.pipeline", "glassdist.storage.writer", "glassdist.report.maps",
            "glassdist.history.models", "glassdist.history.store", "glassdist.acceptance.assess", "glassdist.measures",
            "glassdist.analyzer.captures", "glassdist.analyzer.reflection", "glassdist.report.console",
