@@ -176,8 +176,8 @@ def test_manifest_paths_defaults_and_comments(tmp_path):
     m = tmp_path / "m" / "manifest.csv"
     m.write_text(
         "id,image,reference,pitch_mm,distance_m,detrend_degree\n"
-        "p1,img/one.png,ref.png,5,1.5,\n"
-        "# a comment row,,,,,\n"
+        "p1,img/one.png,ref.png,5,1.5,,,\n"  # empty trailing cells, as spreadsheets write them
+        "# a comment row, with, more, commas, than, the, header\n"
         ",two.bmp,,,2.0,4\n"
     )
     (tmp_path / "m" / "ref.png").write_bytes(b"x")  # a reference cell must name a file (the image cell need not)
@@ -199,6 +199,10 @@ def test_manifest_paths_defaults_and_comments(tmp_path):
         ("image,pitch,distance_m\na.png,5,1\n", "unknown column(s) pitch"),
         ("image;pitch_mm;distance_m\na.png;2,5;1\n", "separates its columns with ';', not commas"),  # where ',' is the decimal mark
         ("image\tpitch_mm\tdistance_m\na.png\t5\t1\n", "separates its columns with '\\t', not commas"),
+        # a duplicated column: the last one used to win silently (a pane analysed from the other photo)
+        ("image,image,pitch_mm,distance_m\na.png,b.png,5,1\n", "column(s) image appear more than once"),
+        # an unquoted comma in a path shifts every later cell
+        ("image,pitch_mm,distance_m\npane,1.png,5,1\n", "line 2 has 4 cells but the header names 3 columns"),
         ("image,pitch_mm,distance_m\na.png,five,1\n", "line 2: 'pitch_mm' must be a number"),
         ("image,pitch_mm,distance_m\na.png,-5,1\n", "must be positive"),
         ("image,distance_m\na.png,1\n", "no 'pitch_mm'"),

@@ -377,6 +377,13 @@ def read_csv_rows(path, what: str = "manifest", *, option: str | None = None) ->
         Column names, stripped.
     rows : list of (int, dict)
         ``(line number, {column: stripped cell})`` for every non-empty row.
+
+    Raises
+    ------
+    InputError
+        Columns separated by ``;``, a tab or ``|``; a column named twice in the header; a row
+        (other than a ``#`` comment) with more non-empty cells than the header has columns
+        (empty trailing cells are allowed).
     """
     lim = limits()
     p = check_input_file(path, what, option=option, max_bytes=lim.csv_bytes)
@@ -386,8 +393,21 @@ def read_csv_rows(path, what: str = "manifest", *, option: str | None = None) ->
     try:
         reader = csv.DictReader(io.StringIO(text, newline=""))
         header = [(h or "").strip() for h in (reader.fieldnames or [])]
+        other = next((sep for sep in ";\t|" if len(header) == 1 and sep in header[0]), None)
+        if other is not None:  # a spreadsheet saved with another separator (';' where ',' is the decimal mark)
+            raise InputError(f"{what} '{safe_text(p)}' separates its columns with {other!r}, not commas; "
+                             "save it as comma-separated values (CSV, with '.' as the decimal mark)")
+        twice = sorted({h for h in header if h and header.count(h) > 1})
+        if twice:  # DictReader keeps the last one: a pane would silently get the other cell's value
+            raise InputError(f"{what} '{safe_text(p)}': column(s) {safe_text(', '.join(twice), 200)} appear more "
+                             "than once in the header row; keep one of each")
         rows = []
         for lineno, row in enumerate(reader, start=2):
+            extra = [v for v in row.get(None, ()) if v.strip()]
+            comment = header and (row.get(reader.fieldnames[0]) or "").lstrip().startswith("#")
+            if extra and not comment:  # e.g. a path with an unquoted comma: every cell after it would shift
+                raise InputError(f"{what} '{safe_text(p)}' line {lineno} has {len(header) + len(row[None])} cells "
+                                 f"but the header names {len(header)} columns; quote a cell that holds a comma")
             cells = {(k or "").strip(): (v if isinstance(v, str) else "").strip() for k, v in row.items() if k is not None}
             if any(cells.values()):
                 rows.append((lineno, cells))

@@ -214,10 +214,6 @@ def read_manifest(path, defaults=None):
     header, rows = read_csv_rows(path, "manifest")
     unknown = sorted(set(header) - _COLUMNS)
     if unknown:
-        other = next((sep for sep in ";\t|" if len(header) == 1 and sep in header[0]), None)
-        if other is not None:  # a spreadsheet saved with another separator (';' where ',' is the decimal mark)
-            raise InputError(f"manifest '{safe_text(path)}' separates its columns with {other!r}, not commas; "
-                             "save it as comma-separated values (CSV, with '.' as the decimal mark)")
         raise InputError(f"manifest '{safe_text(path)}': unknown column(s) {safe_text(', '.join(unknown), 200)}; "
                          f"valid columns are {', '.join(sorted(_COLUMNS))}")
     if "image" not in header:
