@@ -184,6 +184,7 @@ DOC_BAD = {
     "newline-key": b'{"x\\nVERDICT: PASS": 1}',
     "truncated": b'{"detrend_degree": ',
     "bom-junk": b"\xef\xbb\xbf\xef\xbb\xbf{}",
+    "duplicate-key": b'{"sigma_mm": 2, "sigma_mm": 3}',  # the parser would keep the last silently
 }
 PARAMS_BAD = dict(DOC_BAD, **{
     "unknown-key": b'{"detrend_degre": 2}',
@@ -205,6 +206,8 @@ SPEC_BAD = dict(DOC_BAD, **{
                        b'"threshold_mD": 1e999, "max_percent": 1}]}',
     "percent-101": b'{"name": "s", "criteria": [{"channel": "phi_eff", "statistic": "area_over", '
                    b'"threshold_mD": 10, "max_percent": 101}]}',
+    "limit-twice": b'{"name": "s", "criteria": [{"channel": "phi_eff", "statistic": "p95_abs", "max_mD": 500, '
+                   b'"max_mD": 5}]}',
     "no-criteria": b'{"name": "s"}',
     "empty-criteria": b'{"name": "s", "criteria": []}',
     "empty-name": b'{"name": "", "criteria": [{"channel": "phi_eff", "statistic": "p95_abs", "max_mD": 1}]}',
@@ -273,6 +276,7 @@ SCENE_BAD = {
     "syntax": "pane: [1, 2\n",
     "bigint-text": yaml.safe_dump(SCENE).replace("pitch_mm: 72.6", "pitch_mm: " + "9" * 5000),
     "inf-in-analysis": _scene_text(_set(["analysis", "sigma_mm"], float("inf"))),
+    "name-twice": yaml.safe_dump(SCENE) + "name: again\n",
 }
 SCENE_BYTES = {"not-utf8": b"name: caf\xe9\n"}
 SCENE_CASES = [(c, k) for c in ("render", "predict", "validate") for k in [*SCENE_BAD, *SCENE_BYTES]]

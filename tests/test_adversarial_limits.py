@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import re
 import struct
 import time
 import zlib
@@ -109,6 +110,23 @@ def test_yaml_alias_bomb_is_refused_in_a_fraction_of_a_second(tmp_path):
     with pytest.raises(InputError, match="GLASSDIST_MAX_NODES"):
         load_document(f, "scene file")
     assert time.process_time() - t0 < 1.0
+
+
+@pytest.mark.parametrize("name, twice, once, where", [
+    ("spec.json", '{"criteria": [{"max_mD": 500, "max_mD": 5}]}', '{"criteria": [{"max_mD": 500, "min_mD": 5}]}',
+     "'max_mD' appears twice in one object"),
+    ("scene.yaml", "pane:\n  thickness_mm: 20\n  thickness_mm: 2\n", "pane:\n  thickness_mm: 20\n  n: 2\n",
+     "'thickness_mm' appears twice in one mapping (line 3)"),
+])
+def test_a_key_given_twice_is_refused_not_resolved(tmp_path, name, twice, once, where):
+    """JSON and YAML parsers keep the last of two equal keys silently: a limit or a dimension given
+    twice would be read as whichever came second."""
+    f = tmp_path / name
+    f.write_text(twice)
+    with pytest.raises(InputError, match=re.escape(where)):
+        load_document(f, "document")
+    f.write_text(once)
+    assert load_document(f, "document")  # the same keys once each: read
 
 
 def test_a_spec_name_with_a_newline_cannot_print_a_verdict_line():

@@ -211,8 +211,19 @@ def _finite_float(text):
     return v
 
 
+def _unique_keys(pairs):
+    """A JSON object's ``dict``; a key given twice is refused (the parser keeps the last one silently:
+    a specification with two ``max_mD`` would judge by whichever came second)."""
+    out = {}
+    for key, value in pairs:
+        if key in out:
+            raise ValueError(f"the key '{safe_text(key, 80)}' appears twice in one object")
+        out[key] = value
+    return out
+
+
 def _parse_json(text: str):
-    return json.loads(text, parse_constant=_reject_constant, parse_float=_finite_float)
+    return json.loads(text, parse_constant=_reject_constant, parse_float=_finite_float, object_pairs_hook=_unique_keys)
 
 
 def _yaml_node_count(root, lim: Limits) -> None:
@@ -238,9 +249,22 @@ def _yaml_node_count(root, lim: Limits) -> None:
             raise ValueError("it refers to itself (a recursive YAML alias)")
         if depth > lim.depth:
             raise ValueError(f"it is nested more than {lim.depth} levels deep")
+        if isinstance(node, yaml.MappingNode):
+            _yaml_unique_keys(node, yaml)
         on_path.add(key)
         stack.append((node, depth, True))
         stack.extend((k, depth + 1, False) for k in _yaml_children(node, yaml) if id(k) not in size)
+
+
+def _yaml_unique_keys(node, yaml) -> None:
+    """Refuse a YAML mapping that gives a key twice (the loader keeps the last one silently)."""
+    seen = set()
+    for k, _ in node.value:
+        if isinstance(k, yaml.ScalarNode) and k.tag != "tag:yaml.org,2002:merge":
+            if (k.tag, k.value) in seen:
+                raise ValueError(f"the key '{safe_text(k.value, 80)}' appears twice in one mapping "
+                                 f"(line {k.start_mark.line + 1})")
+            seen.add((k.tag, k.value))
 
 
 def _yaml_children(node, yaml):
@@ -324,7 +348,7 @@ def load_document(path, what: str, *, option: str | None = None, fmt: str | None
         See :func:`check_input_file`; not UTF-8; a syntax error; nested deeper than
         :attr:`Limits.depth`; more values than :attr:`Limits.nodes` (YAML aliases
         expanded); an integer of more than 4300 digits; ``NaN``, ``Infinity`` or a number
-        out of the floating-point range.
+        out of the floating-point range; a key given twice in one mapping.
     """
     lim = limits()
     p = check_input_file(path, what, option=option, max_bytes=lim.document_bytes)
