@@ -49,6 +49,22 @@ def test_an_abbreviated_option_exits_2_with_a_suggestion(pair, tmp_path):
     assert len(r.stderr.strip().splitlines()) == 1 and not (tmp_path / "o").exists()
 
 
+@pytest.mark.parametrize("argv", [
+    ["analyze", "x.png", "--pitch-mm", "5", "--distance-m", "1.5", "--out", "o", "--distance-m", "0.5"],
+    ["analyze", "x.png", "--pitch-mm=5", "--pitch-mm=5", "--distance-m", "1", "--out", "o"],  # even the same value
+    ["batch", "m.csv", "--out", "o", "--out", "p"],
+])
+def test_an_option_given_twice_exits_2_naming_both_values(pair, tmp_path, argv):
+    """argparse keeps the last of two values silently: a script that appends its own --distance-m to
+    another's would measure with whichever came last."""
+    r = _cli(*argv, cwd=tmp_path)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert re.search(r"argument --[a-z-]+: given twice \(\S+ and \S+\); give it once", r.stderr), r.stderr
+    assert not any(tmp_path.iterdir())  # nothing written, nothing read
+    ns = cli.build_parser().parse_args(["analyze", "x.png", "--report", "--report", "--out", "o"])
+    assert ns.report is True  # a flag given twice is still the flag
+
+
 @pytest.mark.parametrize("argv, suggestion", [
     (["analyze", "x.png", "--pitch-mm", "5", "--distnce-m", "1", "--out", "o"], "--distance-m"),
     (["analyze", "x.png", "--pitch-mm=5", "--distance-m", "1", "--refrence=r.png", "--out", "o"], "--reference"),

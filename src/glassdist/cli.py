@@ -37,12 +37,27 @@ EXIT_BAD_INPUT = 2
 COMMAND_MODULES = ["glassdist.jobs._cli", "glassdist.render._cli", "glassdist.theory._cli", "glassdist.virtual._cli", "glassdist.render.cycles", "glassdist.experiments._cli", "glassdist.virtual._sweep_cli", "glassdist.web._cli", "glassdist.history._cli"]
 
 
+class _StoreOnce(argparse._StoreAction):
+    """argparse's ``store``, refusing an option given twice: the last value used to win silently
+    (``--distance-m 1.5 ... --distance-m 0.5``, a script's option appended to another's)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        if option_string is not None:
+            given = parser.__dict__.setdefault("_given", {})
+            if self.dest in given:
+                parser.error(f"argument {option_string}: given twice ({safe_text(given[self.dest], 60)} and "
+                             f"{safe_text(values, 60)}); give it once")
+            given[self.dest] = values
+        super().__call__(parser, namespace, values, option_string)
+
+
 class OneLineErrorParser(argparse.ArgumentParser):
     """An argument parser whose errors are one line on stderr (exit status 2), no usage block.
 
     Sub-command parsers made through ``add_subparsers`` are of the same class, so every
     ``glassdist`` command reports a bad option as
-    ``glassdist COMMAND: error: MESSAGE (see glassdist COMMAND --help)``.
+    ``glassdist COMMAND: error: MESSAGE (see glassdist COMMAND --help)``. An option that
+    takes a value may be given once (:class:`_StoreOnce`).
     """
 
     _commands = None  # the sub-parsers action, once add_subparsers is called
@@ -50,6 +65,12 @@ class OneLineErrorParser(argparse.ArgumentParser):
     def __init__(self, *args, **kwargs):
         kwargs["allow_abbrev"] = False  # '--pitch 5' is not taken for '--pitch-mm 5'
         super().__init__(*args, **kwargs)
+        self.register("action", None, _StoreOnce)
+        self.register("action", "store", _StoreOnce)
+
+    def parse_known_args(self, args=None, namespace=None):
+        self._given = {}  # the options of this parse (a parser may be asked again, in the tests)
+        return super().parse_known_args(args, namespace)
 
     def add_subparsers(self, **kwargs):
         self._commands = super().add_subparsers(**kwargs)
