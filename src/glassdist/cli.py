@@ -210,6 +210,11 @@ def _read_inputs(args):
                 f"the image '{path}' is {other.shape[1]}x{other.shape[0]} px but '{paths[0]}' is "
                 f"{image.shape[1]}x{image.shape[0]} px; captures of one set-up come from the same camera"
             )
+    for j, other in enumerate(images[1:], start=1):  # one exposure given twice would claim a noise it lacks
+        same = next((i for i in range(j) if np.array_equal(images[i], other)), None)
+        if same is not None:
+            raise InputError(f"the image '{paths[j]}' is the same photo as '{paths[same]}' (identical pixels); "
+                             "repeated captures must be separate exposures")
     ref_photo = read_photo(args.reference, dtype=np.float32) if args.reference is not None else None
     reference = ref_photo.image if ref_photo is not None else None
     if reference is not None and reference.shape != image.shape:
@@ -217,6 +222,10 @@ def _read_inputs(args):
             f"the reference '{args.reference}' is {reference.shape[1]}x{reference.shape[0]} px but the image is "
             f"{image.shape[1]}x{image.shape[0]} px; both photos must come from the same camera, same size"
         )
+    if reference is not None and any(np.array_equal(reference, other) for other in images):
+        # the photo against itself reads 0 mD everywhere, and passes any specification
+        raise InputError(f"the reference '{args.reference}' is the same photo as the image (identical pixels); give "
+                         "a photo of the grid taken without the glass, or leave out --reference (Direct Method)")
     if protocol.sources["pattern"] == "default":  # neither given nor pinned: the photo decides
         protocol = _pattern_from_photo(protocol, protocol_with, reference if reference is not None else image)
     params = load_params(args.params, **protocol.params_overrides)
