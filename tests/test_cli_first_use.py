@@ -65,15 +65,17 @@ def test_an_option_given_twice_exits_2_naming_both_values(pair, tmp_path, argv):
     assert ns.report is True  # a flag given twice is still the flag
 
 
-@pytest.mark.parametrize("as_reference", [True, False])
-def test_the_same_photo_twice_exits_2(pair, tmp_path, as_reference):
-    """The photo given again, as its own reference (it read 0 mD everywhere, exit 0, and passed any
-    specification) or as a second capture (the average claimed 1/sqrt(2) of a noise it still had). A
-    copy under another name is the same photo: the pixels are compared, not the names."""
+@pytest.mark.parametrize("role", ["reference", "capture", "lens photo"])
+def test_the_same_photo_twice_exits_2(pair, tmp_path, role):
+    """The photo given again: as its own reference (it read 0 mD everywhere, exit 0, and passed any
+    specification), as a second capture (the average claimed 1/sqrt(2) of a noise it still had) or as
+    the Direct Method's lens photo (the glass taken for the lens). A copy under another name is the
+    same photo: the pixels are compared, not the names."""
     import shutil
 
     copy = shutil.copy(pair / "pane.png", tmp_path / "copy.png")
-    extra = ["--reference", copy] if as_reference else [copy, "--reference", pair / "reference.png"]
+    extra = {"reference": ["--reference", copy], "capture": [copy, "--reference", pair / "reference.png"],
+             "lens photo": ["--lens-photo", copy]}[role]
     r = _cli("analyze", pair / "pane.png", *extra, "--pitch-mm", 2, "--distance-m", 1, "--out", tmp_path / "o")
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
     assert "is the same photo as" in r.stderr and "identical pixels" in r.stderr

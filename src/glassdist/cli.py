@@ -319,6 +319,9 @@ def _lens_source(args, pinned, protocol, params, images):
     if args.camera_file is not None:
         return calibration_from_camera_file(args.camera_file, images[0].shape)
     photo = read_image(args.lens_photo, dtype=np.float32)
+    if np.array_equal(photo, images[0]):  # the glass's own distortion would be taken for the lens's
+        raise InputError(f"the lens photo '{args.lens_photo}' is the same photo as the image (identical pixels); give "
+                         "a photo of the grid taken without the glass")
     return calibrate_from_photo(photo, pitch_mm=protocol.pitch_mm, params=params, image_shape=images[0].shape,
                                 distance_m=protocol.distance_m)
 
