@@ -127,13 +127,15 @@ def _covariances(carriers: F.CarrierPair, p: AnalyzerParams):
     )
 
 
+def _bandpass_px2(covs) -> np.ndarray:
+    """Spatial covariance (px^2) of each carrier's Gaussian bandpass of frequency covariance ``cov``: ``cov^-1 / (4 pi^2)``."""
+    return np.array([np.linalg.inv(cov) / (4 * np.pi**2) for cov in covs])
+
+
 def _demodulation_blur_px2(carriers: F.CarrierPair, covs, p: AnalyzerParams) -> np.ndarray:
-    """Spatial covariance (px^2) of the low-pass Block F applies to each phase map."""
-    out = []
-    for c, cov in zip((carriers.k1, carriers.k2), covs):
-        s3 = p.smoothing_periods * c.period_px
-        out.append(np.linalg.inv(cov) / (4 * np.pi**2) + s3**2 * np.eye(2))
-    return np.array(out)
+    """Spatial covariance (px^2) of the low-pass Block F applies to each phase map: the bandpass, then the complex smoothing."""
+    s3 = [p.smoothing_periods * c.period_px for c in (carriers.k1, carriers.k2)]
+    return _bandpass_px2(covs) + np.array([s**2 * np.eye(2) for s in s3])
 
 
 def _margins(carriers: F.CarrierPair, covs, p: AnalyzerParams, direct: bool) -> tuple[float, float]:
@@ -838,7 +840,7 @@ def _phase_noise(demod: _Demodulation, refm, agrid: F.SamplingGrid, p: AnalyzerP
         blur = blur + (m * max(demod.grid.step)) ** 2 / 12.0 * np.eye(2)
     return _PhaseNoise(level(demod.noise_std, demod.mods[:2]),
                        None if refm is None else level(refm.noise_std, demod.mods[2:4]),
-                       blur, np.array([np.linalg.inv(c) / (4 * np.pi**2) for c in demod.covariances]))
+                       blur, _bandpass_px2(demod.covariances))
 
 
 def _uncertainty(ag: _AnalysisGrid, phase_noise: _PhaseNoise, ch, a1: dict, sigma_px: float, distance_m: float) -> dict:
