@@ -43,7 +43,7 @@ class _StoreOnce(argparse._StoreAction):
 
     def __call__(self, parser, namespace, values, option_string=None):
         if option_string is not None:
-            given = parser.__dict__.setdefault("_given", {})
+            given = parser._given  # reset by OneLineErrorParser.parse_known_args, the only parser registering it
             if self.dest in given:
                 parser.error(f"argument {option_string}: given twice ({safe_text(given[self.dest], 60)} and "
                              f"{safe_text(values, 60)}); give it once")
