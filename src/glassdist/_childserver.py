@@ -26,6 +26,7 @@ container may lack.
 
 from __future__ import annotations
 
+import gc
 import json
 import os
 import signal
@@ -114,6 +115,10 @@ def serve() -> None:
     for name in PRELOAD:
         __import__(name)
     _warm()
+    # What is loaded now lives as long as the server: in a permanent generation, a child's garbage
+    # collections no longer walk it (nor write to its pages, which the child then shares instead of
+    # copying). The documented batch: 17.4 -> 16.1 s.
+    gc.freeze()
     reply = os.fdopen(os.dup(1), "w", buffering=1)
     requests = os.fdopen(os.dup(0), "r")
     reply.write(json.dumps({"ready": True}) + "\n")
