@@ -172,6 +172,11 @@ def _stage_progress(enabled: bool):
         yield step
 
 
+def _same_photo(photo, others):
+    """Index of the first of ``others`` with ``photo``'s pixels, or None: a copy under another name is the same photo."""
+    return next((i for i, other in enumerate(others) if np.array_equal(photo, other)), None)
+
+
 def _read_inputs(args):
     """Every input of ``analyze``, read once and validated before any work or any write.
 
@@ -211,7 +216,7 @@ def _read_inputs(args):
                 f"{image.shape[1]}x{image.shape[0]} px; captures of one set-up come from the same camera"
             )
     for j, other in enumerate(images[1:], start=1):  # one exposure given twice would claim a noise it lacks
-        same = next((i for i in range(j) if np.array_equal(images[i], other)), None)
+        same = _same_photo(other, images[:j])
         if same is not None:
             raise InputError(f"the image '{paths[j]}' is the same photo as '{paths[same]}' (identical pixels); "
                              "repeated captures must be separate exposures")
@@ -222,7 +227,7 @@ def _read_inputs(args):
             f"the reference '{args.reference}' is {reference.shape[1]}x{reference.shape[0]} px but the image is "
             f"{image.shape[1]}x{image.shape[0]} px; both photos must come from the same camera, same size"
         )
-    if reference is not None and any(np.array_equal(reference, other) for other in images):
+    if reference is not None and _same_photo(reference, images) is not None:
         # the photo against itself reads 0 mD everywhere, and passes any specification
         raise InputError(f"the reference '{args.reference}' is the same photo as the image (identical pixels); give "
                          "a photo of the grid taken without the glass, or leave out --reference (Direct Method)")
@@ -319,7 +324,7 @@ def _lens_source(args, pinned, protocol, params, images):
     if args.camera_file is not None:
         return calibration_from_camera_file(args.camera_file, images[0].shape)
     photo = read_image(args.lens_photo, dtype=np.float32)
-    if np.array_equal(photo, images[0]):  # the glass's own distortion would be taken for the lens's
+    if _same_photo(photo, images) is not None:  # the glass's own distortion would be taken for the lens's
         raise InputError(f"the lens photo '{args.lens_photo}' is the same photo as the image (identical pixels); give "
                          "a photo of the grid taken without the glass")
     return calibrate_from_photo(photo, pitch_mm=protocol.pitch_mm, params=params, image_shape=images[0].shape,
