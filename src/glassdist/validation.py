@@ -227,7 +227,8 @@ def _parse_json(text: str):
 
 
 def _yaml_node_count(root, lim: Limits) -> None:
-    """Refuse YAML node graphs that are too deep or expand (through aliases) to too many values."""
+    """Refuse YAML node graphs that are too deep, expand (through aliases) to too many values, or give
+    a key twice in one mapping (:func:`_yaml_unique_keys`)."""
     import yaml
 
     size: dict[int, int] = {}
