@@ -174,6 +174,66 @@ def _project(H: np.ndarray, pts: np.ndarray) -> np.ndarray:
     return q[:, :2] / q[:, 2:3]
 
 
+def _reprojection(sn, Tdi, dst, unpack, names):
+    """The residual of :func:`fit_lens_homography` and its exact Jacobian, as two functions of the parameters.
+
+    With ``q = H u`` (``u`` a Hartley-normalised grid point), ``p_n = (q_0, q_1) / q_2``, the
+    undistorted pixel ``p_u = A p_n + b`` (``A, b`` from ``Tdi``), ``x = (p_u - c) / s`` and the
+    residual ``r = (c + s D(x) - p) / s``:
+    ``dr/dh = J_D A dp_n/dh / s``, ``dr/dk = dD/dk`` for each Brown coefficient, and
+    ``dr/dc' = e - J_D e`` for the principal point ``c = c_0 + s c'``, with ``J_D`` the
+    Jacobian of the Brown map (:meth:`glassdist.brown.BrownDistortion.distort`) at ``x``.
+    Exact derivatives spare the fit the finite differences of ~10 residual evaluations per
+    step; the minimum it reaches is the same.
+    """
+    A, b = Tdi[:2, :2], Tdi[:2, 2]
+    n = len(sn)
+
+    def parts(t):
+        H = np.r_[t[:8], 1.0].reshape(3, 3)
+        q = sn @ H.T
+        pn = q[:, :2] / q[:, 2:3]
+        _, lens = unpack(t)
+        (cx, cy), s = lens.center_px, lens.scale_px
+        pu = pn @ A.T + b
+        return q, pn, lens, (pu[:, 0] - cx) / s, (pu[:, 1] - cy) / s
+
+    def fun(t):
+        _, _, lens, x, y = parts(t)
+        xd, yd = lens.distortion.distort(x, y)
+        (cx, cy), s = lens.center_px, lens.scale_px
+        return np.r_[cx + s * xd - dst[:, 0], cy + s * yd - dst[:, 1]] / s
+
+    def jac(t):
+        q, pn, lens, x, y = parts(t)
+        d, s = lens.distortion, lens.scale_px
+        r2 = x * x + y * y
+        g = 1.0 + r2 * (d.k1 + d.k2 * r2)
+        dg = 2.0 * (d.k1 + 2.0 * d.k2 * r2)  # dg/dx = dg * x
+        jxx = g + dg * x * x + 2 * d.p1 * y + 6 * d.p2 * x
+        jxy = jyx = dg * x * y + 2 * d.p1 * x + 2 * d.p2 * y  # the Brown map's Jacobian is symmetric
+        jyy = g + dg * y * y + 6 * d.p1 * y + 2 * d.p2 * x
+        # dp_n/dh: rows (x, y) over the 8 free entries of H
+        w = 1.0 / q[:, 2]
+        dpn = np.zeros((2, n, 8))
+        dpn[0, :, 0:3] = sn * w[:, None]
+        dpn[1, :, 3:6] = sn * w[:, None]
+        dpn[0, :, 6:8] = -(pn[:, 0] * w)[:, None] * sn[:, :2]
+        dpn[1, :, 6:8] = -(pn[:, 1] * w)[:, None] * sn[:, :2]
+        dpu = np.einsum("ij,jnk->ink", A, dpn) / s
+        J = np.empty((2 * n, 8 + len(names)))
+        J[:n, :8] = jxx[:, None] * dpu[0] + jxy[:, None] * dpu[1]
+        J[n:, :8] = jyx[:, None] * dpu[0] + jyy[:, None] * dpu[1]
+        xy = x * y
+        cols = {"k1": (x * r2, y * r2), "k2": (x * r2 * r2, y * r2 * r2), "p1": (2 * xy, r2 + 2 * y * y),
+                "p2": (r2 + 2 * x * x, 2 * xy), "cx": (1.0 - jxx, -jyx), "cy": (-jxy, 1.0 - jyy)}
+        for i, name in enumerate(names):
+            J[:n, 8 + i], J[n:, 8 + i] = cols[name]
+        return J
+
+    return fun, jac
+
+
 def fit_lens_homography(
     src: np.ndarray, dst: np.ndarray, H0: np.ndarray, *, center_px, scale_px: float, tangential: bool = False,
     principal_point: bool = False, start: BrownDistortion | None = None, fix_distortion: bool = False,
@@ -182,7 +242,7 @@ def fit_lens_homography(
 
     Minimises :math:`\\sum_i \\lVert c + s D((H(U_i, V_i) - c)/s) - p_i\\rVert^2` over the
     8 entries of ``H`` (Hartley-normalised), ``k1, k2`` and, if asked, ``p1, p2`` and the
-    principal point.
+    principal point, with the exact Jacobian (:func:`_reprojection`).
 
     Parameters
     ----------
@@ -232,16 +292,8 @@ def fit_lens_homography(
         c = c0 + s * np.array([extra.get("cx", 0.0), extra.get("cy", 0.0)])
         return H, LensModel(b, (float(c[0]), float(c[1])), s)
 
-    def resid(t):
-        H = np.r_[t[:8], 1.0].reshape(3, 3)
-        q = sn @ H.T
-        pn = q[:, :2] / q[:, 2:3]
-        pu = pn @ Tdi[:2, :2].T + Tdi[:2, 2]
-        _, lens = unpack(t)
-        xd, yd = lens.distort_px(pu[:, 0], pu[:, 1])
-        return np.r_[xd - dst[:, 0], yd - dst[:, 1]] / s
-
-    sol = least_squares(resid, x0, method="lm", x_scale="jac", max_nfev=200 * len(x0))
+    fun, jac = _reprojection(sn, Tdi, dst, unpack, names)
+    sol = least_squares(fun, x0, jac=jac, method="lm", x_scale="jac", max_nfev=200 * len(x0))
     H, lens = unpack(sol.x)
     H = H / H[2, 2]
     r = sol.fun.reshape(2, -1) * s
