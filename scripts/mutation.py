@@ -20,6 +20,7 @@ Usage::
 
     python scripts/mutation.py [--per-module 25 | --total 200] [--seed 0] [--modules metrics,acceptance:10]
                                [--jobs 1] [--timeout-factor 3] [--out mutation.json] [--python PYTHON]
+                               [--function NAME] [--tests TEST,...]
 
 Writes a JSON record (every mutant: module, line, the changed source line, the outcome)
 and prints the kill rate per module, each surviving mutant, and the overall kill rate with
@@ -209,15 +210,33 @@ def main(argv=None) -> int:
     ap.add_argument("--jobs", type=int, default=1, help="mutants tested at once (each in its own scratch copy)")
     ap.add_argument("--timeout-factor", type=float, default=3.0,
                     help="a mutant whose tests run longer than this many times the unchanged run is killed (timeout)")
+    ap.add_argument("--function", default=None,
+                    help="only the mutants inside the function (or method) of this name, in each module")
+    ap.add_argument("--tests", default=None,
+                    help="comma-separated tests to run instead of the modules' targeted tests (e.g. those of --function)")
     ap.add_argument("--stop-after-min", type=float, default=None,
                     help="start no mutant after this many minutes (the record keeps those tested)")
     args = ap.parse_args(argv)
     stop_at = time.monotonic() + 60 * args.stop_after_min if args.stop_after_min else float("inf")
     rng = random.Random(args.seed)
-    record = {"seed": args.seed, "per_module": args.per_module, "total": args.total, "modules": {}}
+    record = {"seed": args.seed, "per_module": args.per_module, "total": args.total, "function": args.function,
+              "tests": args.tests, "modules": {}}
     items = [item.partition(":") for item in args.modules.split(",")]
     trees = {name: ast.parse((REPO / "src" / "glassdist" / MODULES[name][0]).read_text()) for name, _, _ in items}
-    counts = {name: len(_points(trees[name])) for name in trees}
+    targeted = {name: args.tests.split(",") if args.tests else MODULES[name][1] for name in trees}
+
+    def points_of(name):
+        points = _points(trees[name])
+        if args.function is None:
+            return points
+        spans = [(n.lineno, n.end_lineno) for n in ast.walk(trees[name])
+                 if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef)) and n.name == args.function]
+        if not spans:
+            raise SystemExit(f"{name}: no function named {args.function!r}")
+        nodes = list(ast.walk(trees[name]))
+        return [(i, kind) for i, kind in points if any(a <= nodes[i].lineno <= b for a, b in spans)]
+
+    counts = {name: len(points_of(name)) for name in trees}
     if args.total is not None:
         sizes = _stratified(counts, args.total)
     else:
@@ -237,7 +256,7 @@ def main(argv=None) -> int:
         def baseline(name):
             src = copies.get()
             try:
-                return _run_tests(args.python, src, MODULES[name][1], 1200)
+                return _run_tests(args.python, src, targeted[name], 1200)
             finally:
                 copies.put(src)
 
@@ -247,7 +266,7 @@ def main(argv=None) -> int:
         for name in names:
             if base[name][0] != "survived":
                 raise SystemExit(f"{name}: the targeted tests fail on the unchanged code ({base[name][0]})")
-            points = _points(trees[name])
+            points = points_of(name)
             picked = sorted(rng.sample(points, min(len(points), sizes[name])) if sizes[name] else points)
             chosen += [(name, index, kind) for index, kind in picked]
             record["modules"][name] = []
@@ -260,7 +279,7 @@ def main(argv=None) -> int:
             name, index, kind = point
             if time.monotonic() > stop_at:
                 return None
-            rel, tests = MODULES[name]
+            rel, tests = MODULES[name][0], targeted[name]
             tree, original = trees[name], originals[name]
             mutant, line = _mutate(tree, index)
             src = copies.get()
