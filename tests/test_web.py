@@ -246,7 +246,6 @@ def test_kept_jobs_have_a_disk_budget(tmp_path):
     store.close()
 
 
-@pytest.mark.filterwarnings("ignore:Using `httpx` with `starlette.testclient`")
 def test_the_browser_test_skips_without_playwright(monkeypatch, tmp_path):
     """Without glassdist[browser-tests] the browser test is skipped, not failed (nothing else is touched)."""
     for name in ("playwright", "playwright.sync_api"):
