@@ -45,6 +45,19 @@ def test_term_derivatives_match_finite_differences(term):
     assert np.allclose(hg[0], term.height(u, v)) and np.allclose(hg[1], gu) and np.allclose(hg[2], gv)
 
 
+@pytest.mark.parametrize("span_mm", [200.0, 600.0], ids=["inside", "across the edge"])
+def test_pillow_height_gradient_is_height_and_gradient_exactly(span_mm):
+    """The tracer's fused call gives the same values, bit for bit, as height and gradient, whether the
+    points all lie on the dome or some lie beyond it (where all three are 0)."""
+    term = TERMS[1]
+    u, v = np.random.default_rng(1).uniform(-span_mm, span_mm, (2, 400))
+    h, hu, hv = term.height_gradient(u, v)
+    gu, gv = term.gradient(u, v)
+    assert np.array_equal(h, term.height(u, v)) and np.array_equal(hu, gu) and np.array_equal(hv, gv)
+    outside = (np.abs(u - 20) >= 450) | (np.abs(v + 10) >= 350)
+    assert outside.any() == (span_mm > 400) and not np.any(np.c_[h, hu, hv][outside])
+
+
 @pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.stem)
 def test_examples_load_and_resolve_the_carrier(path):
     scene = load_scene(path)

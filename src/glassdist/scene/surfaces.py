@@ -171,14 +171,14 @@ class Pillow(_TermBase):
     def height_gradient(self, u, v):
         # One set of sines and cosines for the three (the tracer's Newton step asks for all of
         # them at every iteration); the same products in the same order, so the same values.
+        # A view inside the dome (the usual case: the dome is the pane) skips the masking.
         inside, ka, kb, x, y = self._parts(u, v)
         A = self.amplitude_mm
         cx, cy, sx, sy = np.cos(x), np.cos(y), np.sin(x), np.sin(y)
-        return (
-            np.where(inside, A * cx * cy, 0.0),
-            np.where(inside, -A * ka * sx * cy, 0.0),
-            np.where(inside, -A * kb * cx * sy, 0.0),
-        )
+        out = (A * cx * cy, -A * ka * sx * cy, -A * kb * cx * sy)
+        if np.all(inside):
+            return tuple(np.asarray(o, dtype=float) for o in out)
+        return tuple(np.where(inside, o, 0.0) for o in out)
 
     def hessian(self, u, v):
         inside, ka, kb, x, y = self._parts(u, v)
