@@ -8,16 +8,21 @@ the accuracy experiment (``glassdist.experiments.accuracy``) this prints φ_eff 
 trusted region and 1 σ inside it, against the exact truth, for the Comparative Method, the Direct
 Method, and the Direct Method's own phases with the Comparative Method's A1 Jacobian (the
 homography of the glass-less reference) in place of its own; and the ratio of the two
-homographies' area scales at the view's centre. A diagnostic, not a method: a user of the
-Direct Method has no reference::
+homographies' area scales at the view's centre. ``--ripple PERIODS SIGMA`` does the same for one
+cell of ``benchmarks/bench_strong_ripples.py`` (its ratios over the interior, through the stack and
+through the independent evaluation). A diagnostic, not a method: a user of the Direct Method has
+no reference::
 
     python benchmarks/direct_baseline_share.py [--scenes wavy_slab_A0.5,biconvex_lens_p48,biconvex_lens_p64]
+    python benchmarks/direct_baseline_share.py --scenes "" --ripple 4 3
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
@@ -30,7 +35,10 @@ def main(argv=None) -> int:
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scenes", default="wavy_slab_A0.5,biconvex_lens_p48,biconvex_lens_p64")
-    names = ap.parse_args(argv).scenes.split(",")
+    ap.add_argument("--ripple", type=float, nargs=2, metavar=("PERIODS", "SIGMA"),
+                    help="also one cell of bench_strong_ripples.py (peak 0.35 period, scale 0.5, N = 2)")
+    a = ap.parse_args(argv)
+    names = [n for n in a.scenes.split(",") if n]
     opts = RunOptions()
     measure = pipeline._measure
     held = {}
@@ -39,8 +47,8 @@ def main(argv=None) -> int:
         held["m"] = measure(*args, **kwargs)
         return held["m"]
 
-    print("| scene | run | φ_eff | φ_shear | φ_eff 1 σ inside | φ_shear 1 σ inside |")
-    print("|---|---|---|---|---|---|")
+    if names:
+        print("| scene | run | φ_eff | φ_shear | φ_eff 1 σ inside | φ_shear 1 σ inside |\n|---|---|---|---|---|---|")
     for name in names:
         kind, build, _ = accuracy.SCENES[name]
         scene = opts.prepare(build())
@@ -65,6 +73,27 @@ def main(argv=None) -> int:
                                      .reshape(2, 2))) for m, H in baselines.items()}
         print(f"| {name} | area scale of the grid at the centre, Direct / reference | "
               f"{area['direct'] / area['comparative']:.4f} | | | |")
+    if a.ripple:
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        import bench_strong_ripples as ripples
+
+        n, sp = a.ripple
+        scene = ripples._scene(n, 0.35, None, 0.5)
+        print("\n| ripple, periods | sigma, periods | run | ratio (stack) | ratio (indep.) |\n|---|---|---|---|---|")
+        for swap in (False, True):
+            def one(*args, swap=swap, **kwargs):
+                m = measure(*args, **kwargs)
+                if m.fit is None:
+                    held["comparative"] = m.baseline
+                return replace(m, baseline=held["comparative"]) if swap and m.fit is not None else m
+            pipeline._measure = one
+            try:
+                rows = ripples.run_case(scene, [sp], 2, None)
+            finally:
+                pipeline._measure = measure
+            for r in rows if not swap else rows[1:]:
+                what = r["method"] + (", the reference's A1 Jacobian" if swap else "")
+                print(f"| {n:g} | {sp:g} | {what} | {r['ratio_stack']:.4f} | {r['ratio_independent']:.4f} |")
     return 0
 
 
