@@ -124,6 +124,8 @@ def _line_cover(x, half, pitch, width):
         return np.floor(s / pitch) * width + np.minimum(np.mod(s, pitch), width)
 
     wide = half > 1e-12
+    if np.all(wide):  # a footprint everywhere (the renders' case): no point samples to compute
+        return (cum(x + half) - cum(x - half)) / (2 * half)
     safe = np.where(wide, half, 1.0)
     box = (cum(x + safe) - cum(x - safe)) / (2 * safe)
     point = (np.mod(x + width / 2, pitch) < width).astype(float)
@@ -138,6 +140,8 @@ def _square_wave_mean(x, half, q):
         return np.minimum(m, 2 * q - m)
 
     wide = half > 1e-12
+    if np.all(wide):  # a footprint everywhere (the renders' case): no point samples to compute
+        return (cum(x + half) - cum(x - half)) / (2 * half)
     safe = np.where(wide, half, 1.0)
     box = (cum(x + safe) - cum(x - safe)) / (2 * safe)
     point = np.where(np.mod(x, 2 * q) < q, 1.0, -1.0)
