@@ -8,19 +8,24 @@ the accuracy experiment (``glassdist.experiments.accuracy``) this prints φ_eff 
 trusted region and 1 σ inside it, against the exact truth, for the Comparative Method, the Direct
 Method, and the Direct Method's own phases with the Comparative Method's A1 Jacobian (the
 homography of the glass-less reference) in place of its own; and the ratio of the two
-homographies' area scales at the view's centre. ``--ripple PERIODS SIGMA`` does the same for one
+homographies' area scales at the view's centre. ``--also`` adds Direct runs with one of Block I's
+inputs replaced: ``reference-carriers`` (F1's carriers of the glass-less reference instead of the
+photo's own) and ``zero-offsets`` (each part of the region kept at the integer offset its unwrapping
+gave it, instead of the one read from the largest part's homography); ``a+b`` replaces both. ``--ripple PERIODS SIGMA`` does the same for one
 cell of ``benchmarks/bench_strong_ripples.py`` (its ratios over the interior, through the stack and
 through the independent evaluation). A diagnostic, not a method: a user of the Direct Method has
 no reference::
 
     python benchmarks/direct_baseline_share.py [--scenes wavy_slab_A0.5,biconvex_lens_p48,biconvex_lens_p64]
     python benchmarks/direct_baseline_share.py --scenes "" --ripple 4 3
+    python benchmarks/direct_baseline_share.py --scenes wavy_slab_A0.75 --also reference-carriers,zero-offsets,reference-carriers+zero-offsets
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+from contextlib import ExitStack, contextmanager
 from dataclasses import replace
 from pathlib import Path
 
@@ -28,7 +33,7 @@ import numpy as np
 
 
 def main(argv=None) -> int:
-    from glassdist.analyzer import pipeline
+    from glassdist.analyzer import fourier, homography, pipeline
     from glassdist.analyzer.homography import logical_jacobian
     from glassdist.experiments import accuracy
     from glassdist.experiments._common import RunOptions
@@ -37,8 +42,10 @@ def main(argv=None) -> int:
     ap.add_argument("--scenes", default="wavy_slab_A0.5,biconvex_lens_p48,biconvex_lens_p64")
     ap.add_argument("--ripple", type=float, nargs=2, metavar=("PERIODS", "SIGMA"),
                     help="also one cell of bench_strong_ripples.py (peak 0.35 period, scale 0.5, N = 2)")
+    ap.add_argument("--also", default="", help="comma-separated: reference-carriers, zero-offsets, or both joined by +")
     a = ap.parse_args(argv)
     names = [n for n in a.scenes.split(",") if n]
+    also = [x for x in a.also.split(",") if x]
     opts = RunOptions()
     measure = pipeline._measure
     held = {}
@@ -64,6 +71,11 @@ def main(argv=None) -> int:
             runs["direct, the reference's A1 Jacobian"] = accuracy.measure(inputs, "direct", params, kind)
         finally:
             pipeline._measure = measure
+        for what in also:  # "a+b": both replaced at once
+            with ExitStack() as stack:
+                for part in what.split("+"):
+                    stack.enter_context(_replaced(part, inputs, fourier, homography))
+                runs[f"direct, {what}"] = accuracy.measure(inputs, "direct", params, kind)
         for run_name, run in runs.items():
             r, i = run["ratios_vs_exact"], run["interior"]["ratios_vs_exact"]
             print(f"| {name} | {run_name} | {r['phi_eff']:.4f} | {r['phi_shear']:.4f} | {i['phi_eff']:.4f} | "
@@ -95,6 +107,45 @@ def main(argv=None) -> int:
                 what = r["method"] + (", the reference's A1 Jacobian" if swap else "")
                 print(f"| {n:g} | {sp:g} | {what} | {r['ratio_stack']:.4f} | {r['ratio_independent']:.4f} |")
     return 0
+
+
+@contextmanager
+def _replaced(what, inputs, fourier, homography):
+    """One of Block I's inputs replaced for the length of a Direct run (see the module's docstring)."""
+    if what == "reference-carriers":
+        ref = fourier.find_carriers(fourier.compute_spectrum(np.asarray(inputs.reference, float)))
+        find = fourier.find_carriers
+
+        def carriers(spectrum, **kwargs):  # the photo's own pair, each carrier moved to the reference's nearest
+            own = find(spectrum, **kwargs)
+            cands = (ref.k1, ref.k2, ref.k1.negated(), ref.k2.negated())
+            near = [min(cands, key=lambda r, c=c: np.hypot(r.fx - c.fx, r.fy - c.fy)) for c in (own.k1, own.k2)]
+            return fourier.CarrierPair(*(replace(r, strength=c.strength) for r, c in zip(near, (own.k1, own.k2))))
+
+        fourier.find_carriers = carriers
+        try:
+            yield
+        finally:
+            fourier.find_carriers = find
+    elif what == "zero-offsets":
+        fit_grid, inverse = homography.fit_grid_homography, homography.apply_inverse
+
+        def fit(UV, yy, xx, *args, **kwargs):  # the offsets are read against apply_inverse(H, xx, yy): make it U, V
+            homography.apply_inverse = lambda H, x, y: (UV[0], UV[1]) if (x is xx and y is yy) else inverse(H, x, y)
+            try:
+                return fit_grid(UV, yy, xx, *args, **kwargs)
+            finally:
+                homography.apply_inverse = inverse
+
+        from glassdist.analyzer import pipeline
+
+        pipeline.fit_grid_homography = fit
+        try:
+            yield
+        finally:
+            pipeline.fit_grid_homography = fit_grid
+    else:
+        raise SystemExit(f"--also: unknown {what!r}; choose reference-carriers or zero-offsets")
 
 
 if __name__ == "__main__":
