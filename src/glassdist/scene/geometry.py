@@ -116,6 +116,17 @@ def pattern_coordinates(backdrop: Backdrop, X, Y):
     return np.cos(t) * x + np.sin(t) * y, -np.sin(t) * x + np.cos(t) * y
 
 
+def _box_mean(cum, x, half, point):
+    """Mean over ``[x - half, x + half]`` of a periodic profile with antiderivative ``cum``; ``point()``,
+    the profile at ``x``, where ``half`` is 0 (point sampling)."""
+    wide = half > 1e-12
+    if np.all(wide):  # a footprint everywhere (the renders' case): no point samples to compute
+        return (cum(x + half) - cum(x - half)) / (2 * half)
+    safe = np.where(wide, half, 1.0)
+    box = (cum(x + safe) - cum(x - safe)) / (2 * safe)
+    return np.where(wide, box, point())
+
+
 def _line_cover(x, half, pitch, width):
     """Mean of the periodic line indicator over ``[x - half, x + half]``."""
 
@@ -123,13 +134,7 @@ def _line_cover(x, half, pitch, width):
         s = s + width / 2
         return np.floor(s / pitch) * width + np.minimum(np.mod(s, pitch), width)
 
-    wide = half > 1e-12
-    if np.all(wide):  # a footprint everywhere (the renders' case): no point samples to compute
-        return (cum(x + half) - cum(x - half)) / (2 * half)
-    safe = np.where(wide, half, 1.0)
-    box = (cum(x + safe) - cum(x - safe)) / (2 * safe)
-    point = (np.mod(x + width / 2, pitch) < width).astype(float)
-    return np.where(wide, box, point)
+    return _box_mean(cum, x, half, lambda: (np.mod(x + width / 2, pitch) < width).astype(float))
 
 
 def _square_wave_mean(x, half, q):
@@ -139,13 +144,7 @@ def _square_wave_mean(x, half, q):
         m = np.mod(s, 2 * q)
         return np.minimum(m, 2 * q - m)
 
-    wide = half > 1e-12
-    if np.all(wide):  # a footprint everywhere (the renders' case): no point samples to compute
-        return (cum(x + half) - cum(x - half)) / (2 * half)
-    safe = np.where(wide, half, 1.0)
-    box = (cum(x + safe) - cum(x - safe)) / (2 * safe)
-    point = np.where(np.mod(x, 2 * q) < q, 1.0, -1.0)
-    return np.where(wide, box, point)
+    return _box_mean(cum, x, half, lambda: np.where(np.mod(x, 2 * q) < q, 1.0, -1.0))
 
 
 def pattern_intensity(backdrop: Backdrop, X, Y, half_width=(0.0, 0.0)) -> np.ndarray:
