@@ -40,6 +40,7 @@ ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 
 from _fcd import fcd_carriers, fcd_displacement  # noqa: E402
+from _flow import dis_displacement, farneback_displacement  # noqa: E402
 
 TOL_PERIODS = 0.1
 
@@ -50,26 +51,6 @@ def _paint_drop(img: np.ndarray, diameter_px: float, centre=(0.42, 0.58)) -> np.
     r = np.hypot(yy - centre[0] * H, xx - centre[1] * W)
     edge = np.clip((r - diameter_px / 2 + 2.0) / 4.0, 0.0, 1.0)  # 4 px soft rim
     return img * edge + 0.08 * (1.0 - edge)
-
-
-def _flow(ref: np.ndarray, img: np.ndarray, kind: str) -> np.ndarray:
-    """OpenCV flow ref -> img as the displacement u with img(r) = ref(r - u), px."""
-    import cv2
-
-    a = np.clip(ref * 255, 0, 255).astype(np.uint8)
-    b = np.clip(img * 255, 0, 255).astype(np.uint8)
-    if kind == "dis":
-        # Finest pyramid level and long descents: the presets lock onto the wrong period of the grid.
-        dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
-        dis.setFinestScale(0)
-        dis.setPatchSize(12)
-        dis.setPatchStride(4)
-        dis.setGradientDescentIterations(25)
-        flow = dis.calc(a, b, None)
-    else:
-        flow = cv2.calcOpticalFlowFarneback(a, b, None, 0.5, 3, 15, 5, 5, 1.2, 0)
-    # ref(r) = img(r + flow(r)), and img(r + u) = ref(r): u = flow.
-    return flow.astype(float)
 
 
 def cases(names: list[str] | None):
@@ -116,8 +97,8 @@ def score(name, ref, img, pattern, params) -> dict:
     fcd = fcd_displacement(ref, img)
     k = fcd_carriers(ref)
     period_fcd = float(2 * np.pi / min(np.hypot(*k[0]), np.hypot(*k[1])))
-    dis = _flow(ref, img, "dis")
-    farn = _flow(ref, img, "farneback")
+    dis = dis_displacement(ref, img)
+    farn = farneback_displacement(ref, img, 15, 5, 5, 1.2, levels=3, gaussian=False)
 
     def close(a, b):
         with np.errstate(invalid="ignore"):
