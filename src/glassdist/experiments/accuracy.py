@@ -420,7 +420,9 @@ def _coverage_section(folder: Path) -> str:
 
 Produced by `{rec['command']}` (the "before" columns: `{rec.get("before", {}).get("command", "—")}`, the analyzer before the quality map). Peers: a
 compact fast checkerboard demodulation (FCD, Wildeman 2018; `benchmarks/_fcd.py`) and OpenCV's DIS and
-Farneback optical flow, each given the reference and the photo. Agreement area: where FCD agrees with at
+Farneback optical flow, each given the reference and the photo (the flows computed from the photo to the
+reference, so that, like FCD's field, they are defined at the photo's pixels: `benchmarks/_flow.py`).
+Agreement area: where FCD agrees with at
 least one of the flows within {rec['tolerance_periods']:g} carrier period (each flow alone locks onto the wrong
 period in places). Coverage: share of the agreement area that glassdist (Comparative Method) reports
 (`valid`); precision: share of the reported region inside the agreement area; accuracy: share of the
