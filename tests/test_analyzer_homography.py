@@ -151,3 +151,31 @@ def test_each_region_joins_the_fit_by_its_own_integer_offsets():
     p = q @ fit.matrix.T
     err = np.hypot(p[:, 0] / p[:, 2] - xx[labels > 0], p[:, 1] / p[:, 2] - yy[labels > 0])
     assert err.max() < 1e-3
+
+
+@pytest.mark.parametrize("amplitude, warned", [(0.0, False), (0.4, False), (0.6, True)])
+def test_parts_whose_grid_the_glass_moves_by_a_period_are_called_ambiguous(amplitude, warned):
+    """Two parts whose numbering differs by whole periods, and a glass wave of ``amplitude`` periods
+    (peak) in both: the 5-95 % spread of a part's logical coordinates against the homography is
+    about twice the amplitude. From a spread of one period on, a part's whole-period offset cannot be
+    told from the glass's displacement, and Block I says so; below it, it stays silent."""
+    from glassdist.analyzer import fourier as F
+    from glassdist.analyzer.homography import fit_grid_homography
+    from glassdist.analyzer.params import AnalyzerParams
+
+    H = np.array([[8.0, 0.4, 20.0], [-0.3, 8.2, 12.0], [2e-5, -1e-5, 1.0]])
+    grid = F.SamplingGrid((384, 512), (96, 128))
+    yy, xx = grid.coords()
+    U, V = apply_inverse(H, xx, yy)
+    labels = np.where(xx < 200, 1, np.where(xx > 260, 2, 0))
+    wave = amplitude * np.sin(2 * np.pi * yy / 96.0)  # four wave periods down the view
+    U = np.where(labels == 2, U + 3, U) + wave
+    V = np.where(labels == 2, V - 2, V)
+    carriers = F.CarrierPair(F.Carrier(1 / 8.0, 0.0, 50.0), F.Carrier(0.0, 1 / 8.2, 50.0))
+    warn: list[str] = []
+    _, offsets = fit_grid_homography((U, V), yy, xx, labels, 2, carriers, grid, AnalyzerParams(lens_model="none"), warn)
+    assert offsets[2].tolist() == [3.0, -2.0]
+    said = [w for w in warn if "whole-period offsets" in w]
+    assert bool(said) is warned, warn
+    if warned:
+        assert "2 parts" in said[0] and "(+3, -2)" in said[0]

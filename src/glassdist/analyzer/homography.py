@@ -627,6 +627,32 @@ def _points_spacing(carriers: F.CarrierPair, grid: F.SamplingGrid) -> int:
 _INTERIOR_PERIODS = 1.5
 
 
+# A part's offset is the rounded median of its logical coordinates against the largest part's
+# homography: it is ambiguous once the glass moves the grid within a part by this many periods or more
+# (5th to 95th percentile), since a whole-period offset and the glass's own displacement look alike.
+_AMBIGUOUS_SPREAD_PERIODS = 1.0
+
+
+def _warn_ambiguous_offsets(spread: float, n: int, offsets: np.ndarray, warn: list[str]) -> None:
+    """Warn when the parts' whole-period offsets cannot be told from the glass's displacement (Block I).
+
+    Measured (``benchmarks/direct_baseline_share.py``): on the ray-traced 0.75 mm roller wave the
+    region falls into five parts and the grid moves by up to 3.1 periods within them; the offsets read
+    from the largest part's homography (5, -4, 2, -3 periods) put the homography's area scale 32 % off
+    and phi_eff 23.5 % low. The bundled waves photo (two parts) moves by at most 0.86 period.
+    """
+    if spread < _AMBIGUOUS_SPREAD_PERIODS:
+        return
+    taken = ", ".join(f"({u:+.0f}, {v:+.0f})" for u, v in offsets[2:])
+    warn.append(
+        f"Direct Method: the analysed region falls into {n} parts and the glass moves the grid by up to "
+        f"{spread:.1f} carrier periods within them, so Block I cannot tell the parts' whole-period offsets "
+        f"(taken as {taken} periods from the largest part's homography) from the glass's own displacement: "
+        "the baseline's scale, and every phi with it, may be off by far more than the stated uncertainty - "
+        "use the Comparative Method (a glass-less reference)"
+    )
+
+
 def fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParams, warn: list[str],
                         lens: LensCalibration | None = None):
     """I1 + I2 over all regions, aligning each region's free integer grid offset to the largest.
@@ -655,11 +681,16 @@ def fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParams
         U = U.copy()
         V = V.copy()
         u0, v0 = apply_inverse(fit.matrix, xx, yy)
-        for r in range(2, n + 1):
+        spread = 0.0
+        for r in range(1, n + 1):
             sel = labels == r
-            offsets[r] = np.round(np.median(U[sel] - u0[sel])), np.round(np.median(V[sel] - v0[sel]))
-            U[sel] -= offsets[r, 0]
-            V[sel] -= offsets[r, 1]
+            du, dv = U[sel] - u0[sel], V[sel] - v0[sel]
+            spread = max(spread, *(float(np.subtract(*np.percentile(d, [95, 5]))) for d in (du, dv)))
+            if r > 1:
+                offsets[r] = np.round(np.median(du)), np.round(np.median(dv))
+                U[sel] -= offsets[r, 0]
+                V[sel] -= offsets[r, 1]
+        _warn_ambiguous_offsets(spread, n, offsets, warn)
         src, dst = logical_grid_points(U, V, yy, xx, (labels > 0) & interior, spacing)
         fit = fit_homography(src, dst, threshold_px=thr, max_trials=p.ransac_max_trials, seed=p.ransac_seed)
     fit = refit_undistorted(
