@@ -518,7 +518,7 @@ def write_experiment(result: ExperimentResult, out: Path, *, command: str, dpi: 
     figs = "\n".join(f"![{f}]({f})" for f in result.figures)
     md = (
         f"# Experiment: {result.name}\n\n"
-        f"Produced by:\n\n```bash\n{command}\n```\n\n"
+        f"Produced by:\n\n```bash\n.venv/bin/{command}\n```\n\n"  # the environment's command (README Quick start)
         f"{result.table}\n\n"
         f"Numbers: [`{result.name}.json`]({result.name}.json) (glassdist {__version__}).\n\n{figs}\n"
     )
