@@ -179,3 +179,27 @@ def test_parts_whose_grid_the_glass_moves_by_a_period_are_called_ambiguous(ampli
     assert bool(said) is warned, warn
     if warned:
         assert "2 parts" in said[0] and "(+3, -2)" in said[0]
+
+
+@pytest.mark.parametrize("where, n, warned", [("largest", 2, True), ("whole", 1, False)])
+def test_the_ambiguity_is_read_in_every_part_and_only_between_parts(where, n, warned):
+    """The glass moving the grid by more than a period within the largest part alone makes the other
+    parts' offsets ambiguous too (they are read from its homography); a region in one part has no
+    offset to choose, whatever the glass does."""
+    from glassdist.analyzer import fourier as F
+    from glassdist.analyzer.homography import fit_grid_homography
+    from glassdist.analyzer.params import AnalyzerParams
+
+    H = np.array([[8.0, 0.4, 20.0], [-0.3, 8.2, 12.0], [2e-5, -1e-5, 1.0]])
+    grid = F.SamplingGrid((384, 512), (96, 128))
+    yy, xx = grid.coords()
+    U, V = apply_inverse(H, xx, yy)
+    if n == 1:
+        labels = np.ones(grid.shape, int)
+    else:
+        labels = np.where(xx < 200, 1, np.where(xx > 260, 2, 0))
+    U = U + np.where(labels == 1, 0.6 * np.sin(2 * np.pi * yy / 96.0), 0.0)
+    carriers = F.CarrierPair(F.Carrier(1 / 8.0, 0.0, 50.0), F.Carrier(0.0, 1 / 8.2, 50.0))
+    warn: list[str] = []
+    fit_grid_homography((U, V), yy, xx, labels, n, carriers, grid, AnalyzerParams(lens_model="none"), warn)
+    assert any("whole-period offsets" in w for w in warn) is warned, warn
