@@ -636,10 +636,12 @@ _AMBIGUOUS_SPREAD_PERIODS = 1.0
 def _warn_ambiguous_offsets(spread: float, n: int, offsets: np.ndarray, warn: list[str]) -> None:
     """Warn when the parts' whole-period offsets cannot be told from the glass's displacement (Block I).
 
-    Measured (``benchmarks/direct_baseline_share.py``): on the ray-traced 0.75 mm roller wave the
-    region falls into five parts and the grid moves by up to 3.1 periods within them; the offsets read
-    from the largest part's homography (5, -4, 2, -3 periods) put the homography's area scale 32 % off
-    and phi_eff 23.5 % low. The bundled waves photo (two parts) moves by at most 0.86 period.
+    Measured: on the ray-traced 0.75 mm roller wave (the accuracy experiment, Direct) the region
+    falls into five parts and the grid moves by up to 3.1 periods within them; the offsets read from
+    the largest part's homography (5, -4, 2, -3 periods) put the homography's area scale 32 % off and
+    phi_eff 23.5 % low (``benchmarks/direct_baseline_share.py --scenes wavy_slab_A0.75``). The
+    bundled waves photo's two parts move by at most 0.86 period, and no other ray-traced scene of
+    the experiment has more than one part but the pillowed IGU (0.05 period).
     """
     if spread < _AMBIGUOUS_SPREAD_PERIODS:
         return
