@@ -1,0 +1,120 @@
+"""The displacement output against a known displacement, beside two peers and the truth itself.
+
+A synthetic checkerboard (``glassdist.synthetic.synthetic_capture``: 768 px, 10 px squares, a
+carrier period of 14.1 px, camera noise 0.02) seen through a roller wave 80 px long (5.7 carrier
+periods) of increasing strength, and its glass-less reference. The truth is the generator's own
+displacement, ``u = -delta / mm_per_px`` at the photo's pixels (``img(r) = ref(r - u(r))``). Each field
+is scored over glassdist's valid region:
+
+* **error**: RMS over the pixels of the larger of the two components' error, carrier periods;
+* **correlation**: the reference warped by the field, correlated with the photo (the waves photo's
+  score, ``bench_waves_peers.py``), next to the truth's own, which bounds what a displacement can
+  explain (camera noise, the pattern's blur).
+
+glassdist runs with its defaults (Comparative Method) and with F5 forced on
+(``{"deformation_min_deviation": 0}``): by default F5 runs only where the one-pass local grid
+frequency departs from the carrier by more than 0.2 of it (p99), and it reads that on the one-pass
+field, which Block F's transfer has already attenuated. "through its transfer" is the truth passed
+through glassdist's documented transfer (``bench_waves_peers.matched``), against glassdist's field.
+
+Usage::
+
+    python benchmarks/bench_displacement_truth.py [--out docs/displacement_truth.md]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import sys
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+from _fcd import fcd_displacement  # noqa: E402
+from _flow import farneback_displacement  # noqa: E402
+from bench_waves_peers import correlation, matched, warp_reference  # noqa: E402
+
+SHAPE = (768, 768)
+MM_PER_PX = 0.5
+PITCH_MM = 5.0
+WAVELENGTH_MM = 40.0
+AMPLITUDES_MM = (0.5, 1.0, 1.5)
+
+
+def _error_periods(u: np.ndarray, truth: np.ndarray, where: np.ndarray, period: float) -> float:
+    e = np.max(np.abs(u - truth), axis=-1)[where]
+    return float(np.sqrt(np.nanmean(e**2)) / period)
+
+
+def run_case(amplitude_mm: float) -> dict:
+    from glassdist import analyze
+    from glassdist.synthetic import synthetic_capture, wave_displacement
+
+    cap = synthetic_capture(SHAPE, pitch_mm=PITCH_MM, mm_per_px=MM_PER_PX, pattern="checkerboard", noise_std=0.02, rng=1,
+                            displacement=wave_displacement(amplitude_mm, WAVELENGTH_MM, 30.0))
+    ref, img = cap.reference, cap.image
+    truth = -np.asarray(cap.displacement_mm) / MM_PER_PX
+    runs = {"glassdist": {}, "glassdist, F5 forced": {"deformation_min_deviation": 0.0}}
+    results = {k: analyze(img, reference=ref, pattern="checkerboard", pitch_mm=PITCH_MM, distance_m=1.0, params=p)
+               for k, p in runs.items()}
+    base = results["glassdist"]
+    valid = base.valid
+    period = max(base.carriers.k1.period_px, base.carriers.k2.period_px)
+    fields = {"truth": truth}
+    for k, res in results.items():
+        u = -res.displacement_mm / res.mm_per_px
+        u[~res.valid] = np.nan
+        fields[k] = u
+    fields["FCD"] = fcd_displacement(ref, img)
+    fields["Farneback"] = farneback_displacement(ref, img, 15, 30)
+    rows = {k: {"error_periods": _error_periods(u, truth, valid, period),
+                "correlation": correlation(warp_reference(ref, u), img, valid)} for k, u in fields.items()}
+    for k, res in results.items():
+        rows[k]["demodulations"] = int(res.demodulations)
+        rows[k]["vs_truth_through_transfer_periods"] = _error_periods(fields[k], matched(truth, res), valid & res.valid,
+                                                                      period)
+    return {"amplitude_mm": amplitude_mm, "gradient": 2 * np.pi * amplitude_mm / WAVELENGTH_MM,
+            "wavelength_periods": WAVELENGTH_MM / MM_PER_PX / period, "period_px": period,
+            "analysed": float(valid.mean()), "rows": rows}
+
+
+def table(recs: list[dict]) -> str:
+    names = list(recs[0]["rows"])
+    lines = ["| wave gradient | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
+    for r in recs:
+        cells = []
+        for k in names:
+            x = r["rows"][k]
+            cell = f"{x['error_periods']:.4f} / {x['correlation']:.4f}"
+            if "demodulations" in x:
+                cell += f" (n = {x['demodulations']}; {x['vs_truth_through_transfer_periods']:.4f})"
+            cells.append(cell)
+        lines.append(f"| {r['gradient']:.2f} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", type=Path, help="write the table (markdown) and the record (FILE.json beside it)")
+    a = ap.parse_args(argv)
+    recs = [run_case(A) for A in AMPLITUDES_MM]
+    text = ("Each cell: error against the truth (carrier periods, RMS) / correlation of the reference warped by "
+            "the field with the photo; for glassdist also the demodulations and the error against the truth "
+            f"through its documented transfer. Carrier period {recs[0]['period_px']:.2f} px, wave "
+            f"{recs[0]['wavelength_periods']:.1f} periods long, {100 * recs[0]['analysed']:.1f} % of the image "
+            "analysed.\n\n" + table(recs))
+    print(text)
+    if a.out:
+        cmd = ("python benchmarks/bench_displacement_truth.py " + shlex.join(argv if argv is not None else sys.argv[1:])).strip()
+        a.out.write_text(f"<!-- {cmd} -->\n{text}\n")
+        a.out.with_suffix(".json").write_text(json.dumps({"command": cmd, "records": recs}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
