@@ -37,7 +37,7 @@ sys.path.insert(0, str(HERE))
 
 from _fcd import fcd_displacement  # noqa: E402
 from _flow import farneback_displacement  # noqa: E402
-from bench_waves_peers import correlation, matched, warp_reference  # noqa: E402
+from bench_waves_peers import correlation, field_px, matched, warp_reference  # noqa: E402
 
 SHAPE = (768, 768)
 MM_PER_PX = 0.5
@@ -67,9 +67,7 @@ def run_case(amplitude_mm: float) -> dict:
     period = max(base.carriers.k1.period_px, base.carriers.k2.period_px)
     fields = {"truth": truth}
     for k, res in results.items():
-        u = -res.displacement_mm / res.mm_per_px
-        u[~res.valid] = np.nan
-        fields[k] = u
+        fields[k] = field_px(res)
     fields["FCD"] = fcd_displacement(ref, img)
     fields["Farneback"] = farneback_displacement(ref, img, 15, 30)
     rows = {k: {"error_periods": _error_periods(u, truth, valid, period),

@@ -140,6 +140,13 @@ def analyze_waves(ref: np.ndarray, img: np.ndarray, params: dict | None = None):
                    params=params or None)
 
 
+def field_px(res) -> np.ndarray:
+    """glassdist's displacement as ``u`` (px, ``img(r) = ref(r - u(r))``), NaN outside its valid region."""
+    u = -res.displacement_mm / res.mm_per_px
+    u[~res.valid] = np.nan
+    return u
+
+
 def agree(a: np.ndarray, b: np.ndarray, period: float) -> np.ndarray:
     """Pixels where two fields (px) agree within ``TOL_PERIODS`` carrier period on both components."""
     with np.errstate(invalid="ignore"):
@@ -156,9 +163,8 @@ def run(image: Path, reference: Path, params: dict) -> dict:
     valid = res.valid
     t_gd = time.perf_counter() - t0
     period = max(res.carriers.k1.period_px, res.carriers.k2.period_px)
-    fields = {"glassdist": -res.displacement_mm / res.mm_per_px, "FCD": fcd_displacement(ref, img),
+    fields = {"glassdist": field_px(res), "FCD": fcd_displacement(ref, img),
               "Farneback": farneback_displacement(ref, img, **FARNEBACK)}
-    fields["glassdist"][~valid] = np.nan
 
     both = agree(fields["FCD"], fields["Farneback"], period)
     for k in ("FCD", "Farneback"):
@@ -171,9 +177,10 @@ def run(image: Path, reference: Path, params: dict) -> dict:
     sm = {k: smooth_nan(np.where(valid[..., None], v, np.nan), period) for k, v in fields.items()}
     rows = {}
     for k, u in fields.items():
+        warped = warp_reference(ref, u)
         rows[k] = {
-            "correlation": correlation(warp_reference(ref, u), img, valid),
-            "correlation_inner": correlation(warp_reference(ref, u), img, inner),
+            "correlation": correlation(warped, img, valid),
+            "correlation_inner": correlation(warped, img, inner),
             "amplitude_vs_fcd": slope(sm[k], sm["FCD matched"], valid),
         }
     cov = float((valid & both).sum() / max(both.sum(), 1))
@@ -210,9 +217,7 @@ def farneback_sweep(image: Path, reference: Path) -> dict:
                      "coverage": float((valid & both).sum() / max(both.sum(), 1)),
                      "inside": float((valid & both).sum() / max(valid.sum(), 1)),
                      "correlation": correlation(warp_reference(ref, u), img, valid)})
-    gd = -res.displacement_mm / res.mm_per_px
-    gd[~valid] = np.nan
-    glassdist_corr = correlation(warp_reference(ref, gd), img, valid)
+    glassdist_corr = correlation(warp_reference(ref, field_px(res)), img, valid)
     return {"period_px": period, "analysed": float(valid.mean()), "setting": FARNEBACK, "glassdist_correlation": glassdist_corr,
             "rows": rows}
 
