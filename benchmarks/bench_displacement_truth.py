@@ -37,7 +37,7 @@ sys.path.insert(0, str(HERE))
 
 from _fcd import fcd_displacement  # noqa: E402
 from _flow import farneback_displacement  # noqa: E402
-from bench_waves_peers import correlation, field_px, matched, warp_reference  # noqa: E402
+from bench_waves_peers import FARNEBACK, correlation, field_px, matched, warp_reference  # noqa: E402
 
 SHAPE = (768, 768)
 MM_PER_PX = 0.5
@@ -69,7 +69,7 @@ def run_case(amplitude_mm: float) -> dict:
     for k, res in results.items():
         fields[k] = field_px(res)
     fields["FCD"] = fcd_displacement(ref, img)
-    fields["Farneback"] = farneback_displacement(ref, img, 15, 30)
+    fields["Farneback"] = farneback_displacement(ref, img, **FARNEBACK)  # the waves benchmark's peer
     rows = {k: {"error_periods": _error_periods(u, truth, valid, period),
                 "correlation": correlation(warp_reference(ref, u), img, valid)} for k, u in fields.items()}
     for k, res in results.items():
