@@ -129,22 +129,35 @@ def test_a_known_lens_is_applied_from_a_hundred_strain_samples():
     assert np.max(np.hypot(px[:, 0] - x[valid], px[:, 1] - y[valid])) < 1e-3
 
 
-def test_each_region_joins_the_fit_by_its_own_integer_offsets():
-    """Two parts of the view (an opaque bar between them) whose logical grid numbering differs by
-    whole periods, U by +3 and V by -2 on the right: Block I takes each offset from its own
-    coordinate, so both parts fit one homography and every point is an inlier."""
+def _two_part_view():
+    """A known homography's logical grid on a sample grid, and two parts of it (an opaque bar between them)."""
     from glassdist.analyzer import fourier as F
-    from glassdist.analyzer.homography import fit_grid_homography
-    from glassdist.analyzer.params import AnalyzerParams
 
     H = np.array([[8.0, 0.4, 20.0], [-0.3, 8.2, 12.0], [2e-5, -1e-5, 1.0]])
     grid = F.SamplingGrid((384, 512), (96, 128))
     yy, xx = grid.coords()
     U, V = apply_inverse(H, xx, yy)
     labels = np.where(xx < 200, 1, np.where(xx > 260, 2, 0))
-    U, V = np.where(labels == 2, U + 3, U), np.where(labels == 2, V - 2, V)
+    return grid, yy, xx, U, V, labels
+
+
+def _fit_grid(U, V, yy, xx, labels, n, grid, warn):
+    """Block I over the parts, with the view's nominal carriers and no lens model."""
+    from glassdist.analyzer import fourier as F
+    from glassdist.analyzer.homography import fit_grid_homography
+    from glassdist.analyzer.params import AnalyzerParams
+
     carriers = F.CarrierPair(F.Carrier(1 / 8.0, 0.0, 50.0), F.Carrier(0.0, 1 / 8.2, 50.0))
-    fit, offsets = fit_grid_homography((U, V), yy, xx, labels, 2, carriers, grid, AnalyzerParams(lens_model="none"), [])
+    return fit_grid_homography((U, V), yy, xx, labels, n, carriers, grid, AnalyzerParams(lens_model="none"), warn)
+
+
+def test_each_region_joins_the_fit_by_its_own_integer_offsets():
+    """Two parts of the view (an opaque bar between them) whose logical grid numbering differs by
+    whole periods, U by +3 and V by -2 on the right: Block I takes each offset from its own
+    coordinate, so both parts fit one homography and every point is an inlier."""
+    grid, yy, xx, U, V, labels = _two_part_view()
+    U, V = np.where(labels == 2, U + 3, U), np.where(labels == 2, V - 2, V)
+    fit, offsets = _fit_grid(U, V, yy, xx, labels, 2, grid, [])
     assert offsets[2].tolist() == [3.0, -2.0]
     assert fit.inlier_fraction > 0.99
     q = np.c_[np.stack([U - offsets[labels, 0], V - offsets[labels, 1]], -1)[labels > 0], np.ones((labels > 0).sum())]
@@ -159,21 +172,12 @@ def test_parts_whose_grid_the_glass_moves_by_a_period_are_called_ambiguous(ampli
     (peak) in both: the 5-95 % spread of a part's logical coordinates against the homography is
     about twice the amplitude. From a spread of one period on, a part's whole-period offset cannot be
     told from the glass's displacement, and Block I says so; below it, it stays silent."""
-    from glassdist.analyzer import fourier as F
-    from glassdist.analyzer.homography import fit_grid_homography
-    from glassdist.analyzer.params import AnalyzerParams
-
-    H = np.array([[8.0, 0.4, 20.0], [-0.3, 8.2, 12.0], [2e-5, -1e-5, 1.0]])
-    grid = F.SamplingGrid((384, 512), (96, 128))
-    yy, xx = grid.coords()
-    U, V = apply_inverse(H, xx, yy)
-    labels = np.where(xx < 200, 1, np.where(xx > 260, 2, 0))
+    grid, yy, xx, U, V, labels = _two_part_view()
     wave = amplitude * np.sin(2 * np.pi * yy / 96.0)  # four wave periods down the view
     U = np.where(labels == 2, U + 3, U) + wave
     V = np.where(labels == 2, V - 2, V)
-    carriers = F.CarrierPair(F.Carrier(1 / 8.0, 0.0, 50.0), F.Carrier(0.0, 1 / 8.2, 50.0))
     warn: list[str] = []
-    _, offsets = fit_grid_homography((U, V), yy, xx, labels, 2, carriers, grid, AnalyzerParams(lens_model="none"), warn)
+    _, offsets = _fit_grid(U, V, yy, xx, labels, 2, grid, warn)
     assert offsets[2].tolist() == [3.0, -2.0]
     said = [w for w in warn if "whole-period offsets" in w]
     assert bool(said) is warned, warn
@@ -181,25 +185,15 @@ def test_parts_whose_grid_the_glass_moves_by_a_period_are_called_ambiguous(ampli
         assert "2 parts" in said[0] and "(+3, -2)" in said[0]
 
 
-@pytest.mark.parametrize("where, n, warned", [("largest", 2, True), ("whole", 1, False)])
-def test_the_ambiguity_is_read_in_every_part_and_only_between_parts(where, n, warned):
+@pytest.mark.parametrize("n, warned", [(2, True), (1, False)])
+def test_the_ambiguity_is_read_in_every_part_and_only_between_parts(n, warned):
     """The glass moving the grid by more than a period within the largest part alone makes the other
     parts' offsets ambiguous too (they are read from its homography); a region in one part has no
     offset to choose, whatever the glass does."""
-    from glassdist.analyzer import fourier as F
-    from glassdist.analyzer.homography import fit_grid_homography
-    from glassdist.analyzer.params import AnalyzerParams
-
-    H = np.array([[8.0, 0.4, 20.0], [-0.3, 8.2, 12.0], [2e-5, -1e-5, 1.0]])
-    grid = F.SamplingGrid((384, 512), (96, 128))
-    yy, xx = grid.coords()
-    U, V = apply_inverse(H, xx, yy)
+    grid, yy, xx, U, V, labels = _two_part_view()
     if n == 1:
         labels = np.ones(grid.shape, int)
-    else:
-        labels = np.where(xx < 200, 1, np.where(xx > 260, 2, 0))
     U = U + np.where(labels == 1, 0.6 * np.sin(2 * np.pi * yy / 96.0), 0.0)
-    carriers = F.CarrierPair(F.Carrier(1 / 8.0, 0.0, 50.0), F.Carrier(0.0, 1 / 8.2, 50.0))
     warn: list[str] = []
-    fit_grid_homography((U, V), yy, xx, labels, n, carriers, grid, AnalyzerParams(lens_model="none"), warn)
+    _fit_grid(U, V, yy, xx, labels, n, grid, warn)
     assert any("whole-period offsets" in w for w in warn) is warned, warn
