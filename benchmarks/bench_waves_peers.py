@@ -16,11 +16,15 @@ Every field is written as ``u`` (px) with ``img(r) = ref(r - u(r))`` (glassdist:
   valid region (the same pixels for every method), and over the part of it more than one
   carrier period from its border;
 * **amplitude**: regression slope of glassdist's field on FCD's at matched smoothing (the
-  peer's field passed through the documented transfer of glassdist's displacement output,
-  Block F's Gaussian per carrier or, after F5, ``(1 - (1 - G B)^n) / B``; then every field
+  peer's field passed through the documented transfer of glassdist's displacement output:
+  Block F's Gaussian per carrier or, after F5, ``(1 - (1 - G B)^n) / B``, times the analysis
+  grid's block means and the interpolation to the pixels; then every field
   restricted to glassdist's region and smoothed by one carrier period over it, NaN-aware),
   means removed, over the pixels where both are valid; 1 = the same amplitude. Every score is
   also given for the peers at matched smoothing ("matched");
+* **scale the photo prefers**: the factor on each field's deviations from its mean whose warped
+  reference explains the photo best (``best_scale``): the photo's own verdict on the amplitude,
+  with no transfer model and no peer (a field attenuated by ``a`` reads about ``1 / a``);
 * **agreement area**: every pixel where FCD and Farneback agree within 0.1 carrier period;
   **coverage** = share of it inside glassdist's ``valid``;
   **inside** = share of glassdist's ``valid`` within it; **accuracy** = share of
@@ -104,10 +108,11 @@ def slope(a: np.ndarray, b: np.ndarray, where: np.ndarray) -> float:
 def matched(u: np.ndarray, res) -> np.ndarray:
     """A peer's field ``u`` (px) through the transfer of glassdist's displacement output, per carrier.
 
-    Block F's Gaussian ``G_i``, or after F5's ``n`` demodulations (``res.demodulations``)
-    ``(1 - (1 - G_i B)^n) / B`` (:class:`glassdist.analyzer.transfer.InstrumentTransfer`),
-    applied in the spectrum of the whole field (periodic FFT on the field extended by odd
-    reflection).
+    The whole documented transfer (:meth:`glassdist.analyzer.transfer.InstrumentTransfer.response`,
+    docs/transfer_function.md): Block F's Gaussian ``G_i``, or after F5's ``n`` demodulations
+    (``res.demodulations``) ``(1 - (1 - G_i B)^n) / B``, times the block means of the analysis grid
+    and the cubic B-spline from it to every pixel, applied in the spectrum of the whole field
+    (periodic FFT on the field extended by odd reflection).
     """
     import scipy.fft as sfft
 
@@ -117,8 +122,12 @@ def matched(u: np.ndarray, res) -> np.ndarray:
 
     ks = res.carriers
     blur = _demodulation_blur_px2(ks, _covariances(ks, res.params), res.params)
-    # the step (B) of the demodulation grid the analysis measured on (F5 may refine the one pass's)
-    tr = InstrumentTransfer(blur, fine_step_px=res.demodulation_step_px, passes=res.demodulations)
+    # the step (B) of the demodulation grid the analysis measured on (F5 may refine the one pass's), the
+    # analysis grid's block means of it and the interpolation from the analysis grid to the pixels
+    fine, coarse = res.demodulation_step_px, res.sampling_step_px
+    block = int(round(coarse[0] / fine[0]))
+    tr = InstrumentTransfer(blur, fine_step_px=fine, block=block, interp_step_px=None if coarse == (1.0, 1.0) else coarse,
+                            passes=res.demodulations)
     ph = D.displacement_to_phase(u, ks)
     h, w = u.shape[:2]
     pad = 64
@@ -127,7 +136,7 @@ def matched(u: np.ndarray, res) -> np.ndarray:
         ext = np.pad(ph[..., i], pad, mode="reflect", reflect_type="odd")
         fy = sfft.fftfreq(ext.shape[0])[:, None]
         fx = sfft.rfftfreq(ext.shape[1])[None, :]
-        g = tr.demodulation(i, fy, fx)
+        g = tr.response(i, fy, fx)
         out.append(sfft.irfft2(sfft.rfft2(ext) * g, s=ext.shape)[pad : pad + h, pad : pad + w])
     return D.phase_to_displacement_px(np.stack(out, axis=-1), ks)
 
@@ -145,6 +154,26 @@ def field_px(res) -> np.ndarray:
     u = -res.displacement_mm / res.mm_per_px
     u[~res.valid] = np.nan
     return u
+
+
+SCALES = np.round(np.arange(0.90, 1.2001, 0.02), 2)
+
+
+def best_scale(ref: np.ndarray, img: np.ndarray, u: np.ndarray, where: np.ndarray) -> float:
+    """The photo's own verdict on a field's amplitude: the factor ``s`` on its deviations from their mean.
+
+    ``u_s = mean + s (u - mean)`` over ``where``; the ``s`` of :data:`SCALES` whose warped
+    reference correlates best with the photo, refined by a parabola through its neighbours.
+    No transfer model and no peer enter it; a field attenuated by a factor ``a`` reads about ``1 / a``.
+    """
+    mean = np.nanmean(np.where(where[..., None], u, np.nan), axis=(0, 1))
+    c = np.array([correlation(warp_reference(ref, mean + s * (u - mean)), img, where) for s in SCALES])
+    i = int(np.argmax(c))
+    if 0 < i < len(c) - 1:
+        den = c[i - 1] - 2 * c[i] + c[i + 1]
+        step = SCALES[1] - SCALES[0]
+        return float(SCALES[i] + (0.5 * step * (c[i - 1] - c[i + 1]) / den if den < 0 else 0.0))
+    return float(SCALES[i])
 
 
 def agree(a: np.ndarray, b: np.ndarray, period: float) -> np.ndarray:
@@ -183,6 +212,8 @@ def run(image: Path, reference: Path, params: dict) -> dict:
             "correlation_inner": correlation(warped, img, inner),
             "amplitude_vs_fcd": slope(sm[k], sm["FCD matched"], valid),
         }
+        if not k.endswith("matched"):
+            rows[k]["best_scale"] = best_scale(ref, img, u, valid)
     cov = float((valid & both).sum() / max(both.sum(), 1))
     inside = float((valid & both).sum() / max(valid.sum(), 1))
     acc = float((valid & agree(fields["glassdist"], fields["FCD"], period)).sum() / max(valid.sum(), 1))
@@ -247,10 +278,12 @@ def sweep_table(rec: dict) -> str:
 
 def table(rec: dict) -> str:
     lines = ["| method | correlation with the photo (ref warped by the field) | the same, more than 1 period inside "
-             f"({100 * rec['inner_share']:.0f} % of the region) | amplitude / FCD matched (+1 period smoothing) |",
-             "|---|---|---|---|"]
+             f"({100 * rec['inner_share']:.0f} % of the region) | amplitude / FCD matched (+1 period smoothing) | "
+             "scale of the field the photo prefers |",
+             "|---|---|---|---|---|"]
     for k, r in rec["methods"].items():
-        lines.append(f"| {k} | {r['correlation']:.4f} | {r['correlation_inner']:.4f} | {r['amplitude_vs_fcd']:.3f} |")
+        best = f"{r['best_scale']:.3f}" if "best_scale" in r else "—"
+        lines.append(f"| {k} | {r['correlation']:.4f} | {r['correlation_inner']:.4f} | {r['amplitude_vs_fcd']:.3f} | {best} |")
     drop = ", ".join(f"{k} {100 * v:.0f} %" for k, v in sorted(rec["dropped_by_label"].items(), key=lambda kv: -kv[1]))
     lines += ["", f"Labels of the agreement area glassdist leaves out: {drop}."]
     lines += ["", "| carrier period | analysed | peers agree (0.1 period) | coverage of it | valid inside it | "
