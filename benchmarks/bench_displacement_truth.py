@@ -9,7 +9,10 @@ is scored over glassdist's valid region:
 * **error**: RMS over the pixels of the larger of the two components' error, carrier periods;
 * **correlation**: the reference warped by the field, correlated with the photo (the waves photo's
   score, ``bench_waves_peers.py``), next to the truth's own, which bounds what a displacement can
-  explain (camera noise, the pattern's blur).
+  explain (camera noise, the pattern's blur);
+* **amplitude**: regression slope of the field on the truth, both smoothed by one carrier period over
+  glassdist's region (the waves benchmark's amplitude measure, ``bench_waves_peers.slope``), so that
+  a peer's amplitude error is known where the waves photo compares glassdist with it.
 
 glassdist runs with its defaults (Comparative Method) and with F5 forced on
 (``{"deformation_min_deviation": 0}``): by default F5 runs only where the one-pass local grid
@@ -37,13 +40,13 @@ sys.path.insert(0, str(HERE))
 
 from _fcd import fcd_displacement  # noqa: E402
 from _flow import farneback_displacement  # noqa: E402
-from bench_waves_peers import FARNEBACK, correlation, field_px, matched, warp_reference  # noqa: E402
+from bench_waves_peers import FARNEBACK, correlation, field_px, matched, slope, smooth_nan, warp_reference  # noqa: E402
 
 SHAPE = (768, 768)
 MM_PER_PX = 0.5
 PITCH_MM = 5.0
 WAVELENGTH_MM = 40.0
-AMPLITUDES_MM = (0.5, 1.0, 1.5)
+AMPLITUDES_MM = (0.5, 1.0, 1.5, 2.0, 2.5, 3.0)
 
 
 def _error_periods(u: np.ndarray, truth: np.ndarray, where: np.ndarray, period: float) -> float:
@@ -70,12 +73,17 @@ def run_case(amplitude_mm: float) -> dict:
         fields[k] = field_px(res)
     fields["FCD"] = fcd_displacement(ref, img)
     fields["Farneback"] = farneback_displacement(ref, img, **FARNEBACK)  # the waves benchmark's peer
+    # amplitude: the waves benchmark's measure (one carrier period of smoothing over glassdist's region), against the truth
+    sm = {k: smooth_nan(np.where(valid[..., None], u, np.nan), period) for k, u in fields.items()}
     rows = {k: {"error_periods": _error_periods(u, truth, valid, period),
-                "correlation": correlation(warp_reference(ref, u), img, valid)} for k, u in fields.items()}
+                "correlation": correlation(warp_reference(ref, u), img, valid),
+                "amplitude_vs_truth": slope(sm[k], sm["truth"], valid)} for k, u in fields.items()}
     for k, res in results.items():
+        through = matched(truth, res)
         rows[k]["demodulations"] = int(res.demodulations)
-        rows[k]["vs_truth_through_transfer_periods"] = _error_periods(fields[k], matched(truth, res), valid & res.valid,
-                                                                      period)
+        rows[k]["vs_truth_through_transfer_periods"] = _error_periods(fields[k], through, valid & res.valid, period)
+        rows[k]["amplitude_vs_truth_through_transfer"] = slope(
+            sm[k], smooth_nan(np.where(valid[..., None], through, np.nan), period), valid)
     return {"amplitude_mm": amplitude_mm, "gradient": 2 * np.pi * amplitude_mm / WAVELENGTH_MM,
             "wavelength_periods": WAVELENGTH_MM / MM_PER_PX / period, "period_px": period,
             "analysed": float(valid.mean()), "rows": rows}
@@ -88,9 +96,10 @@ def table(recs: list[dict]) -> str:
         cells = []
         for k in names:
             x = r["rows"][k]
-            cell = f"{x['error_periods']:.4f} / {x['correlation']:.4f}"
+            cell = f"{x['error_periods']:.4f} / {x['correlation']:.4f} / {x['amplitude_vs_truth']:.3f}"
             if "demodulations" in x:
-                cell += f" (n = {x['demodulations']}; {x['vs_truth_through_transfer_periods']:.4f})"
+                cell += (f" (n = {x['demodulations']}; {x['vs_truth_through_transfer_periods']:.4f} / "
+                         f"{x['amplitude_vs_truth_through_transfer']:.3f})")
             cells.append(cell)
         lines.append(f"| {r['gradient']:.2f} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
@@ -102,8 +111,9 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     recs = [run_case(A) for A in AMPLITUDES_MM]
     text = ("Each cell: error against the truth (carrier periods, RMS) / correlation of the reference warped by "
-            "the field with the photo; for glassdist also the demodulations and the error against the truth "
-            f"through its documented transfer. Carrier period {recs[0]['period_px']:.2f} px, wave "
+            "the field with the photo / amplitude against the truth (slope after one carrier period of smoothing, "
+            "the waves benchmark's measure); for glassdist also the demodulations, and the error and amplitude "
+            f"against the truth through its documented transfer. Carrier period {recs[0]['period_px']:.2f} px, wave "
             f"{recs[0]['wavelength_periods']:.1f} periods long, {100 * recs[0]['analysed']:.1f} % of the image "
             "analysed.\n\n" + table(recs))
     print(text)
