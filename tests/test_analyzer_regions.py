@@ -62,6 +62,10 @@ def test_compare_with_scene_detrends_the_truth_on_the_fit_region(tmp_path):
     # the model's channels exist only where it was detrended: on the fit region, not on the ring
     finite = np.isfinite(val.analytical.phi_eff_mD)
     assert finite.any() and not (finite & ~res.detrend_region).any()
+    # the earlier records' yardstick (benchmarks/bench_yardstick.py): detrended on valid, ring included
+    old = compare_with_scene(res, scene, model=predict_displacement(scene), truth_region=res.valid)
+    ring = np.isfinite(old.analytical.phi_eff_mD) & ~res.detrend_region
+    assert ring.any() and not (ring & ~res.valid).any()
 
 
 def test_trimmed_pixels_take_the_cause_of_their_trim():

@@ -149,7 +149,8 @@ def exact_truth(scene: Scene, model: Prediction) -> Prediction:
     return Prediction(lp.displacement_mm, lp.status, model.incidence_deg, {})
 
 
-def compare_with_scene(result, scene: Scene, *, model: Prediction, truth: Prediction | None = None) -> Validation:
+def compare_with_scene(result, scene: Scene, *, model: Prediction, truth: Prediction | None = None,
+                       truth_region: np.ndarray | None = None) -> Validation:
     """Pass the model (and the truth) through the evaluation stack with the analyzer's settings and compare.
 
     Parameters
@@ -161,6 +162,11 @@ def compare_with_scene(result, scene: Scene, *, model: Prediction, truth: Predic
         The Optical Theoretical Model on the camera pixel grid.
     truth : Prediction, optional
         The exact landing displacement (:func:`exact_truth`).
+    truth_region : ndarray of bool, optional
+        The pixels the model and the truth are detrended on; default ``result.detrend_region``,
+        the documented one. ``result.valid`` reproduces records made before the detrend region
+        was stated, whose truth also saw the ring of partial blocks the A2 fit never sees
+        (``benchmarks/bench_yardstick.py``).
 
     Returns
     -------
@@ -174,7 +180,8 @@ def compare_with_scene(result, scene: Scene, *, model: Prediction, truth: Predic
     board = 1.0 if result.optics is None else result.optics["magnification"]  # reflection: the board's mm per px
     settings = dict(
         sigma_mm=result.sigma_mm, detrend_degree=result.detrend_degree, mm_per_px=result.mm_per_px * board,
-        valid=result.detrend_region, projective=result.params.a1_mode == "projective",
+        valid=result.detrend_region if truth_region is None else truth_region,
+        projective=result.params.a1_mode == "projective",
     )
     _, analytical, region = predict_channels(scene, prediction=model, **settings)
     exact = None if truth is None else predict_channels(scene, prediction=truth, **settings)[1]
