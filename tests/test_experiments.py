@@ -154,6 +154,28 @@ def test_accuracy_subset_cli(tmp_path):
     assert "## Against the acceptance bounds" in (tmp_path / "accuracy.md").read_text()
 
 
+def test_accuracy_takes_analyzer_parameters_and_refuses_bad_ones(tmp_path, capsys, monkeypatch):
+    import glassdist.experiments.accuracy as A
+
+    seen = []
+    monkeypatch.setattr(A, "measure", lambda inputs, method, params, kind: seen.append(params) or {"method": method,
+                                                                                                   "error": "skipped"})
+    f5 = tmp_path / "f5.json"
+    f5.write_text('{"deformation_min_deviation": 0}')
+    out = tmp_path / "out"
+    assert main(["experiment", "accuracy", "--scenes", "wavy_slab", "--scale", "0.25", "--spp", "1", "--params", str(f5),
+                 "--no-progress", "--out", str(out)]) == 0
+    assert [p.deformation_min_deviation for p in seen] == [0.0, 0.0]
+    assert seen[0].sigma_mm == 40.0  # the scene's own analysis settings stay under the file's
+    assert "--params" in json.loads((out / "accuracy.json").read_text())["command"]
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"deformation_min_deviaton": 0}')
+    assert main(["experiment", "accuracy", "--params", str(bad), "--out", str(tmp_path / "o2"), "--no-progress"]) == 2
+    assert "deformation_min_deviaton" in capsys.readouterr().err
+    assert main(["experiment", "parity", "--params", str(f5), "--out", str(tmp_path / "o3"), "--no-progress"]) == 2
+    assert "accuracy experiment only" in capsys.readouterr().err
+
+
 def test_accuracy_unknown_scene_is_bad_input(tmp_path, capsys):
     assert main(["experiment", "accuracy", "--scenes", "nope", "--out", str(tmp_path), "--no-progress"]) == 2
     assert "unknown accuracy scene" in capsys.readouterr().err

@@ -370,6 +370,7 @@ def validation_record(val: Validation) -> dict:
         "sigma_mm": float(res.sigma_mm),
         "detrend_degree": int(res.detrend_degree),
         "analyzer_valid_fraction": float(res.valid.mean()),
+        "demodulations": int(res.demodulations),  # 1: one pass; more where F5 ran
         "compared_fraction": float(val.valid.mean()),
         "ratios_vs_model": val.metrics["ratios"],
         "correlations_vs_model": val.metrics["correlations"],

@@ -214,7 +214,7 @@ def measure(inputs, method: str, params, kind: str) -> dict:
     return run
 
 
-def run_accuracy(*, sigma_mm: float | None = None, scenes=None, **options) -> ExperimentResult:
+def run_accuracy(*, sigma_mm: float | None = None, scenes=None, params_file=None, **options) -> ExperimentResult:
     """Run the accuracy experiment.
 
     Parameters
@@ -224,6 +224,9 @@ def run_accuracy(*, sigma_mm: float | None = None, scenes=None, **options) -> Ex
         scene's own analysis settings, else 2 carrier periods).
     scenes : sequence of str, optional
         Subset of :data:`SCENES` (default: all of them, in that order).
+    params_file : path or dict, optional
+        Analyzer parameters over each scene's own analysis settings
+        (:func:`glassdist.theory.analysis_params`); every run records the parameters it resolved.
     **options
         ``engine``, ``scale``, ``spp``, ``progress``, ``executor``: see :class:`RunOptions`; ``progress``
         is called once per scene (stage ``"accuracy scenes"``).
@@ -245,13 +248,15 @@ def run_accuracy(*, sigma_mm: float | None = None, scenes=None, **options) -> Ex
         raise InputError(f"unknown accuracy scene(s) {', '.join(unknown)}; choose from {', '.join(SCENES)}")
     opts = RunOptions(**options)
     overrides = {} if sigma_mm is None else {"sigma_mm": sigma_mm}
+    if params_file is not None:  # a bad file is bad input before anything renders
+        analysis_params(SCENES[names[0]][1](), params_file, **overrides)
     t0 = time.perf_counter()
     entries = {}
     prepared = [opts.prepare(SCENES[name][1]()) for name in names]
     for k, (i, inputs) in enumerate(opts.render_each(prepared, reference=True)):
         name, scene = names[i], prepared[i]
         kind, _, what = SCENES[name]
-        params = analysis_params(scene, **overrides)
+        params = analysis_params(scene, params_file, **overrides)
         entry = {"name": name, "kind": kind, "scene": what, "definition": scene.model_dump(mode="json"),
                  "timings": inputs.timings, "runs": {}}
         for method in METHODS:
