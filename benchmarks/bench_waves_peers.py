@@ -22,6 +22,8 @@ Every field is written as ``u`` (px) with ``img(r) = ref(r - u(r))`` (glassdist:
   restricted to glassdist's region and smoothed by one carrier period over it, NaN-aware),
   means removed, over the pixels where both are valid; 1 = the same amplitude. Every score is
   also given for the peers at matched smoothing ("matched");
+* **border bands**: the correlation by distance from the border of glassdist's region and by the
+  quality label of what lies beyond that border (``border_bands``);
 * **scale the photo prefers**: the factor on each field's deviations from its mean whose warped
   reference explains the photo best (``best_scale``): the photo's own verdict on the amplitude,
   with no transfer model and no peer (a field attenuated by ``a`` reads about ``1 / a``);
@@ -176,6 +178,36 @@ def best_scale(ref: np.ndarray, img: np.ndarray, u: np.ndarray, where: np.ndarra
     return float(SCALES[i])
 
 
+BANDS_PX = ((0, 3), (3, 6), (6, 10), (10, 20), (20, None))
+
+
+def border_bands(res, warped: dict, img: np.ndarray) -> list[dict]:
+    """Each score by distance from the border of glassdist's region and by what lies beyond that border.
+
+    Per band of distance (px, ``BANDS_PX``) from the nearest pixel outside ``res.valid``, and within
+    it per quality label of that nearest pixel (image edge, beyond measurable distortion, ...): its
+    share of the region and the correlation of each warped reference with the photo there.
+    """
+    from scipy import ndimage
+
+    from glassdist.analyzer.region import LABELS
+
+    valid = res.valid
+    dist, idx = ndimage.distance_transform_edt(valid, return_indices=True)
+    beyond = np.asarray(res.quality)[idx[0], idx[1]]
+    out = []
+    for lo, hi in BANDS_PX:
+        band = valid & (dist > lo) & (dist <= (np.inf if hi is None else hi))
+        for label in [None, *np.unique(beyond[band]).tolist()]:
+            m = band if label is None else band & (beyond == label)
+            if m.sum() < 200:  # too few pixels for a correlation worth reading
+                continue
+            out.append({"band_px": [lo, hi], "beyond": "all" if label is None else LABELS[int(label)],
+                        "share": float(m.sum() / valid.sum()),
+                        "correlation": {k: correlation(w, img, m) for k, w in warped.items()}})
+    return out
+
+
 def agree(a: np.ndarray, b: np.ndarray, period: float) -> np.ndarray:
     """Pixels where two fields (px) agree within ``TOL_PERIODS`` carrier period on both components."""
     with np.errstate(invalid="ignore"):
@@ -204,9 +236,11 @@ def run(image: Path, reference: Path, params: dict) -> dict:
 
     inner = ndimage.distance_transform_edt(valid) > period
     sm = {k: smooth_nan(np.where(valid[..., None], v, np.nan), period) for k, v in fields.items()}
-    rows = {}
+    rows, warped_by = {}, {}
     for k, u in fields.items():
         warped = warp_reference(ref, u)
+        if k in ("glassdist", "Farneback"):
+            warped_by[k] = warped
         rows[k] = {
             "correlation": correlation(warped, img, valid),
             "correlation_inner": correlation(warped, img, inner),
@@ -226,7 +260,8 @@ def run(image: Path, reference: Path, params: dict) -> dict:
     return {"period_px": period, "analysed": float(valid.mean()), "inner_share": float(inner.sum() / max(valid.sum(), 1)),
             "farneback": FARNEBACK, "agree_area": float(both.mean()), "coverage": cov,
             "inside": inside, "accuracy": acc, "parts": int(n_parts), "dropped_by_label": dropped_by, "glassdist_s": t_gd, "methods": rows,
-            "warnings": list(res.warnings), "quality_counts": res.quality_counts()}
+            "warnings": list(res.warnings), "quality_counts": res.quality_counts(),
+            "border_bands": border_bands(res, warped_by, img)}
 
 
 def farneback_sweep(image: Path, reference: Path) -> dict:
@@ -284,6 +319,14 @@ def table(rec: dict) -> str:
     for k, r in rec["methods"].items():
         best = f"{r['best_scale']:.3f}" if "best_scale" in r else "—"
         lines.append(f"| {k} | {r['correlation']:.4f} | {r['correlation_inner']:.4f} | {r['amplitude_vs_fcd']:.3f} | {best} |")
+    lines += ["", "By distance from the border of glassdist's region and by what lies beyond it (the nearest pixel "
+              "outside the region): share of the region, correlation with the photo glassdist / Farneback.", "",
+              "| distance from the border | beyond it | share of the region | glassdist | Farneback |", "|---|---|---|---|---|"]
+    for b in rec["border_bands"]:
+        lo, hi = b["band_px"]
+        where = f"{lo}–{hi} px" if hi is not None else f"> {lo} px"
+        c = b["correlation"]
+        lines.append(f"| {where} | {b['beyond']} | {100 * b['share']:.1f} % | {c['glassdist']:.4f} | {c['Farneback']:.4f} |")
     drop = ", ".join(f"{k} {100 * v:.0f} %" for k, v in sorted(rec["dropped_by_label"].items(), key=lambda kv: -kv[1]))
     lines += ["", f"Labels of the agreement area glassdist leaves out: {drop}."]
     lines += ["", "| carrier period | analysed | peers agree (0.1 period) | coverage of it | valid inside it | "
