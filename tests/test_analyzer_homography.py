@@ -185,6 +185,20 @@ def test_parts_whose_grid_the_glass_moves_by_a_period_are_called_ambiguous(ampli
         assert "2 parts" in said[0] and "(+3, -2)" in said[0]
 
 
+@pytest.mark.parametrize("amplitude, alone", [(0.6, True), (0.3, False)])
+def test_an_ambiguous_part_stays_out_of_the_baseline(amplitude, alone):
+    """Where the parts' offsets are ambiguous, the baseline is the largest part's alone: the same fit as
+    Block I over that part as the whole region. Below the ambiguity the other part joins the fit, and
+    its own share of the glass wave (stronger there) moves the homography."""
+    grid, yy, xx, U, V, labels = _two_part_view()
+    wave = amplitude * np.sin(2 * np.pi * yy / 96.0) * np.where(labels == 2, 1.5, 1.0)
+    U = np.where(labels == 2, U + 3, U) + wave
+    V = np.where(labels == 2, V - 2, V)
+    fit, _ = _fit_grid(U, V, yy, xx, labels, 2, grid, [])
+    own, _ = _fit_grid(U, V, yy, xx, np.where(labels == 1, 1, 0), 1, grid, [])
+    assert np.allclose(fit.matrix, own.matrix, rtol=0, atol=1e-12) is alone
+
+
 @pytest.mark.parametrize("n, warned", [(2, True), (1, False)])
 def test_the_ambiguity_is_read_in_every_part_and_only_between_parts(n, warned):
     """The glass moving the grid by more than a period within the largest part alone makes the other

@@ -637,11 +637,11 @@ def _warn_ambiguous_offsets(spread: float, n: int, offsets: np.ndarray, warn: li
     """Warn when the parts' whole-period offsets cannot be told from the glass's displacement (Block I).
 
     Measured: on the ray-traced 0.75 mm roller wave (the accuracy experiment, Direct) the region
-    falls into five parts and the grid moves by up to 3.1 periods within them; the offsets read from
-    the largest part's homography (5, -4, 2, -3 periods) put the homography's area scale 32 % off and
-    phi_eff 23.5 % low (``benchmarks/direct_baseline_share.py --scenes wavy_slab_A0.75``). The
-    bundled waves photo's two parts move by at most 0.86 period, and no other ray-traced scene of
-    the experiment has more than one part but the pillowed IGU (0.05 period).
+    falls into five parts and the grid moves by up to 3.1 periods within them; refitted over every
+    part with the offsets read from the largest part's homography (5, -4, 2, -3 periods), the
+    baseline read phi_eff 23.5 % low, and fitted on the largest part alone (what Block I then does)
+    15.4 % low. The bundled waves photo's two parts move by at most 0.86 period, and no other
+    ray-traced scene of the experiment has more than one part but the pillowed IGU (0.05 period).
     """
     if spread < _AMBIGUOUS_SPREAD_PERIODS:
         return
@@ -649,15 +649,20 @@ def _warn_ambiguous_offsets(spread: float, n: int, offsets: np.ndarray, warn: li
     warn.append(
         f"Direct Method: the analysed region falls into {n} parts and the glass moves the grid by up to "
         f"{spread:.1f} carrier periods within them, so Block I cannot tell the parts' whole-period offsets "
-        f"(taken as {taken} periods from the largest part's homography) from the glass's own displacement: "
-        "the baseline's scale, and every phi with it, may be off by far more than the stated uncertainty - "
-        "use the Comparative Method (a glass-less reference)"
+        f"(taken as {taken} periods from the largest part's homography) from the glass's own displacement "
+        "and fits the baseline on the largest part alone: its scale, and every phi with it, may still be off "
+        "by far more than the stated uncertainty - use the Comparative Method (a glass-less reference)"
     )
 
 
 def fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParams, warn: list[str],
                         lens: LensCalibration | None = None):
     """I1 + I2 over all regions, aligning each region's free integer grid offset to the largest.
+
+    Where those offsets are ambiguous (:func:`_warn_ambiguous_offsets`) the baseline is fitted
+    on the largest part alone: the others join it only through offsets that may be wrong, and a
+    wrong whole-period offset tilts and scales the homography fitted through it; each part is
+    detrended on its own, so its offset does not enter its phi.
 
     ``UV``: logical grid coordinates (carrier periods) on the demodulation grid ``(yy, xx)``;
     ``labels``/``n``: the valid region's parts (:class:`~glassdist.analyzer.region.Region`);
@@ -679,6 +684,7 @@ def fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParams
     src, dst = logical_grid_points(U, V, yy, xx, (labels == 1) & interior, spacing)
     fit = fit_homography(src, dst, threshold_px=thr, max_trials=p.ransac_max_trials, seed=p.ransac_seed)
     offsets = np.zeros((n + 1, 2))
+    fitted = labels > 0  # the parts the baseline is fitted on
     if n > 1:
         U = U.copy()
         V = V.copy()
@@ -693,14 +699,17 @@ def fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParams
                 U[sel] -= offsets[r, 0]
                 V[sel] -= offsets[r, 1]
         _warn_ambiguous_offsets(spread, n, offsets, warn)
-        src, dst = logical_grid_points(U, V, yy, xx, (labels > 0) & interior, spacing)
-        fit = fit_homography(src, dst, threshold_px=thr, max_trials=p.ransac_max_trials, seed=p.ransac_seed)
+        if spread < _AMBIGUOUS_SPREAD_PERIODS:
+            src, dst = logical_grid_points(U, V, yy, xx, (labels > 0) & interior, spacing)
+            fit = fit_homography(src, dst, threshold_px=thr, max_trials=p.ransac_max_trials, seed=p.ransac_seed)
+        else:
+            fitted = labels == 1
     fit = refit_undistorted(
-        fit, U, V, yy, xx, (labels > 0) & interior, spacing, period_px=period, step_px=grid.step, threshold_px=thr,
+        fit, U, V, yy, xx, fitted & interior, spacing, period_px=period, step_px=grid.step, threshold_px=thr,
     )
     if p.lens_model != "none" or lens is not None:
         fit = refit_with_lens(
-            fit, U, V, yy, xx, (labels > 0) & interior, spacing, period_px=period, step_px=grid.step, threshold_px=thr,
+            fit, U, V, yy, xx, fitted & interior, spacing, period_px=period, step_px=grid.step, threshold_px=thr,
             image_shape=grid.full_shape, tangential="tangential" in p.lens_model, principal_point="center" in p.lens_model,
             warn=warn, known=lens,
         )
