@@ -10,8 +10,9 @@ Method, and the Direct Method's own phases with the Comparative Method's A1 Jaco
 homography of the glass-less reference) in place of its own; and the ratio of the two
 homographies' area scales at the view's centre. ``--also`` adds Direct runs with one of Block I's
 inputs replaced: ``reference-carriers`` (F1's carriers of the glass-less reference instead of the
-photo's own) and ``zero-offsets`` (each part of the region kept at the integer offset its unwrapping
-gave it, instead of the one read from the largest part's homography); ``a+b`` replaces both. ``--ripple PERIODS SIGMA`` does the same for one
+photo's own) and ``zero-offsets`` (every part of the region joins the baseline at the integer
+offset its unwrapping gave it, instead of Block I's choice: the offsets read from the largest part's
+homography, or, where those are ambiguous, the largest part alone); ``a+b`` replaces both. ``--ripple PERIODS SIGMA`` does the same for one
 cell of ``benchmarks/bench_strong_ripples.py`` (its ratios over the interior, through the stack and
 through the independent evaluation). A diagnostic, not a method: a user of the Direct Method has
 no reference::
