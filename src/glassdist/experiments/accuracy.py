@@ -224,8 +224,8 @@ def run_accuracy(*, sigma_mm: float | None = None, scenes=None, params_file=None
         scene's own analysis settings, else 2 carrier periods).
     scenes : sequence of str, optional
         Subset of :data:`SCENES` (default: all of them, in that order).
-    params_file : path or dict, optional
-        Analyzer parameters over each scene's own analysis settings
+    params_file : path, optional
+        JSON file of analyzer parameters over each scene's own analysis settings
         (:func:`glassdist.theory.analysis_params`); every run records the parameters it resolved.
     **options
         ``engine``, ``scale``, ``spp``, ``progress``, ``executor``: see :class:`RunOptions`; ``progress``
