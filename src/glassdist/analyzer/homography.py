@@ -633,8 +633,8 @@ _INTERIOR_PERIODS = 1.5
 _AMBIGUOUS_SPREAD_PERIODS = 1.0
 
 
-def _warn_ambiguous_offsets(spread: float, n: int, offsets: np.ndarray, warn: list[str]) -> None:
-    """Warn when the parts' whole-period offsets cannot be told from the glass's displacement (Block I).
+def _ambiguous_offsets(spread: float, n: int, offsets: np.ndarray, warn: list[str]) -> bool:
+    """Whether the parts' whole-period offsets cannot be told from the glass's displacement (Block I), said in ``warn``.
 
     Measured: on the ray-traced 0.75 mm roller wave (the accuracy experiment, Direct) the region
     falls into five parts and the grid moves by up to 3.1 periods within them; refitted over every
@@ -644,7 +644,7 @@ def _warn_ambiguous_offsets(spread: float, n: int, offsets: np.ndarray, warn: li
     ray-traced scene of the experiment has more than one part but the pillowed IGU (0.05 period).
     """
     if spread < _AMBIGUOUS_SPREAD_PERIODS:
-        return
+        return False
     taken = ", ".join(f"({u:+.0f}, {v:+.0f})" for u, v in offsets[2:])
     warn.append(
         f"Direct Method: the analysed region falls into {n} parts and the glass moves the grid by up to "
@@ -653,13 +653,14 @@ def _warn_ambiguous_offsets(spread: float, n: int, offsets: np.ndarray, warn: li
         "and fits the baseline on the largest part alone: its scale, and every phi with it, may still be off "
         "by far more than the stated uncertainty - use the Comparative Method (a glass-less reference)"
     )
+    return True
 
 
 def fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParams, warn: list[str],
                         lens: LensCalibration | None = None):
     """I1 + I2 over all regions, aligning each region's free integer grid offset to the largest.
 
-    Where those offsets are ambiguous (:func:`_warn_ambiguous_offsets`) the baseline is fitted
+    Where those offsets are ambiguous (:func:`_ambiguous_offsets`) the baseline is fitted
     on the largest part alone: the others join it only through offsets that may be wrong, and a
     wrong whole-period offset tilts and scales the homography fitted through it; each part is
     detrended on its own, so its offset does not enter its phi.
@@ -698,12 +699,11 @@ def fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParams
                 offsets[r] = np.round(np.median(du)), np.round(np.median(dv))
                 U[sel] -= offsets[r, 0]
                 V[sel] -= offsets[r, 1]
-        _warn_ambiguous_offsets(spread, n, offsets, warn)
-        if spread < _AMBIGUOUS_SPREAD_PERIODS:
+        if _ambiguous_offsets(spread, n, offsets, warn):
+            fitted = labels == 1
+        else:
             src, dst = logical_grid_points(U, V, yy, xx, (labels > 0) & interior, spacing)
             fit = fit_homography(src, dst, threshold_px=thr, max_trials=p.ransac_max_trials, seed=p.ransac_seed)
-        else:
-            fitted = labels == 1
     fit = refit_undistorted(
         fit, U, V, yy, xx, fitted & interior, spacing, period_px=period, step_px=grid.step, threshold_px=thr,
     )
