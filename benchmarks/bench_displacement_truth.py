@@ -28,8 +28,6 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import json
-import shlex
 import sys
 from pathlib import Path
 
@@ -40,6 +38,7 @@ sys.path.insert(0, str(HERE))
 
 from _fcd import fcd_displacement  # noqa: E402
 from _flow import farneback_displacement  # noqa: E402
+from _record import write_record  # noqa: E402
 from bench_waves_peers import FARNEBACK, correlation, field_px, matched, slope, smooth_nan, warp_reference  # noqa: E402
 
 SHAPE = (768, 768)
@@ -118,9 +117,7 @@ def main(argv=None) -> int:
             "analysed.\n\n" + table(recs))
     print(text)
     if a.out:
-        cmd = ("python benchmarks/bench_displacement_truth.py " + shlex.join(argv if argv is not None else sys.argv[1:])).strip()
-        a.out.write_text(f"<!-- {cmd} -->\n{text}\n")
-        a.out.with_suffix(".json").write_text(json.dumps({"command": cmd, "records": recs}, indent=1))
+        write_record(a.out, "bench_displacement_truth.py", argv, text, {"records": recs})
     return 0
 
 

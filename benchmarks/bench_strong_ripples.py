@@ -20,15 +20,18 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import json
-import shlex
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+from _record import write_record  # noqa: E402
+
+ROOT = HERE.parent
 
 
 def _scene(n: float | None, peak_pitch: float, dome_pitch: float | None, scale: float):
@@ -122,9 +125,7 @@ def main(argv=None) -> int:
             lines.append(line)
             print(line, flush=True)
     if a.out:
-        cmd = "python benchmarks/bench_strong_ripples.py " + shlex.join(argv if argv is not None else sys.argv[1:])
-        a.out.write_text(f"<!-- {cmd.strip()} -->\n" + "\n".join(lines) + "\n")
-        a.out.with_suffix(".json").write_text(json.dumps({"command": cmd.strip(), "records": recs}, indent=1))
+        write_record(a.out, "bench_strong_ripples.py", argv, "\n".join(lines), {"records": recs})
     return 0
 
 

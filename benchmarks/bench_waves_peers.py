@@ -48,7 +48,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import shlex
 import sys
 import time
 from pathlib import Path
@@ -61,6 +60,7 @@ sys.path.insert(0, str(HERE))
 
 from _fcd import fcd_displacement  # noqa: E402
 from _flow import farneback_displacement  # noqa: E402
+from _record import write_record  # noqa: E402
 
 TOL_PERIODS = 0.1
 # The Farneback peer's setting: the largest agreement with FCD over --farneback-sweep (a choice
@@ -337,13 +337,6 @@ def table(rec: dict) -> str:
     return "\n".join(lines)
 
 
-def write(out: Path, argv, text: str, rec: dict) -> None:
-    """The table (markdown, its command in a comment) and the record beside it (``.json``)."""
-    cmd = ("python benchmarks/bench_waves_peers.py " + shlex.join(argv if argv is not None else sys.argv[1:])).strip()
-    out.write_text(f"<!-- {cmd} -->\n{text}\n")
-    out.with_suffix(".json").write_text(json.dumps({"command": cmd, **rec}, indent=1))
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--image", type=Path, default=ROOT / "examples" / "data" / "distorted_waves.bmp")
@@ -357,14 +350,14 @@ def main(argv=None) -> int:
         text = sweep_table(rec)
         print(text)
         if a.out:
-            write(a.out, argv, text, rec)
+            write_record(a.out, "bench_waves_peers.py", argv, text, rec)
         return 0
     rec = run(a.image, a.reference, json.loads(a.params))
     text = table(rec)
     print(text)
     print("warnings:", *rec["warnings"], sep="\n  ")
     if a.out:
-        write(a.out, argv, text, rec)
+        write_record(a.out, "bench_waves_peers.py", argv, text, rec)
     return 0
 
 

@@ -25,13 +25,17 @@ from __future__ import annotations
 
 import argparse
 import json
-import shlex
 import subprocess
 import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path.insert(0, str(HERE))
+
+from _record import write_record  # noqa: E402
+
 CHANNELS = ("phi_eff", "phi_shear")
 
 
@@ -111,11 +115,9 @@ def main(argv=None) -> int:
     print(text)
     print(f"{time.perf_counter() - t0:.0f} s", file=sys.stderr)
     if a.out:
-        cmd = ("python benchmarks/bench_yardstick.py " + shlex.join(argv if argv is not None else sys.argv[1:])).strip()
-        a.out.write_text(f"<!-- {cmd} -->\n{text}\n")
-        a.out.with_suffix(".json").write_text(json.dumps(
-            {"command": cmd, "record_commit": a.record_commit, "rows": rows,
-             "record": [{"scene": k[0], "method": k[1], **v} for k, v in record.items()]}, indent=1))
+        write_record(a.out, "bench_yardstick.py", argv, text, {
+            "record_commit": a.record_commit, "rows": rows,
+            "record": [{"scene": k[0], "method": k[1], **v} for k, v in record.items()]})
     return 0
 
 
