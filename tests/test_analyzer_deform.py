@@ -77,17 +77,29 @@ def _error_periods(cap, res) -> np.ndarray:
 @pytest.mark.parametrize("method", ["comparative", "direct"])
 def test_deformation_reads_a_strong_wave_through_the_linear_transfer(strong_wave, method):
     ref = strong_wave.reference if method == "comparative" else None
+    settings = {"sigma_mm": 16.0, "detrend_degree": 1}
     runs = {n: analyze(strong_wave.image, pitch_mm=PITCH, distance_m=10.0, reference=ref,
-                       params={"sigma_mm": 16.0, "detrend_degree": 1, "deformation_passes": n}) for n in (0, 3)}
+                       params={**settings, "deformation_passes": n, "analysis_block": 4}) for n in (0, 3)}
     one, f5 = (_error_periods(strong_wave, runs[n]) for n in (0, 3))
-    # One pass: 0.0066 period RMS, 0.018 at most (the bandpass's non-linear response); deformed: 0.0018, 0.0098
-    # (Comparative) and 0.0018, 0.0101 (Direct), on F5's grid of twice the one pass's samples (0.0019, 0.0109 on
-    # the one pass's grid). The deformed output is no longer smoothed by Block F's Gaussian (transfer ~1 at this
-    # wave): its peak error is the non-linear remainder and the noise at full bandwidth.
+    # On 4 x 4 block means of the demodulation grid. One pass: 0.0066 period RMS, 0.018 at most (the bandpass's
+    # non-linear response); deformed: 0.0018, 0.0098 (Comparative) and 0.0018, 0.0101 (Direct), on F5's grid of
+    # twice the one pass's samples (0.0019, 0.0109 on the one pass's grid). The deformed output is no longer
+    # smoothed by Block F's Gaussian (transfer ~1 at this wave): its peak error is the non-linear remainder and
+    # the noise at full bandwidth.
     assert np.sqrt(np.mean(one**2)) > 0.004
     assert np.sqrt(np.mean(f5**2)) < 0.0021
     assert np.abs(f5).max() < 0.011
     assert runs[3].valid.mean() >= runs[0].valid.mean() - 0.005
+    # By default Block A keeps F5's resolution (2 x 2 means: pipeline.BLOCK_MIN_RESPONSE). Those pass what 4 x 4
+    # means removed, the passes' remainder at the carrier frequency (two thirds of the error power lies at
+    # 0.09-0.16 cycles/px, the carrier's 0.125; 2 % with 4 x 4 means): 0.0032 period RMS, 0.0165 at most
+    # (Comparative), 0.0033, 0.0165 (Direct); without noise 0.0029 and 0.0031.
+    auto = analyze(strong_wave.image, pitch_mm=PITCH, distance_m=10.0, reference=ref,
+                   params={**settings, "deformation_passes": 3})
+    assert auto.sampling_step_px == pytest.approx(tuple(2 * s for s in auto.demodulation_step_px))
+    e = _error_periods(strong_wave, auto)
+    assert np.sqrt(np.mean(e**2)) < 0.0036
+    assert np.abs(e).max() < 0.018
 
 
 def test_phase_and_displacement_conversions_are_inverse_and_signed():

@@ -24,6 +24,38 @@ def test_closed_form_responses():
     assert np.allclose(t.residual_cov_px2(1, 13.0), (169.0 - 25.0) * np.eye(2))
 
 
+@pytest.mark.parametrize("step_px, passes, expected", [(1.0, 1, 4), (1.0, 4, 2), (2.0, 10, 1)])
+def test_block_means_keep_what_the_demodulation_resolves(step_px, passes, expected):
+    """Block A's auto block factor: the largest m whose block means keep 90 % where the demodulation passes half.
+
+    The half-response frequency is solved here from the closed forms (a Gaussian of 16 px^2 for the one
+    pass; ``(1 - (1 - G B)^n) / B`` with ``B = sinc^2`` after F5's n demodulations), the block means'
+    response is the Dirichlet kernel in closed form (``cos(pi s nu)`` for 2, times ``cos(2 pi s nu)``
+    for 4), and the reporting sigma is wide enough for 4 x 4 blocks.
+    """
+    from scipy.optimize import brentq
+
+    from glassdist.analyzer.fourier import SamplingGrid
+    from glassdist.analyzer.params import AnalyzerParams
+    from glassdist.analyzer.pipeline import _analysis_block
+
+    c = 16.0
+
+    def half(nu):
+        g, b = np.exp(-2 * np.pi**2 * c * nu**2), np.sinc(step_px * nu) ** 2
+        return (g if passes == 1 else (1 - (1 - g * b) ** passes) / b) - 0.5
+
+    nu = brentq(half, 1e-6, 0.5 / step_px)
+    d2 = np.cos(np.pi * step_px * nu)
+    d4 = d2 * np.cos(2 * np.pi * step_px * nu)
+    assert expected == (4 if d4 >= 0.9 else 2 if d2 >= 0.9 else 1)
+    grid = SamplingGrid((int(256 * step_px), int(256 * step_px)), (256, 256))
+    blur = np.array([c * np.eye(2), c * np.eye(2)])
+    assert _analysis_block(100.0, blur, grid, AnalyzerParams(), passes) == expected
+    # the reporting smoothing's own bound still applies: sigma 6 px leaves a residual of 4.5 px, blocks of at most 2.2 px
+    assert _analysis_block(6.0, blur, grid, AnalyzerParams(), 1) == (2 if step_px == 1.0 else 1)
+
+
 def test_masked_filter_cost_does_not_grow_with_sigma():
     """The FFT grid is bounded by twice the field, whatever sigma (it grew as sigma^2)."""
     shapes = [M._kernel_spectrum((96, 128), s**2 * np.eye(2), (1.0, 1.0), None)[0] for s in (30.0, 300.0, 8000.0)]

@@ -39,14 +39,15 @@ def test_comparative_and_direct_agree_on_waves(real_data):
     assert (c.valid & d.valid).mean() > 0.6
     v = c.trusted & d.trusted  # compared where statistics are taken (outside the guard band)
     assert v.mean() > 0.4
-    # README ("Accuracy"): correlation 0.998 / 0.998 (measured 0.9986 / 0.9988); mean |phi| of the
-    # Direct Method 1.4 % above the Comparative on phi_eff (measured 1.0136) and 1.0 % on phi_shear (1.0104),
-    # with F5 grown into the rings' steep flanks on its finer grid (3.4 % / 3.6 % when F5 kept to the
-    # one pass's region and grid; 1.7 % / 0.04 % before F5), the Comparative's A1 Jacobian through
+    # README ("Accuracy"): correlation 0.998 / 0.998 (measured 0.9982 / 0.9982); mean |phi| of the
+    # Direct Method 1.8 % above the Comparative on phi_eff (measured 1.0178) and 1.5 % on phi_shear (1.0147),
+    # with F5 grown into the rings' steep flanks on its finer grid and Block A on 2 x 2 means of it
+    # (1.0136 / 1.0104, r 0.9986 / 0.9988 on 4 x 4 means; 3.4 % / 3.6 % when F5 kept to the one pass's
+    # region and grid; 1.7 % / 0.04 % before F5), the Comparative's A1 Jacobian through
     # the lens Block I fits on the glass-less reference. Both runs are
     # deterministic on the same photo; the margins (0.3 points) allow for platform differences of
     # the FFT and the unwrapper, not for a change of method (re-measure and update the README).
-    for ch, ratio in (("phi_eff_mD", 1.0136), ("phi_shear_mD", 1.0104)):
+    for ch, ratio in (("phi_eff_mD", 1.0178), ("phi_shear_mD", 1.0147)):
         a, b = getattr(c, ch)[v], getattr(d, ch)[v]
         assert np.corrcoef(a, b)[0, 1] > 0.998, ch
         assert np.mean(np.abs(b)) / np.mean(np.abs(a)) == pytest.approx(ratio, abs=0.003), ch
@@ -77,9 +78,10 @@ def _explains(ref, img, u, where) -> float:
 
 def test_waves_field_explains_the_photo_and_agrees_with_fcd(real_data):
     # docs/waves_peers.md: F5 grows into the rings' steep flanks. Measured: 92.1 % of the photo
-    # analysed in 2 parts (79.2 % in 36 parts without the growth), 98.6 % of it within 0.1
-    # period of FCD's field, and the reference warped by glassdist's field correlates with the
-    # photo at 0.9845 over that region against 0.9806 for FCD's field on the same pixels.
+    # analysed in 2 parts (79.2 % in 36 parts without the growth), 97.9 % of it within 0.1
+    # period of FCD's field (98.6 % with Block A on 4 x 4 means of F5's grid: the finer field resolves
+    # detail FCD's disc smooths away), and the reference warped by glassdist's field correlates with the
+    # photo at 0.9865 over that region (0.9845 on 4 x 4 means) against 0.9806 for FCD's field on the same pixels.
     ref, img = real_data["reference"], real_data["waves"]
     p = dict(P, detrend_degree=3)
     res = analyze(img, pitch_mm=5.0, distance_m=0.5, reference=ref, params=p)
@@ -89,9 +91,9 @@ def test_waves_field_explains_the_photo_and_agrees_with_fcd(real_data):
     v = res.valid
     assert v.mean() > 0.918 and res.n_regions <= 2
     close = np.max(np.abs(u - fcd), axis=-1) < 0.1 * period
-    assert close[v].mean() > 0.985
+    assert close[v].mean() > 0.976
     ours, peer = _explains(ref, img, u, v), _explains(ref, img, fcd, v)
-    assert ours > peer and ours > 0.984, (ours, peer)
+    assert ours > peer and ours > 0.986, (ours, peer)
     # the growth is what reaches the flanks: without it the region stays the one pass's
     one = analyze(img, pitch_mm=5.0, distance_m=0.5, reference=ref, params=dict(p, deformation_growth_passes=0))
     assert one.valid.mean() < 0.81
@@ -125,7 +127,7 @@ def test_the_waves_photos_lens_is_applied_when_the_photo_is_inverted(real_data):
     """The waves photo and its reference with their intensities inverted and cut to 16 bits (a
     negative of the same pane; the Comparative Method reads it as before, 1.0000): the camera lens
     stays applied and the Direct Method at the default N = 2 reads the Comparative's mean |phi_eff|
-    within 3 % (measured 1.029, as on the photo itself). Its leave-one-quadrant-out figure is 0.239
+    as on the photo itself: 1.032 (1.029 with Block A on 4 x 4 means of F5's grid). Its leave-one-quadrant-out figure is 0.239
     (0.145 on the photo as bundled): with the quadrant bound at the inner disc's 0.2 the lens was
     refused and the reading was 1.406 (docs/lens_calibration.md, "How stable the decision is")."""
 
@@ -138,4 +140,4 @@ def test_the_waves_photos_lens_is_applied_when_the_photo_is_inverted(real_data):
     cal = d.homography_fit.lens
     assert 0.2 < cal.consistency["quadrants"] < 0.3 and d.homography_fit.lens_model is not None
     ratio = np.mean(np.abs(d.phi_eff_mD[d.trusted])) / np.mean(np.abs(c.phi_eff_mD[c.trusted]))
-    assert ratio == pytest.approx(1.0, abs=0.03)
+    assert ratio == pytest.approx(1.032, abs=0.003)

@@ -148,7 +148,8 @@ class AnalyzerParams(BaseModel):
     )
 
     analysis_block: Literal["auto", 1, 2, 4] = Field(
-        "auto", description="Block A runs on m x m block means of the demodulation grid ('auto': as coarse as sigma allows)"
+        "auto", description="Block A runs on m x m block means of the demodulation grid ('auto': as coarse as sigma and the "
+        "demodulation's passband allow)"
     )
 
     @field_validator("decimation")

@@ -35,7 +35,7 @@ from .lens import LensCalibration
 from .metrics import (
     detrend_increment, evaluate_displacement, inverse_2x2, masked_gaussian, polynomial_detrend, strain_tensor,
 )
-from .transfer import InstrumentTransfer
+from .transfer import InstrumentTransfer, dirichlet_response
 from .params import AnalyzerParams, load_params
 from .pattern import settle_pattern
 from .region import (
@@ -220,8 +220,15 @@ def _frequency_deviation(phases: np.ndarray, valid: np.ndarray, carriers, step) 
     return out
 
 
-def _analysis_block(sigma_px: float, blur, grid: F.SamplingGrid, p: AnalyzerParams) -> int:
-    """Block factor (1, 2 or 4) of the Block A grid: its step stays below half the residual smoothing."""
+def _analysis_block(sigma_px: float, blur, grid: F.SamplingGrid, p: AnalyzerParams, passes: int = 1) -> int:
+    """Block factor (1, 2 or 4) of the Block A grid: as coarse as two bounds allow.
+
+    Its step stays below half the residual smoothing (what the phi maps need), and its block
+    means keep at least :data:`BLOCK_MIN_RESPONSE` of the displacement at the frequency where
+    the demodulation (``passes`` demodulations) passes half of it (what the displacement output
+    needs: F5's passes widen the demodulation's passband, and 4 x 4 means of its finer grid
+    would cut into it).
+    """
     if p.analysis_block != "auto":
         m = int(p.analysis_block)
         return m if grid.shape[0] % m == 0 and grid.shape[1] % m == 0 else 1
@@ -229,10 +236,31 @@ def _analysis_block(sigma_px: float, blur, grid: F.SamplingGrid, p: AnalyzerPara
     residual = np.sqrt(max(sigma_px**2 - worst, 0.0))
     step = max(grid.step)
     h, w = grid.shape
+    nu = None if blur is None else _half_response_frequency(InstrumentTransfer(blur, fine_step_px=grid.step, passes=passes))
     for m in (4, 2):
         if h % m == 0 and w % m == 0 and m * step <= residual / 2.0 and min(h, w) // m >= 16:
-            return m
+            if nu is None or float(dirichlet_response(m, step, nu)) >= BLOCK_MIN_RESPONSE:
+                return m
     return 1
+
+
+#: Least response of Block A's block means (Dirichlet kernel) at the frequency where the demodulation
+#: passes half the displacement: about four blocks per wavelength there. On the waves photo the one
+#: pass's 2 x 2 means of its 4.06 px grid keep 0.94 (4 x 4: 0.72); after F5's four or ten demodulations
+#: on its 2.03 px grid 4 x 4 means keep 0.81 or 0.73, 2 x 2 means 0.96 or 0.94.
+BLOCK_MIN_RESPONSE = 0.9
+
+
+def _half_response_frequency(tr: InstrumentTransfer) -> float:
+    """The frequency (cycles/px) where the demodulation's response first falls below one half, the highest along either axis for either carrier."""
+    f = np.linspace(0.0, 0.5, 2001)
+    zero = np.zeros_like(f)
+    out = 0.0
+    for i in range(2):
+        for fy, fx in ((f, zero), (zero, f)):
+            below = np.nonzero(tr.demodulation(i, fy, fx) < 0.5)[0]
+            out = max(out, float(f[below[0]]) if below.size else 0.5)
+    return out
 
 
 def _resolve_params(params, pattern) -> AnalyzerParams:
@@ -719,13 +747,14 @@ def _smoothing_mm(demod: _Demodulation, p: AnalyzerParams, p_c: float, mm_per_px
 
 def _to_analysis_grid(phases, region: Region, grid: F.SamplingGrid, sigma_px: float, blur, p: AnalyzerParams,
                       passes: int = 1) -> _AnalysisGrid:
-    """Block means of the demodulation grid, as coarse as the reporting smoothing allows.
+    """Block means of the demodulation grid, as coarse as the reporting smoothing and the demodulation's passband allow.
 
-    The block step stays below half the residual smoothing. The instrument transfer
+    The block step stays below half the residual smoothing, and the block means keep the
+    displacement the demodulation resolves (:func:`_analysis_block`). The instrument transfer
     (Gaussian demodulation blur, block means, interpolation to the pixel grid) goes with
     the phases, for Block A to divide it out.
     """
-    m = _analysis_block(sigma_px, blur, grid, p)
+    m = _analysis_block(sigma_px, blur, grid, p, passes)
     agrid = grid if m == 1 else F.block_grid(grid, m)
     transfer = None if blur is None else InstrumentTransfer(
         blur, fine_step_px=grid.step, block=m, interp_step_px=None if agrid.is_full else agrid.step, passes=passes,
