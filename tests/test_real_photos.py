@@ -78,7 +78,7 @@ def _explains(ref, img, u, where) -> float:
 
 def test_waves_field_explains_the_photo_and_agrees_with_fcd(real_data):
     # docs/waves_peers.md: F5 grows into the rings' steep flanks. Measured: 92.1 % of the photo
-    # analysed in 2 parts (79.2 % in 36 parts without the growth), 97.9 % of it within 0.1
+    # analysed in 2 parts (80.7 % without the growth, 80.4 % in one pass), 97.9 % of it within 0.1
     # period of FCD's field (98.6 % with Block A on 4 x 4 means of F5's grid: the finer field resolves
     # detail FCD's disc smooths away), and the reference warped by glassdist's field correlates with the
     # photo at 0.9865 over that region (0.9845 on 4 x 4 means) against 0.9806 for FCD's field on the same pixels.
