@@ -30,9 +30,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import json
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -44,14 +42,6 @@ sys.path.insert(0, str(HERE))
 from _record import write_record  # noqa: E402
 
 CHANNELS = ("phi_eff", "phi_shear")
-
-
-def ratios(val, where: np.ndarray) -> dict:
-    """``{channel: mean |Analyzer| / mean |truth|}`` over ``where`` (None below 100 pixels)."""
-    if where.sum() < 100:
-        return {ch: None for ch in CHANNELS}
-    return {ch: float(np.mean(np.abs(getattr(val.analysis, f"{ch}_mD")[where]))
-                      / np.mean(np.abs(getattr(val.exact, f"{ch}_mD")[where]))) for ch in CHANNELS}
 
 
 def mirror_axis(truth: np.ndarray, valid: np.ndarray) -> int:
@@ -80,34 +70,34 @@ def mirrored(mask: np.ndarray, c: int) -> np.ndarray:
 
 def run(names: list[str]) -> list[dict]:
     from glassdist.experiments._common import RunOptions, evaluate
-    from glassdist.experiments.accuracy import SCENES
+    from glassdist.experiments.accuracy import SCENES, against_truth
     from glassdist.theory import analysis_params
+
+    def ratios(val, where):  # mean |Analyzer| / mean |truth| per channel, as docs/accuracy.md
+        return against_truth(val, where)["ratios_vs_exact"]
 
     opts = RunOptions()
     prepared = [opts.prepare(SCENES[n][1]()) for n in names]
-    with tempfile.TemporaryDirectory() as tmp:
-        off_file = Path(tmp) / "growth_off.json"
-        off_file.write_text(json.dumps({"deformation_growth_passes": 0}))
-        rows = []
-        for i, inputs in opts.render_each(prepared, reference=True):
-            for method in ("comparative", "direct"):
-                on = evaluate(inputs, method=method, params=analysis_params(prepared[i]))
-                off = evaluate(inputs, method=method, params=analysis_params(prepared[i], off_file))
-                added = on.valid & ~off.valid
-                c = mirror_axis(on.exact.phi_eff_mD, on.valid)
-                mirror = mirrored(added, c) & on.valid & off.valid & ~added
-                yy, xx = np.nonzero(mirror)  # pixel by pixel: the mirror and the added pixel it reflects
-                t = np.abs(on.exact.phi_eff_mD)
-                asym = float(np.mean(np.abs(t[yy, xx] - t[yy, c - xx])) / np.mean(t[yy, c - xx])) if yy.size else None
-                rows.append({
-                    "scene": names[i], "method": method, "axis_column": c, "asymmetry": asym,
-                    "pixels": {"all": int(on.valid.sum()), "growth_off": int(off.valid.sum()),
-                               "shared": int((on.valid & off.valid).sum()),
-                               "added": int(added.sum()), "mirror": int(mirror.sum())},
-                    "growth_off": ratios(off, off.valid), "all": ratios(on, on.valid),
-                    "shared": ratios(on, on.valid & off.valid), "added": ratios(on, added), "mirror": ratios(on, mirror),
-                    "demodulations": [on.analysis.demodulations, off.analysis.demodulations],
-                })
+    rows = []
+    for i, inputs in opts.render_each(prepared, reference=True):
+        for method in ("comparative", "direct"):
+            on = evaluate(inputs, method=method, params=analysis_params(prepared[i]))
+            off = evaluate(inputs, method=method, params=analysis_params(prepared[i], deformation_growth_passes=0))
+            added = on.valid & ~off.valid
+            c = mirror_axis(on.exact.phi_eff_mD, on.valid)
+            mirror = mirrored(added, c) & on.valid & off.valid & ~added
+            yy, xx = np.nonzero(mirror)  # pixel by pixel: the mirror and the added pixel it reflects
+            t = np.abs(on.exact.phi_eff_mD)
+            asym = float(np.mean(np.abs(t[yy, xx] - t[yy, c - xx])) / np.mean(t[yy, c - xx])) if yy.size else None
+            rows.append({
+                "scene": names[i], "method": method, "axis_column": c, "asymmetry": asym,
+                "pixels": {"all": int(on.valid.sum()), "growth_off": int(off.valid.sum()),
+                           "shared": int((on.valid & off.valid).sum()),
+                           "added": int(added.sum()), "mirror": int(mirror.sum())},
+                "growth_off": ratios(off, off.valid), "all": ratios(on, on.valid),
+                "shared": ratios(on, on.valid & off.valid), "added": ratios(on, added), "mirror": ratios(on, mirror),
+                "demodulations": [on.analysis.demodulations, off.analysis.demodulations],
+            })
     return rows
 
 
@@ -119,7 +109,7 @@ def table(rows: list[dict]) -> str:
     for r in rows:
         for ch in CHANNELS:
             cells = [r["scene"], r["method"], ch.replace("phi", "φ")]
-            cells += ["—" if r[k][ch] is None else f"{r[k][ch]:.4f}" for k in cols]
+            cells += [f"{r[k][ch]:.4f}" if ch in r[k] else "—" for k in cols]
             cells.append("—" if r["asymmetry"] is None else f"{100 * r['asymmetry']:.2f} %")
             lines.append("| " + " | ".join(cells) + " |")
     lines += ["", "| scene | method | pixels: growth off | growth on | shared | added | mirror |", "|---|---|---|---|---|---|---|"]
