@@ -55,14 +55,9 @@ def test_comparative_and_direct_agree_on_waves(real_data):
 
 def _fcd():
     """The in-repo FCD peer (benchmarks/_fcd.py: its own carrier search, filters and unwrapping)."""
-    import importlib.util
-    from pathlib import Path
+    from _benchmarks import load_benchmark_module
 
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "_fcd.py"
-    spec = importlib.util.spec_from_file_location("_fcd_peer", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod.fcd_displacement
+    return load_benchmark_module("_fcd").fcd_displacement
 
 
 def _explains(ref, img, u, where) -> float:
