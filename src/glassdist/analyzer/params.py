@@ -120,6 +120,13 @@ class AnalyzerParams(BaseModel):
         "(strong local frequencies the one-pass bandpass clipped), never merging two of its parts; 0 = F5 stays "
         "within the one-pass region",
     )
+    deformation_photo_passes: int = Field(
+        0, ge=0, le=8,
+        description="F5, opt-in: passes after the warped reference's that deform the photo back to the reference's frame "
+        "by the current displacement and demodulate it there, so the bandpass passes the whole signal where the local "
+        "frequency is far off the carrier (docs/transfer_function.md, 'Photo deformation': it explains a real photo of "
+        "strong waves better, and reads short strong ripples up to 2 % low); 0 = none",
+    )
     deformation_min_deviation: float = Field(
         0.2, ge=0, le=1.0,
         description="F5: the passes run only where the one-pass local grid frequency departs from the carrier by more "

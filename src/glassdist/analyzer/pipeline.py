@@ -485,7 +485,12 @@ def _follow_local_grid(img, refm: ReferenceModel | None, demod: _Demodulation, r
     # The last residual was measured against the reference warped by pred: phi = pred + residual,
     # the converged field (the filters' Gaussian acts on the residual only; after n demodulations
     # the linear transfer is (1 - (1 - G B)^n) / B, transfer.InstrumentTransfer).
-    total = [(np.abs(z) * np.exp(1j * (np.angle(z) + pred[..., i]))).astype(np.complex64) for i, z in enumerate(zs)]
+    phase = pred + res
+    if p.deformation_photo_passes > 0:
+        pred = pred + D.fill_nearest(np.where(measured[..., None], res, 0.0), measured)
+        phase, n_photo = _photo_passes(img, refm, demod, bb_img, own, pred, measured, grid, p)
+        k += n_photo
+    total = [(np.abs(z) * np.exp(1j * phase[..., i])).astype(np.complex64) for i, z in enumerate(zs)]
     if grid is demod.grid:
         mods = list(demod.mods)
     else:  # the photo's on F5's grid, the reference's brought to it
@@ -743,6 +748,85 @@ def _smoothing_mm(demod: _Demodulation, p: AnalyzerParams, p_c: float, mm_per_px
                 f"{np.sqrt(worst) * mm_per_px:.3g} mm along the least resolved direction (summary.json: effective_sigma_mm)"
             )
     return float(sigma_mm), blur
+
+
+def _own_shift(refm: ReferenceModel | None, src: F.SamplingGrid, q: np.ndarray, grid: F.SamplingGrid,
+               ks: F.CarrierPair) -> np.ndarray | float:
+    """``own(r - u(r)) - own(r)`` (rad, (h, w, 2) on ``grid``): the reference's own phase across the displacement.
+
+    ``own``: the phases of the reference's basebands (on ``src``); ``q = -2 pi F u`` (rad), the
+    displacement in phase units. The Comparative phase at ``r`` is the photo's there less the
+    reference's there, ``own(r - u) - own(r) - 2 pi F u``: it differs from ``q`` wherever the
+    reference's own grid is not uniform (its perspective, its lens), by this. 0 in the Direct Method.
+    """
+    if refm is None:
+        return 0.0
+    unit = [b / np.maximum(np.abs(b), 1e-30) for b in refm.baseband]
+    zero = np.zeros_like(q)
+    return np.stack([np.angle(D.to_frame(o, src, q, grid, ks) * np.conj(D.to_frame(o, src, zero, grid, ks)))
+                     for o in unit], axis=-1)
+
+
+# Fixed-point iterations from the Comparative phase to the displacement: each multiplies the error by
+# the reference's relative frequency deviation across the displacement (a few percent).
+_OWN_ITERATIONS = 4
+
+
+def _photo_passes(img, refm: ReferenceModel | None, demod: _Demodulation, bb_img, own, pred: np.ndarray,
+                  measured: np.ndarray, grid: F.SamplingGrid, p: AnalyzerParams):
+    """F5's last passes: the photo deformed back to the reference's frame (:func:`~glassdist.analyzer.deform.deformed_photo`).
+
+    Each pass demodulates the deformed photo on the one-pass grid with the same filters,
+    against the reference's own basebands (Comparative; the flat carrier in the Direct Method),
+    and reads the residual at the photo's samples (:func:`~glassdist.analyzer.deform.to_frame`).
+    The deformation needs the displacement itself, ``q = -2 pi F u``; the Comparative phase
+    ``pred`` carries the reference's own phase across it as well (:func:`_own_shift`), so ``q``
+    is solved from ``pred`` first and ``pred`` rebuilt from ``q`` at the end (without it the
+    ray-traced strong lens read 0.14 px off the truth on its perspective side instead of 0.07).
+    Within three kernel widths (Block F's, its longest axis) of where the deformed photo draws
+    from off the photo, the residual is the warped reference's (``bb_img``: the photo's basebands
+    on ``grid``; ``own``: the reference's, as in :func:`_follow_local_grid`), blended over as
+    much again: both measure ``G (true - B pred)``, so every sample's transfer counts the same passes.
+
+    Returns ``(phase, passes)``: the output phase ``pred + residual`` (rad, (h, w, 2) on
+    ``grid``, the Comparative phase as F4 unwraps it) and the passes run (up to
+    ``deformation_photo_passes``, fewer once the RMS update is below ``deformation_tolerance_periods``).
+    """
+    ks = demod.carriers
+    covs = demod.covariances
+    period = max(ks.k1.period_px, ks.k2.period_px)
+    reach_px = 3.0 * float(np.sqrt(np.max(np.linalg.eigvalsh(_demodulation_blur_px2(ks, covs, p)))))
+    q = pred
+    for _ in range(_OWN_ITERATIONS if refm is not None else 0):
+        q = pred - _own_shift(refm, demod.grid, q, grid, ks)
+    spline = D.photo_spline(img)
+    n = 0
+    while True:
+        n += 1
+        deformed, outside = D.deformed_photo(spline, q, grid, ks)
+        bb = _basebands(F.compute_spectrum(deformed), ks, covs, grid)
+        del deformed
+        zs = bb if refm is None else tuple(b * np.conj(D.to_grid(r, demod.grid, grid)) for b, r in zip(bb, refm.baseband))
+        zs = [F.smooth_complex(z, p.smoothing_periods * c.period_px, grid) for z, c in zip(zs, (ks.k1, ks.k2))]
+        res = np.stack([np.angle(D.to_frame(z, grid, q, grid, ks)) for z in zs], axis=-1)
+        if outside.any():
+            # the deformed photo's share: none within reach_px of where it draws from off the photo, all beyond
+            # twice that (reference frame); the warped reference's residual, of the Comparative phase, is off as
+            # an update of q by the reference's relative frequency deviation across the displacement (a few
+            # percent of a small update)
+            dist = ndimage.distance_transform_edt(~outside, sampling=grid.step)
+            share = D.to_frame(np.clip(dist / reach_px - 1.0, 0.0, 1.0).astype(np.float32), grid, q, grid, ks)[..., None]
+            pred = q + _own_shift(refm, demod.grid, q, grid, ks)
+            bb_ref = _basebands(F.compute_spectrum(D.warped_reference(pred, own, grid, ks)), ks, covs, grid)
+            zr = [F.smooth_complex(b * np.conj(r), p.smoothing_periods * c.period_px, grid)
+                  for b, r, c in zip(bb_img, bb_ref, (ks.k1, ks.k2))]
+            res = share * res + (1.0 - share) * np.stack([np.angle(z) for z in zr], axis=-1)
+        step = float(np.sqrt(np.mean(np.sum(D.phase_to_displacement_px(res[measured], ks) ** 2, axis=-1)))) / period
+        log.debug("F5 photo pass %d: RMS update %.4f period", n, step)
+        if n >= p.deformation_photo_passes or step < p.deformation_tolerance_periods:
+            q = q + res
+            return q + _own_shift(refm, demod.grid, q, grid, ks), n
+        q = q + D.fill_nearest(np.where(measured[..., None], res, 0.0), measured)
 
 
 def _to_analysis_grid(phases, region: Region, grid: F.SamplingGrid, sigma_px: float, blur, p: AnalyzerParams,
