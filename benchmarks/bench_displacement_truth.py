@@ -22,12 +22,13 @@ through glassdist's documented transfer (``bench_waves_peers.matched``), against
 
 Usage::
 
-    python benchmarks/bench_displacement_truth.py [--out docs/displacement_truth.md]
+    python benchmarks/bench_displacement_truth.py [--params JSON] [--out docs/displacement_truth.md]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -53,7 +54,7 @@ def _error_periods(u: np.ndarray, truth: np.ndarray, where: np.ndarray, period: 
     return float(np.sqrt(np.nanmean(e**2)) / period)
 
 
-def run_case(amplitude_mm: float) -> dict:
+def run_case(amplitude_mm: float, overrides: dict | None = None) -> dict:
     from glassdist import analyze
     from glassdist.synthetic import synthetic_capture, wave_displacement
 
@@ -61,7 +62,7 @@ def run_case(amplitude_mm: float) -> dict:
                             displacement=wave_displacement(amplitude_mm, WAVELENGTH_MM, 30.0))
     ref, img = cap.reference, cap.image
     truth = -np.asarray(cap.displacement_mm) / MM_PER_PX
-    runs = {"glassdist": {}, "glassdist, F5 forced": {"deformation_min_deviation": 0.0}}
+    runs = {"glassdist": dict(overrides or {}), "glassdist, F5 forced": {**(overrides or {}), "deformation_min_deviation": 0.0}}
     results = {k: analyze(img, reference=ref, pattern="checkerboard", pitch_mm=PITCH_MM, distance_m=1.0, params=p)
                for k, p in runs.items()}
     base = results["glassdist"]
@@ -106,9 +107,10 @@ def table(recs: list[dict]) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--params", default="{}", help="analyzer parameter overrides for both glassdist runs, JSON")
     ap.add_argument("--out", type=Path, help="write the table (markdown) and the record (FILE.json beside it)")
     a = ap.parse_args(argv)
-    recs = [run_case(A) for A in AMPLITUDES_MM]
+    recs = [run_case(A, json.loads(a.params)) for A in AMPLITUDES_MM]
     text = ("Each cell: error against the truth (carrier periods, RMS) / correlation of the reference warped by "
             "the field with the photo / amplitude against the truth (slope after one carrier period of smoothing, "
             "the waves benchmark's measure); for glassdist also the demodulations, and the error and amplitude "

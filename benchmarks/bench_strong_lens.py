@@ -8,12 +8,13 @@ sigma inside the trusted region), through the stack and through the independent 
 
 Usage::
 
-    python benchmarks/bench_strong_lens.py [--scale-amplitude 12] [--passes N]
+    python benchmarks/bench_strong_lens.py [--scale-amplitude 12] [--passes N] [--params JSON]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -27,6 +28,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scale-amplitude", type=float, default=12.0)
     ap.add_argument("--passes", type=int, help="deformation_passes (default: the analyzer's)")
+    ap.add_argument("--params", default="{}", help="analyzer parameter overrides, JSON")
     a = ap.parse_args(argv)
     base = load_scene(ROOT / "examples" / "scenes" / "large_lens.yaml")
     dm = base.model_dump()["pane"]["deformation"]
@@ -35,6 +37,8 @@ def main(argv=None) -> int:
     scene = base.with_changes(name=f"large_lens_x{a.scale_amplitude:g}", pane={"deformation": dm})
     if a.passes is not None:
         scene = scene.with_changes(analysis={"deformation_passes": a.passes})
+    if a.params != "{}":
+        scene = scene.with_changes(analysis=json.loads(a.params))
     print("| method | ratio | r | interior | ratio interior (stack) | ratio interior (indep.) |")
     print("|---|---|---|---|---|---|")
     for r in _lens_rows(scene, RunOptions(engine="exact")):

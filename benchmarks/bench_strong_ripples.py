@@ -14,12 +14,13 @@ detrend is ~0).
 Usage::
 
     python benchmarks/bench_strong_ripples.py [--scale 0.5] [--periods 2.5 3 4 6 10] [--sigma 1 2 3] \
-        [--peak-pitch 0.35] [--dome] [--dome-only] [--passes N] [--out FILE.md]
+        [--peak-pitch 0.35] [--dome] [--dome-only] [--passes N] [--params JSON] [--out FILE.md]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from pathlib import Path
@@ -58,7 +59,7 @@ def _scene(n: float | None, peak_pitch: float, dome_pitch: float | None, scale: 
     return scene.with_changes(camera={"pixels": px})
 
 
-def run_case(scene, sigma_periods, degree: int, passes: int | None) -> list[dict]:
+def run_case(scene, sigma_periods, degree: int, passes: int | None, overrides: dict | None = None) -> list[dict]:
     from glassdist.experiments._common import evaluate, render_inputs
     from glassdist.experiments.transfer import _interior, _rms_ratio, independent_phi_eff
     from glassdist.scene import landing_jacobian
@@ -74,6 +75,8 @@ def run_case(scene, sigma_periods, degree: int, passes: int | None) -> list[dict
             params = analysis_params(scene, detrend_degree=degree, sigma_mm=sp * p_c)
             if passes is not None:
                 params = params.model_copy(update={"deformation_passes": passes})
+            if overrides:
+                params = params.model_copy(update=overrides)
             t0 = time.perf_counter()
             val = evaluate(inputs, method=method, params=params)
             res = val.analysis
@@ -105,6 +108,7 @@ def main(argv=None) -> int:
     ap.add_argument("--dome-pitch", type=float, default=0.35)
     ap.add_argument("--degree", type=int)
     ap.add_argument("--passes", type=int, help="deformation_passes (default: the analyzer's)")
+    ap.add_argument("--params", default="{}", help="analyzer parameter overrides, JSON")
     ap.add_argument("--out", type=Path)
     a = ap.parse_args(argv)
     dome = a.dome_pitch if (a.dome or a.dome_only) else None
@@ -116,7 +120,7 @@ def main(argv=None) -> int:
     recs = []
     for n in cases:
         scene = _scene(n, a.peak_pitch, dome, a.scale)
-        for r in run_case(scene, a.sigma, degree, a.passes):
+        for r in run_case(scene, a.sigma, degree, a.passes, json.loads(a.params)):
             r["periods"] = n
             recs.append(r)
             line = (f"| {'dome alone' if n is None else f'{n:g}'} | {r['sigma_periods']:g} | {r['method']} | "
