@@ -112,7 +112,8 @@ def matched(u: np.ndarray, res) -> np.ndarray:
 
     The whole documented transfer (:meth:`glassdist.analyzer.transfer.InstrumentTransfer.response`,
     docs/transfer_function.md): Block F's Gaussian ``G_i``, or after F5's ``n`` demodulations
-    (``res.demodulations``) ``(1 - (1 - G_i B)^n) / B``, times the block means of the analysis grid
+    (``res.demodulations``) ``(1 - (1 - G_i B)^n) / B`` (with its photo passes, ``res.photo_passes``,
+    from the low-pass of ``res.restart_sigma_px``, as there), times the block means of the analysis grid
     and the cubic B-spline from it to every pixel, applied in the spectrum of the whole field
     (periodic FFT on the field extended by odd reflection).
     """
@@ -129,7 +130,8 @@ def matched(u: np.ndarray, res) -> np.ndarray:
     fine, coarse = res.demodulation_step_px, res.sampling_step_px
     block = int(round(coarse[0] / fine[0]))
     tr = InstrumentTransfer(blur, fine_step_px=fine, block=block, interp_step_px=None if coarse == (1.0, 1.0) else coarse,
-                            passes=res.demodulations)
+                            passes=res.demodulations - res.photo_passes, photo_passes=res.photo_passes,
+                            restart_sigma_px=res.restart_sigma_px)
     ph = D.displacement_to_phase(u, ks)
     h, w = u.shape[:2]
     pad = 64

@@ -24,6 +24,28 @@ def test_closed_form_responses():
     assert np.allclose(t.residual_cov_px2(1, 13.0), (169.0 - 25.0) * np.eye(2))
 
 
+def test_photo_passes_continue_or_restart_the_transfer():
+    """F5's photo passes start from the warped reference's field low-passed by a Gaussian ``L``:
+    ``(1 - (1 - G B)^k (1 - L (1 - (1 - G B)^n))) / B``. With no low-pass they continue the n passes
+    (``n + k`` passes); with one that removes everything they restart from zero (``k`` passes)."""
+    cov = np.array([9.0 * np.eye(2), 12.0 * np.eye(2)])
+    fy, fx = np.linspace(0.0, 0.2, 41)[:, None], np.linspace(0.0, 0.2, 41)[None, :]
+    step = (2.0, 2.5)
+    G = np.exp(-2 * np.pi**2 * 12.0 * (fx**2 + fy**2))
+    B = np.sinc(2.0 * fy) ** 2 * np.sinc(2.5 * fx) ** 2
+    cont = InstrumentTransfer(cov, fine_step_px=step, passes=4, photo_passes=3, restart_sigma_px=0.0)
+    assert np.allclose(cont.demodulation(1, fy, fx), (1 - (1 - G * B) ** 7) / B)
+    fresh = InstrumentTransfer(cov, fine_step_px=step, passes=4, photo_passes=3, restart_sigma_px=1e6)
+    assert np.allclose(fresh.demodulation(1, fy, fx)[:, 1:], ((1 - (1 - G * B) ** 3) / B)[:, 1:])
+    assert cont.total_passes == fresh.total_passes == 7
+    # in between: the field before them, low-passed, then k updates G (1 - B x)
+    mid = InstrumentTransfer(cov, fine_step_px=step, passes=4, photo_passes=3, restart_sigma_px=3.0)
+    x = np.exp(-2 * np.pi**2 * 9.0 * (fx**2 + fy**2)) * (1 - (1 - G * B) ** 4) / B
+    for _ in range(3):
+        x = x + G * (1 - B * x)
+    assert np.allclose(mid.demodulation(1, fy, fx), x)
+
+
 @pytest.mark.parametrize("step_px, passes, expected", [(1.0, 1, 4), (1.0, 4, 2), (2.0, 10, 1)])
 def test_block_means_keep_what_the_demodulation_resolves(step_px, passes, expected):
     """Block A's auto block factor: the largest m whose block means keep 90 % where the demodulation passes half.

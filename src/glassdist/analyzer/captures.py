@@ -450,7 +450,7 @@ def _averaged_grid(m1: _Measurement, total: np.ndarray, count: np.ndarray, n_cap
     # Reported: the averaged region and the first capture's partial border blocks around it
     # (smoothly extended, as for one capture).
     report = valid | (m1.ag.report & ndimage.binary_dilation(valid))
-    ag = _AnalysisGrid(m1.ag.grid, avg, valid, labels, report, None, m1.ag.transfer, m1.ag.passes)
+    ag = _AnalysisGrid(m1.ag.grid, avg, valid, labels, report, None, m1.ag.transfer, m1.ag.passes, m1.ag.photo)
     partial = float(np.mean(count[valid] < n_captures)) if valid.any() else 0.0
     if partial > 0.05:
         warn.append(f"{100 * partial:.0f}% of the averaged region is covered by fewer than all "

@@ -122,10 +122,16 @@ class AnalyzerParams(BaseModel):
     )
     deformation_photo_passes: int = Field(
         0, ge=0, le=8,
-        description="F5, opt-in: passes after the warped reference's that deform the photo back to the reference's frame "
-        "by the current displacement and demodulate it there, so the bandpass passes the whole signal where the local "
-        "frequency is far off the carrier (docs/transfer_function.md, 'Photo deformation': it explains a real photo of "
-        "strong waves better, and reads short strong ripples up to 2 % low); 0 = none",
+        description="F5, opt-in: largest number of passes, after the warped reference's, that deform the photo back to "
+        "the reference's frame by the current displacement and demodulate it there, so that the bandpass passes the "
+        "whole signal where the local frequency is far off the carrier; they start from the warped reference's field "
+        "low-passed (deformation_photo_restart_periods). docs/transfer_function.md, 'Photo deformation': with 6 the "
+        "waves photo is explained better than by both peers and the strong ripples read as without; 0 = none",
+    )
+    deformation_photo_restart_periods: float = Field(
+        0.5, gt=0, le=5.0,
+        description="F5: sigma of the Gaussian low-pass of the warped reference's field the photo passes start from, "
+        "carrier periods (what that field carries beyond the filters' passband, no pass can see)",
     )
     deformation_min_deviation: float = Field(
         0.2, ge=0, le=1.0,

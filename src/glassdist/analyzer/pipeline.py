@@ -220,12 +220,14 @@ def _frequency_deviation(phases: np.ndarray, valid: np.ndarray, carriers, step) 
     return out
 
 
-def _analysis_block(sigma_px: float, blur, grid: F.SamplingGrid, p: AnalyzerParams, passes: int = 1) -> int:
+def _analysis_block(sigma_px: float, blur, grid: F.SamplingGrid, p: AnalyzerParams, passes: int = 1,
+                    photo: tuple[int, float] = (0, 0.0)) -> int:
     """Block factor (1, 2 or 4) of the Block A grid: as coarse as two bounds allow.
 
     Its step stays below half the residual smoothing (what the phi maps need), and its block
     means keep at least :data:`BLOCK_MIN_RESPONSE` of the displacement at the frequency where
-    the demodulation (``passes`` demodulations) passes half of it (what the displacement output
+    the demodulation (``passes`` demodulations, then ``photo``: F5's photo passes and the sigma of
+    the low-pass they start from, px) passes half of it (what the displacement output
     needs: F5's passes widen the demodulation's passband, and 4 x 4 means of its finer grid
     would cut into it).
     """
@@ -236,7 +238,8 @@ def _analysis_block(sigma_px: float, blur, grid: F.SamplingGrid, p: AnalyzerPara
     residual = np.sqrt(max(sigma_px**2 - worst, 0.0))
     step = max(grid.step)
     h, w = grid.shape
-    nu = None if blur is None else _half_response_frequency(InstrumentTransfer(blur, fine_step_px=grid.step, passes=passes))
+    nu = None if blur is None else _half_response_frequency(InstrumentTransfer(
+        blur, fine_step_px=grid.step, passes=passes, photo_passes=photo[0], restart_sigma_px=photo[1]))
     for m in (4, 2):
         if h % m == 0 and w % m == 0 and m * step <= residual / 2.0 and min(h, w) // m >= 16:
             if nu is None or float(dirichlet_response(m, step, nu)) >= BLOCK_MIN_RESPONSE:
@@ -299,6 +302,8 @@ class _Demodulation:
     mods: list
     noise_std: float = float("nan")
     passes: int = 1  # demodulations the phase sums (F5's iterative deformation; 1: one pass)
+    photo_passes: int = 0  # F5's photo passes after those, from their field low-passed by restart_sigma_px
+    restart_sigma_px: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -317,7 +322,8 @@ class _AnalysisGrid:
     report: np.ndarray
     fine_valid: np.ndarray | None
     transfer: InstrumentTransfer | None
-    passes: int = 1  # demodulations the phases sum (F5)
+    passes: int = 1  # demodulations the phases sum (F5), its photo passes included
+    photo: tuple[int, float] = (0, 0.0)  # F5's photo passes and the sigma (px) of the low-pass they start from
 
 
 @dataclass(frozen=True)
@@ -486,10 +492,13 @@ def _follow_local_grid(img, refm: ReferenceModel | None, demod: _Demodulation, r
     # the converged field (the filters' Gaussian acts on the residual only; after n demodulations
     # the linear transfer is (1 - (1 - G B)^n) / B, transfer.InstrumentTransfer).
     phase = pred + res
+    n_photo, restart_px = 0, 0.0
     if p.deformation_photo_passes > 0:
-        pred = pred + D.fill_nearest(np.where(measured[..., None], res, 0.0), measured)
-        phase, n_photo = _photo_passes(img, refm, demod, bb_img, own, pred, measured, grid, p)
-        k += n_photo
+        # The photo passes start from the field low-passed: what it carries beyond the filters' passband
+        # no pass can see, and the deformation would fold it into what they do see.
+        restart_px = p.deformation_photo_restart_periods * period
+        phase, n_photo = _photo_passes(img, refm, demod, bb_img, own, _low_passed(phase, measured, grid, restart_px),
+                                       measured, grid, p)
     total = [(np.abs(z) * np.exp(1j * phase[..., i])).astype(np.complex64) for i, z in enumerate(zs)]
     if grid is demod.grid:
         mods = list(demod.mods)
@@ -504,7 +513,8 @@ def _follow_local_grid(img, refm: ReferenceModel | None, demod: _Demodulation, r
     floor = float(np.exp(-0.5 * (p.deformation_max_deviation / p.bandpass_sigma_along) ** 2))
     beyond = np.any([g_ < floor for g_ in gain], axis=0)
     region_mods = [m_ / np.maximum(g_, floor) for m_, g_ in zip(mods[:2], gain)] + mods[2:]
-    out = _Demodulation(demod.method, ks, covs, grid, tuple(total), cohs, mods, demod.noise_std, passes=k + 1)
+    out = _Demodulation(demod.method, ks, covs, grid, tuple(total), cohs, mods, demod.noise_std, passes=k + 1,
+                        photo_passes=n_photo, restart_sigma_px=restart_px)
     return _F5(out, list(res.transpose(2, 0, 1)), region_mods, beyond, Region(measured, measured.astype(np.int32), 1, first),
                grown)
 
@@ -750,6 +760,15 @@ def _smoothing_mm(demod: _Demodulation, p: AnalyzerParams, p_c: float, mm_per_px
     return float(sigma_mm), blur
 
 
+def _low_passed(phase: np.ndarray, measured: np.ndarray, grid: F.SamplingGrid, sigma_px: float) -> np.ndarray:
+    """``phase`` (h, w, 2) smoothed by a Gaussian of ``sigma_px`` over the measured samples (normalised), filled beyond them."""
+    s = (sigma_px / grid.step[0], sigma_px / grid.step[1])
+    w = measured.astype(np.float32)
+    den = np.maximum(F.gaussian_blur(w, s), np.float32(1e-6))
+    out = np.stack([F.gaussian_blur(np.where(measured, phase[..., i], 0.0), s) / den for i in range(2)], axis=-1)
+    return D.fill_nearest(np.where(measured[..., None], out, 0.0), measured)
+
+
 def _own_shift(refm: ReferenceModel | None, src: F.SamplingGrid, q: np.ndarray, grid: F.SamplingGrid,
                ks: F.CarrierPair) -> np.ndarray | float:
     """``own(r - u(r)) - own(r)`` (rad, (h, w, 2) on ``grid``): the reference's own phase across the displacement.
@@ -830,7 +849,7 @@ def _photo_passes(img, refm: ReferenceModel | None, demod: _Demodulation, bb_img
 
 
 def _to_analysis_grid(phases, region: Region, grid: F.SamplingGrid, sigma_px: float, blur, p: AnalyzerParams,
-                      passes: int = 1) -> _AnalysisGrid:
+                      passes: int = 1, photo: tuple[int, float] = (0, 0.0)) -> _AnalysisGrid:
     """Block means of the demodulation grid, as coarse as the reporting smoothing and the demodulation's passband allow.
 
     The block step stays below half the residual smoothing, and the block means keep the
@@ -838,13 +857,15 @@ def _to_analysis_grid(phases, region: Region, grid: F.SamplingGrid, sigma_px: fl
     (Gaussian demodulation blur, block means, interpolation to the pixel grid) goes with
     the phases, for Block A to divide it out.
     """
-    m = _analysis_block(sigma_px, blur, grid, p, passes)
+    m = _analysis_block(sigma_px, blur, grid, p, passes, photo)
     agrid = grid if m == 1 else F.block_grid(grid, m)
     transfer = None if blur is None else InstrumentTransfer(
         blur, fine_step_px=grid.step, block=m, interp_step_px=None if agrid.is_full else agrid.step, passes=passes,
+        photo_passes=photo[0], restart_sigma_px=photo[1],
     )
+    passes = passes + photo[0]
     if m == 1:
-        return _AnalysisGrid(grid, phases, region.valid, region.labels, region.valid, None, transfer, passes)
+        return _AnalysisGrid(grid, phases, region.valid, region.labels, region.valid, None, transfer, passes, photo)
     phases, fill = F.block_mean(phases, region.valid, m)
     hb, wb = agrid.shape
     block_label = region.labels.reshape(hb, m, wb * m).max(axis=1).reshape(hb, wb, m).max(axis=2)
@@ -853,7 +874,7 @@ def _to_analysis_grid(phases, region: Region, grid: F.SamplingGrid, sigma_px: fl
     labels = np.where(fill >= 1.0, block_label, 0)
     valid = labels > 0
     report = ndimage.binary_dilation(valid, iterations=1) & (fill > 0)
-    return _AnalysisGrid(agrid, phases, valid, labels, report, region.valid, transfer, passes)
+    return _AnalysisGrid(agrid, phases, valid, labels, report, region.valid, transfer, passes, photo)
 
 
 def _direct_pass2(ag: _AnalysisGrid, carriers: F.CarrierPair, fit: HomographyFit) -> np.ndarray:
@@ -1277,7 +1298,8 @@ def _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn
     mm_per_px = p_c * float(np.sqrt(carriers.k1.norm * carriers.k2.norm))
     sigma_mm, blur = _smoothing_mm(demod, p, p_c, mm_per_px, warn)
     sigma_px = sigma_mm / mm_per_px
-    ag = _to_analysis_grid(phases, region, demod.grid, sigma_px, blur, p, passes=demod.passes)
+    ag = _to_analysis_grid(phases, region, demod.grid, sigma_px, blur, p, passes=demod.passes,
+                           photo=(demod.photo_passes, demod.restart_sigma_px))
     del phases
     if fit is not None:
         ag = replace(ag, phases=_direct_pass2(ag, carriers, fit))
@@ -1399,6 +1421,8 @@ def _result(meas: _Measurement, evaluated, warn: list[str], *, extra_fields: dic
         effective_sigma_mm=meas.sigma_mm if ag.transfer is None else ag.transfer.effective_sigma_px(meas.sigma_mm / meas.mm_per_px) * meas.mm_per_px,
         n_regions=meas.n_regions if n_regions is None else n_regions,
         demodulations=ag.passes,
+        photo_passes=ag.photo[0],
+        restart_sigma_px=ag.photo[1],
         margin_px=meas.margin_px,
         guard_px=meas.guard_px,
         noise_std=meas.noise_std,

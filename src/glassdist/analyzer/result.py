@@ -175,8 +175,13 @@ class AnalysisResult:
         or why it is not identifiable (Direct Method).
     demodulations : int
         Demodulations the displacement sums: 1 for the one-pass demodulation, more where F5
-        (iterative deformation) ran; the displacement's transfer per carrier follows from it
-        (:mod:`glassdist.analyzer.transfer`: ``G_i``, or ``(1 - (1 - G_i B)^n) / B``).
+        (iterative deformation) ran, its photo passes included; the displacement's transfer per
+        carrier follows from it (:mod:`glassdist.analyzer.transfer`: ``G_i``, or
+        ``(1 - (1 - G_i B)^n) / B``, with the photo passes as there).
+    photo_passes : int
+        Of those, F5's photo passes (0: none ran).
+    restart_sigma_px : float
+        Sigma of the low-pass of the warped reference's field the photo passes started from, px.
     """
 
     method: str
@@ -204,6 +209,8 @@ class AnalysisResult:
     optics: dict | None = None
     bulk: BulkChannel | None = None
     demodulations: int = 1
+    photo_passes: int = 0
+    restart_sigma_px: float = 0.0
     _deferred: dict | None = field(default=None, repr=False, compare=False)
 
     def field_specs(self) -> tuple[FieldSpec, ...]:

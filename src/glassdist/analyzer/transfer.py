@@ -114,6 +114,13 @@ class InstrumentTransfer:
         Gaussian stages are Gaussian and divided out in closed form). Above 1 their
         response is ``(1 - (1 - G_i B)^passes) / B`` (module notes), divided out with the
         non-Gaussian stages, per component.
+    photo_passes : int
+        F5's photo passes after those (0: none). They start from the field of the ``passes``
+        low-passed by a Gaussian of ``restart_sigma_px``: the response is
+        ``(1 - (1 - G_i B)^k (1 - L (1 - (1 - G_i B)^passes))) / B``, ``k`` the photo passes
+        and ``L`` that Gaussian's response.
+    restart_sigma_px : float
+        Sigma of the low-pass the photo passes start from, px.
     """
 
     gaussian_px2: np.ndarray
@@ -121,6 +128,8 @@ class InstrumentTransfer:
     block: int = 1
     interp_step_px: tuple[float, float] | None = None
     passes: int = 1
+    photo_passes: int = 0
+    restart_sigma_px: float = 0.0
 
     def non_gaussian(self, fy: np.ndarray, fx: np.ndarray) -> np.ndarray:
         """Transfer of the block means and the interpolation at ``(fy, fx)`` cycles/px."""
@@ -139,10 +148,19 @@ class InstrumentTransfer:
     def demodulation(self, component: int, fy: np.ndarray, fx: np.ndarray) -> np.ndarray:
         """Response of the demodulation's Gaussian stages: ``G_i``, or ``(1 - (1 - G_i B)^n) / B`` after F5."""
         g = gaussian_response(self.gaussian_px2[component], fy, fx)
-        if self.passes <= 1:
+        if self.total_passes <= 1:
             return g
         b = self.prediction_interpolation(fy, fx)
-        return (1.0 - (1.0 - g * b) ** self.passes) / b
+        left = (1.0 - g * b) ** self.passes
+        if self.photo_passes > 0:
+            low = gaussian_response(self.restart_sigma_px**2 * np.eye(2), fy, fx)
+            left = (1.0 - g * b) ** self.photo_passes * (1.0 - low * (1.0 - left))
+        return (1.0 - left) / b
+
+    @property
+    def total_passes(self) -> int:
+        """All the demodulations the displacement went through: ``passes`` and ``photo_passes``."""
+        return int(self.passes) + int(self.photo_passes)
 
     def response(self, component: int, fy: np.ndarray, fx: np.ndarray) -> np.ndarray:
         """``H_i(nu)``: end-to-end transfer of displacement component ``component`` (0 or 1)."""
@@ -155,7 +173,7 @@ class InstrumentTransfer:
         response is not Gaussian and :meth:`component_correction` divides it out: the whole
         Gaussian of the sigma reached (:meth:`effective_sigma_px`) remains to apply.
         """
-        if self.passes > 1:
+        if self.total_passes > 1:
             return self.effective_sigma_px(sigma_px) ** 2 * np.eye(2)
         w, V = np.linalg.eigh(sigma_px**2 * np.eye(2) - np.asarray(self.gaussian_px2[component], float))
         return (V * np.clip(w, 0.0, None)) @ V.T
@@ -171,7 +189,7 @@ class InstrumentTransfer:
         (where ``H_i`` falls below it the Gaussian of at least the instrument's resolution
         has already removed the content).
         """
-        if self.passes <= 1:
+        if self.total_passes <= 1:
             return self.correction
         return lambda fy, fx: 1.0 / np.maximum(self.response(component, fy, fx), MIN_RESPONSE)
 
@@ -191,4 +209,6 @@ class InstrumentTransfer:
             "interp_step_px": None if self.interp_step_px is None else list(self.interp_step_px),
             "resolution_px": self.resolution_px(),
             "passes": int(self.passes),
+            "photo_passes": int(self.photo_passes),
+            "restart_sigma_px": float(self.restart_sigma_px),
         }

@@ -262,7 +262,7 @@ def deformation_noise_gains(transfer, component: int, bandpass_px2: np.ndarray, 
     (float, float)
         ``(1.0, 1.0)`` for one pass.
     """
-    if int(transfer.passes) <= 1:
+    if transfer.total_passes <= 1:
         return 1.0, 1.0
     cov = np.asarray(transfer.gaussian_px2[component], float)
     # C is negligible beyond 5 of its frequency sigmas (1 / (2 pi sigma_px)) along its narrowest spatial axis
@@ -289,7 +289,7 @@ def deformation_channel_gain(transfer, component: int, bandpass_px2: np.ndarray,
     sigma_px : float
         The reporting smoothing's sigma reached, px.
     """
-    if int(transfer.passes) <= 1:
+    if transfer.total_passes <= 1:
         return 1.0
     fy, fx = _frequencies(5.0 / (2 * np.pi * float(sigma_px)), samples)
     _, k, r = _pass_responses(transfer, component, bandpass_px2, fy, fx)
@@ -307,11 +307,17 @@ def _pass_responses(transfer, component: int, bandpass_px2, fy, fx):
 
     The recursions of the module notes in closed form: ``k_n`` is the signal's own response
     (:meth:`~glassdist.analyzer.transfer.InstrumentTransfer.demodulation`), and
-    ``r_n = B_1 + (C - B_1) (1 - C B)^(n - 1)``.
+    ``r_n = B_1 + (C - B_1) (1 - C B)^(n - 1)``. F5's photo passes heterodyne the deformed photo
+    against the reference's baseband itself, ``r_(j+1) = r_j + C (B_1 - B r_j)``, from the low-pass
+    ``L r_n`` of the warped reference's: ``r = B_1 / B + (L r_n - B_1 / B) (1 - C B)^k``.
     """
     from .transfer import gaussian_response
 
     C = gaussian_response(np.asarray(transfer.gaussian_px2[component], float), fy, fx)
     B1 = gaussian_response(np.asarray(bandpass_px2, float), fy, fx)
-    r = B1 + (C - B1) * (1.0 - C * transfer.prediction_interpolation(fy, fx)) ** (int(transfer.passes) - 1)
+    B = transfer.prediction_interpolation(fy, fx)
+    r = B1 + (C - B1) * (1.0 - C * B) ** (int(transfer.passes) - 1)
+    if transfer.photo_passes > 0:
+        L = gaussian_response(float(transfer.restart_sigma_px) ** 2 * np.eye(2), fy, fx)
+        r = B1 / B + (L * r - B1 / B) * (1.0 - C * B) ** int(transfer.photo_passes)
     return C, transfer.demodulation(component, fy, fx), r
