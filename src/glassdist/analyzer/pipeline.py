@@ -795,9 +795,10 @@ def _photo_passes(img, refm: ReferenceModel | None, demod: _Demodulation, bb_img
                   measured: np.ndarray, grid: F.SamplingGrid, p: AnalyzerParams):
     """F5's last passes: the photo deformed back to the reference's frame (:func:`~glassdist.analyzer.deform.deformed_photo`).
 
-    Each pass demodulates the deformed photo on the one-pass grid with the same filters,
-    against the reference's own basebands (Comparative; the flat carrier in the Direct Method),
-    and reads the residual at the photo's samples (:func:`~glassdist.analyzer.deform.to_frame`).
+    ``pred``: the warped reference's field, low-passed (:func:`_low_passed`). Each pass
+    demodulates the deformed photo on F5's grid with the same filters, against the reference's own
+    basebands brought to that grid (Comparative; the flat carrier in the Direct Method), and reads
+    the residual at the photo's samples (:func:`~glassdist.analyzer.deform.to_frame`).
     The deformation needs the displacement itself, ``q = -2 pi F u``; the Comparative phase
     ``pred`` carries the reference's own phase across it as well (:func:`_own_shift`), so ``q``
     is solved from ``pred`` first and ``pred`` rebuilt from ``q`` at the end (without it the
