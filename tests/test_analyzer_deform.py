@@ -226,7 +226,7 @@ def test_own_shift_is_the_references_phase_across_the_displacement():
     # displacement u the Comparative phase differs from -2 pi f u by own(r - u) - own(r) = -2 pi 0.02 f u_x.
     from types import SimpleNamespace
 
-    from glassdist.analyzer.pipeline import _own_shift
+    from glassdist.analyzer.pipeline import _own_phasors, _own_shift
 
     ks = F.CarrierPair(F.Carrier(0.125, 0.0), F.Carrier(0.0, 0.125))
     grid = F.SamplingGrid((128, 160), (64, 80))
@@ -234,10 +234,11 @@ def test_own_shift_is_the_references_phase_across_the_displacement():
     refm = SimpleNamespace(baseband=(np.exp(2j * np.pi * 0.02 * 0.125 * xx).astype(np.complex64),
                                      np.ones(grid.shape, np.complex64)))
     u = np.broadcast_to(np.array([3.0, -2.0]), grid.shape + (2,))
-    shift = _own_shift(refm, grid, D.displacement_to_phase(u, ks), grid, ks)
+    shift = _own_shift(_own_phasors(refm, grid, grid, ks), grid, D.displacement_to_phase(u, ks), grid, ks)
     inner = (slice(4, -4), slice(4, -4))
     assert np.allclose(shift[inner][..., 0], -2 * np.pi * 0.02 * 0.125 * 3.0, atol=1e-4)
     assert np.allclose(shift[inner][..., 1], 0.0, atol=1e-6)
+    assert _own_phasors(None, grid, grid, ks) is None
     assert _own_shift(None, grid, D.displacement_to_phase(u, ks), grid, ks) == 0.0
 
 

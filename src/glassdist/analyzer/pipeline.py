@@ -464,14 +464,13 @@ def _follow_local_grid(img, refm: ReferenceModel | None, demod: _Demodulation, r
     growth_left, converging, k = p.deformation_growth_passes, 0, 0
     while True:
         k += 1
-        ref_w = D.warped_reference(pred, own, grid, ks)
-        bb_ref = _basebands(F.compute_spectrum(ref_w), ks, covs, grid)
-        del ref_w
-        zs, cohs = _smooth_with_coherence(tuple(b * np.conj(r) for b, r in zip(bb_img, bb_ref)), (ks.k1, ks.k2), grid, p)
+        het, bb_ref = _warped_heterodyne(bb_img, pred, own, grid, ks, covs)
+        zs, cohs = _smooth_with_coherence(het, (ks.k1, ks.k2), grid, p)
+        del het
         res = np.stack([np.angle(z) for z in zs], axis=-1)
         coherent = np.all([c_ > p.coherence_threshold for c_ in cohs], axis=0)
         ok = coherent & measured
-        step = float(np.sqrt(np.mean(np.sum(D.phase_to_displacement_px(res[ok], ks) ** 2, axis=-1)))) / period if ok.any() else 0.0
+        step = _rms_update_periods(res, ok, ks, period)
         new = D.grow(measured, coherent & growable, res, grid, period, parts) if growth_left > 0 else np.zeros_like(measured)
         growth_left = growth_left - 1 if new.any() else 0
         converging += 0 if new.any() else 1
@@ -760,30 +759,47 @@ def _smoothing_mm(demod: _Demodulation, p: AnalyzerParams, p_c: float, mm_per_px
     return float(sigma_mm), blur
 
 
+def _warped_heterodyne(bb_img, pred: np.ndarray, own, grid: F.SamplingGrid, ks: F.CarrierPair, covs):
+    """F5's heterodyne of the photo's basebands ``bb_img`` against the reference warped by ``pred``, and that reference's basebands."""
+    bb_ref = _basebands(F.compute_spectrum(D.warped_reference(pred, own, grid, ks)), ks, covs, grid)
+    return tuple(b * np.conj(r) for b, r in zip(bb_img, bb_ref)), bb_ref
+
+
+def _rms_update_periods(res: np.ndarray, where: np.ndarray, ks: F.CarrierPair, period: float) -> float:
+    """RMS displacement of the residual phases ``res`` (h, w, 2) over ``where``, carrier periods (0 where empty)."""
+    if not where.any():
+        return 0.0
+    return float(np.sqrt(np.mean(np.sum(D.phase_to_displacement_px(res[where], ks) ** 2, axis=-1)))) / period
+
+
 def _low_passed(phase: np.ndarray, measured: np.ndarray, grid: F.SamplingGrid, sigma_px: float) -> np.ndarray:
     """``phase`` (h, w, 2) smoothed by a Gaussian of ``sigma_px`` over the measured samples (normalised), filled beyond them."""
-    s = (sigma_px / grid.step[0], sigma_px / grid.step[1])
-    w = measured.astype(np.float32)
-    den = np.maximum(F.gaussian_blur(w, s), np.float32(1e-6))
-    out = np.stack([F.gaussian_blur(np.where(measured, phase[..., i], 0.0), s) / den for i in range(2)], axis=-1)
+    w = measured.astype(float)
+    out = np.stack([masked_gaussian(phase[..., i], w, sigma_px**2 * np.eye(2), grid.step, order=0) for i in range(2)],
+                   axis=-1)
     return D.fill_nearest(np.where(measured[..., None], out, 0.0), measured)
 
 
-def _own_shift(refm: ReferenceModel | None, src: F.SamplingGrid, q: np.ndarray, grid: F.SamplingGrid,
-               ks: F.CarrierPair) -> np.ndarray | float:
+def _own_phasors(refm: ReferenceModel | None, src: F.SamplingGrid, grid: F.SamplingGrid, ks: F.CarrierPair):
+    """The reference's own phasors: ``(on src, at grid's samples)``, each per carrier; None in the Direct Method."""
+    if refm is None:
+        return None
+    unit = [b / np.maximum(np.abs(b), 1e-30) for b in refm.baseband]
+    return unit, [D.to_frame(o, src, np.zeros(grid.shape + (2,), np.float32), grid, ks) for o in unit]
+
+
+def _own_shift(own, src: F.SamplingGrid, q: np.ndarray, grid: F.SamplingGrid, ks: F.CarrierPair) -> np.ndarray | float:
     """``own(r - u(r)) - own(r)`` (rad, (h, w, 2) on ``grid``): the reference's own phase across the displacement.
 
-    ``own``: the phases of the reference's basebands (on ``src``); ``q = -2 pi F u`` (rad), the
-    displacement in phase units. The Comparative phase at ``r`` is the photo's there less the
+    ``own``: :func:`_own_phasors` (its phasors on ``src`` and at ``grid``'s samples); ``q = -2 pi F u``
+    (rad), the displacement in phase units. The Comparative phase at ``r`` is the photo's there less the
     reference's there, ``own(r - u) - own(r) - 2 pi F u``: it differs from ``q`` wherever the
     reference's own grid is not uniform (its perspective, its lens), by this. 0 in the Direct Method.
     """
-    if refm is None:
+    if own is None:
         return 0.0
-    unit = [b / np.maximum(np.abs(b), 1e-30) for b in refm.baseband]
-    zero = np.zeros_like(q)
-    return np.stack([np.angle(D.to_frame(o, src, q, grid, ks) * np.conj(D.to_frame(o, src, zero, grid, ks)))
-                     for o in unit], axis=-1)
+    unit, here = own
+    return np.stack([np.angle(D.to_frame(o, src, q, grid, ks) * np.conj(h)) for o, h in zip(unit, here)], axis=-1)
 
 
 # Fixed-point iterations from the Comparative phase to the displacement: each multiplies the error by
@@ -816,9 +832,11 @@ def _photo_passes(img, refm: ReferenceModel | None, demod: _Demodulation, bb_img
     covs = demod.covariances
     period = max(ks.k1.period_px, ks.k2.period_px)
     reach_px = 3.0 * float(np.sqrt(np.max(np.linalg.eigvalsh(_demodulation_blur_px2(ks, covs, p)))))
+    own_ph = _own_phasors(refm, demod.grid, grid, ks)
     q = pred
     for _ in range(_OWN_ITERATIONS if refm is not None else 0):
-        q = pred - _own_shift(refm, demod.grid, q, grid, ks)
+        q = pred - _own_shift(own_ph, demod.grid, q, grid, ks)
+    ref_bb = None if refm is None else [D.to_grid(r, demod.grid, grid) for r in refm.baseband]
     spline = D.photo_spline(img)
     n = 0
     while True:
@@ -826,7 +844,7 @@ def _photo_passes(img, refm: ReferenceModel | None, demod: _Demodulation, bb_img
         deformed, outside = D.deformed_photo(spline, q, grid, ks)
         bb = _basebands(F.compute_spectrum(deformed), ks, covs, grid)
         del deformed
-        zs = bb if refm is None else tuple(b * np.conj(D.to_grid(r, demod.grid, grid)) for b, r in zip(bb, refm.baseband))
+        zs = bb if ref_bb is None else tuple(b * np.conj(r) for b, r in zip(bb, ref_bb))
         zs = [F.smooth_complex(z, p.smoothing_periods * c.period_px, grid) for z, c in zip(zs, (ks.k1, ks.k2))]
         res = np.stack([np.angle(D.to_frame(z, grid, q, grid, ks)) for z in zs], axis=-1)
         if outside.any():
@@ -836,16 +854,14 @@ def _photo_passes(img, refm: ReferenceModel | None, demod: _Demodulation, bb_img
             # percent of a small update)
             dist = ndimage.distance_transform_edt(~outside, sampling=grid.step)
             share = D.to_frame(np.clip(dist / reach_px - 1.0, 0.0, 1.0).astype(np.float32), grid, q, grid, ks)[..., None]
-            pred = q + _own_shift(refm, demod.grid, q, grid, ks)
-            bb_ref = _basebands(F.compute_spectrum(D.warped_reference(pred, own, grid, ks)), ks, covs, grid)
-            zr = [F.smooth_complex(b * np.conj(r), p.smoothing_periods * c.period_px, grid)
-                  for b, r, c in zip(bb_img, bb_ref, (ks.k1, ks.k2))]
+            het, _ = _warped_heterodyne(bb_img, q + _own_shift(own_ph, demod.grid, q, grid, ks), own, grid, ks, covs)
+            zr = [F.smooth_complex(z, p.smoothing_periods * c.period_px, grid) for z, c in zip(het, (ks.k1, ks.k2))]
             res = share * res + (1.0 - share) * np.stack([np.angle(z) for z in zr], axis=-1)
-        step = float(np.sqrt(np.mean(np.sum(D.phase_to_displacement_px(res[measured], ks) ** 2, axis=-1)))) / period
+        step = _rms_update_periods(res, measured, ks, period)
         log.debug("F5 photo pass %d: RMS update %.4f period", n, step)
         if n >= p.deformation_photo_passes or step < p.deformation_tolerance_periods:
             q = q + res
-            return q + _own_shift(refm, demod.grid, q, grid, ks), n
+            return q + _own_shift(own_ph, demod.grid, q, grid, ks), n
         q = q + D.fill_nearest(np.where(measured[..., None], res, 0.0), measured)
 
 
