@@ -35,10 +35,9 @@ def main(argv=None) -> int:
     for side in ("front", "back"):
         dm[side] = [{**d, "amplitude_mm": d["amplitude_mm"] * a.scale_amplitude} for d in dm[side]]
     scene = base.with_changes(name=f"large_lens_x{a.scale_amplitude:g}", pane={"deformation": dm})
-    if a.passes is not None:
-        scene = scene.with_changes(analysis={"deformation_passes": a.passes})
-    if a.params != "{}":
-        scene = scene.with_changes(analysis=json.loads(a.params))
+    overrides = {**json.loads(a.params), **({} if a.passes is None else {"deformation_passes": a.passes})}
+    if overrides:
+        scene = scene.with_changes(analysis=overrides)
     print("| method | ratio | r | interior | ratio interior (stack) | ratio interior (indep.) |")
     print("|---|---|---|---|---|---|")
     for r in _lens_rows(scene, RunOptions(engine="exact")):

@@ -59,7 +59,7 @@ def _scene(n: float | None, peak_pitch: float, dome_pitch: float | None, scale: 
     return scene.with_changes(camera={"pixels": px})
 
 
-def run_case(scene, sigma_periods, degree: int, passes: int | None, overrides: dict | None = None) -> list[dict]:
+def run_case(scene, sigma_periods, degree: int, overrides: dict | None = None) -> list[dict]:
     from glassdist.experiments._common import evaluate, render_inputs
     from glassdist.experiments.transfer import _interior, _rms_ratio, independent_phi_eff
     from glassdist.scene import landing_jacobian
@@ -73,8 +73,6 @@ def run_case(scene, sigma_periods, degree: int, passes: int | None, overrides: d
     for method in ("comparative", "direct"):
         for sp in sigma_periods:
             params = analysis_params(scene, detrend_degree=degree, sigma_mm=sp * p_c)
-            if passes is not None:
-                params = params.model_copy(update={"deformation_passes": passes})
             if overrides:
                 params = params.model_copy(update=overrides)
             t0 = time.perf_counter()
@@ -114,13 +112,14 @@ def main(argv=None) -> int:
     dome = a.dome_pitch if (a.dome or a.dome_only) else None
     degree = a.degree if a.degree is not None else (4 if dome else 2)
     cases = [None] if a.dome_only else a.periods
+    overrides = {**json.loads(a.params), **({} if a.passes is None else {"deformation_passes": a.passes})}
     lines = ["| ripple, periods | sigma, periods | method | ratio (stack) | ratio (indep.) | p95 abs phi_eff, mD "
              "(truth) | interior | valid |", "|---|---|---|---|---|---|---|---|"]
     print("\n".join(lines), flush=True)
     recs = []
     for n in cases:
         scene = _scene(n, a.peak_pitch, dome, a.scale)
-        for r in run_case(scene, a.sigma, degree, a.passes, json.loads(a.params)):
+        for r in run_case(scene, a.sigma, degree, overrides):
             r["periods"] = n
             recs.append(r)
             line = (f"| {'dome alone' if n is None else f'{n:g}'} | {r['sigma_periods']:g} | {r['method']} | "
