@@ -385,7 +385,10 @@ def test_uncertainty_matches_the_scatter_of_single_captures_of_a_strong_wave(met
     and 1.58 / 1.61 before F5's passes entered its sigma). The Direct Method's displacement carries Block I's
     baseline, which moves between captures (not in the per-pixel sigma): its best change of homography is removed
     per capture (``minus_homography_change``, a plain least-squares fit). With three photo passes (opt-in), 12
-    captures: 0.88 / 0.90 / 0.88 / 0.98 Comparative, 0.98 / 0.96 / 0.80 / 0.88 Direct."""
+    captures: 0.98 / 1.00 / 1.06 / 1.06 Comparative, 1.16 / 1.14 / 1.01 / 0.97 Direct (0.88 / 0.90 / 0.88 / 0.98
+    and 0.98 / 0.96 / 0.80 / 0.88 while their noise was taken over the photo's modulation at its local frequency
+    instead of the deformed photo's, at the carrier). The displacement is held to 0.85-1.15: every case reads
+    within it (0.90 / 0.92 Comparative and 0.94 / 0.95 Direct without photo passes)."""
     from glassdist.experiments.transfer import minus_homography_change
 
     params = {"pattern": "lines", "sigma_mm": 16.0, "detrend_degree": 2, "deformation_photo_passes": photo}
@@ -409,4 +412,5 @@ def test_uncertainty_matches_the_scatter_of_single_captures_of_a_strong_wave(met
     for k in keys:
         emp = np.std(np.stack(vals[k]), axis=0, ddof=1)[trusted]
         ratio = np.median(emp / np.mean(np.stack(preds[k]), axis=0)[trusted])
-        assert 0.8 < ratio < 1.25, (k, ratio)
+        lo, hi = (0.8, 1.25) if k.endswith("_mD") else (0.85, 1.15)
+        assert lo < ratio < hi, (k, ratio)

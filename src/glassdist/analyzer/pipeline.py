@@ -496,8 +496,8 @@ def _follow_local_grid(img, refm: ReferenceModel | None, demod: _Demodulation, r
         # The photo passes start from the field low-passed: what it carries beyond the filters' passband
         # no pass can see, and the deformation would fold it into what they do see.
         restart_px = p.deformation_photo_restart_periods * period
-        phase, n_photo = _photo_passes(img, refm, demod, bb_img, own, _low_passed(phase, measured, grid, restart_px),
-                                       measured, grid, p)
+        phase, n_photo, photo_mods = _photo_passes(img, refm, demod, bb_img, own,
+                                                   _low_passed(phase, measured, grid, restart_px), measured, grid, p)
     total = [(np.abs(z) * np.exp(1j * phase[..., i])).astype(np.complex64) for i, z in enumerate(zs)]
     if grid is demod.grid:
         mods = list(demod.mods)
@@ -512,6 +512,8 @@ def _follow_local_grid(img, refm: ReferenceModel | None, demod: _Demodulation, r
     floor = float(np.exp(-0.5 * (p.deformation_max_deviation / p.bandpass_sigma_along) ** 2))
     beyond = np.any([g_ < floor for g_ in gain], axis=0)
     region_mods = [m_ / np.maximum(g_, floor) for m_, g_ in zip(mods[:2], gain)] + mods[2:]
+    if n_photo:  # the noise goes as one over the modulation the last pass measured at (_photo_passes)
+        mods = photo_mods + mods[2:]
     out = _Demodulation(demod.method, ks, covs, grid, tuple(total), cohs, mods, demod.noise_std, passes=k + 1,
                         photo_passes=n_photo, restart_sigma_px=restart_px)
     return _F5(out, list(res.transpose(2, 0, 1)), region_mods, beyond, Region(measured, measured.astype(np.int32), 1, first),
@@ -824,9 +826,14 @@ def _photo_passes(img, refm: ReferenceModel | None, demod: _Demodulation, bb_img
     on ``grid``; ``own``: the reference's, as in :func:`_follow_local_grid`), blended over as
     much again: both measure ``G (true - B pred)``, so every sample's transfer counts the same passes.
 
-    Returns ``(phase, passes)``: the output phase ``pred + residual`` (rad, (h, w, 2) on
-    ``grid``, the Comparative phase as F4 unwraps it) and the passes run (up to
-    ``deformation_photo_passes``, fewer once the RMS update is below ``deformation_tolerance_periods``).
+    Returns ``(phase, passes, mods)``: the output phase ``pred + residual`` (rad, (h, w, 2) on
+    ``grid``, the Comparative phase as F4 unwraps it), the passes run (up to
+    ``deformation_photo_passes``, fewer once the RMS update is below ``deformation_tolerance_periods``)
+    and the modulation the last pass measured at, per carrier, read at the photo's samples: the
+    deformed photo's (its grid at the carrier, so the bandpass's whole amplitude), the photo's own
+    where the residual is the warped reference's. The phase noise goes as one over it, not over
+    the photo's at its local frequency (the strong wave of ``test_analyzer_quality``, Direct:
+    its x displacement scattered 0.75 of a sigma predicted from the photo's).
     """
     ks = demod.carriers
     covs = demod.covariances
@@ -847,6 +854,7 @@ def _photo_passes(img, refm: ReferenceModel | None, demod: _Demodulation, bb_img
         zs = bb if ref_bb is None else tuple(b * np.conj(r) for b, r in zip(bb, ref_bb))
         zs = [F.smooth_complex(z, p.smoothing_periods * c.period_px, grid) for z, c in zip(zs, (ks.k1, ks.k2))]
         res = np.stack([np.angle(D.to_frame(z, grid, q, grid, ks)) for z in zs], axis=-1)
+        share = 1.0
         if outside.any():
             # the deformed photo's share: none within reach_px of where it draws from off the photo, all beyond
             # twice that (reference frame); the warped reference's residual, of the Comparative phase, is off as
@@ -860,8 +868,12 @@ def _photo_passes(img, refm: ReferenceModel | None, demod: _Demodulation, bb_img
         step = _rms_update_periods(res, measured, ks, period)
         log.debug("F5 photo pass %d: RMS update %.4f period", n, step)
         if n >= p.deformation_photo_passes or step < p.deformation_tolerance_periods:
+            w_ = np.squeeze(share, -1) if np.ndim(share) else share
+            mods = [(w_ * D.to_frame(_modulation(b, c.period_px, grid, p), grid, q, grid, ks)
+                     + (1.0 - w_) * _modulation(b0, c.period_px, grid, p)).astype(np.float32)
+                    for b, b0, c in zip(bb, bb_img, (ks.k1, ks.k2))]
             q = q + res
-            return q + _own_shift(own_ph, demod.grid, q, grid, ks), n
+            return q + _own_shift(own_ph, demod.grid, q, grid, ks), n, mods
         q = q + D.fill_nearest(np.where(measured[..., None], res, 0.0), measured)
 
 
