@@ -48,6 +48,8 @@ Propagation (all operators linear, Gaussian kernels, so every step is closed for
   gains. Block A divides out the signal's response (``k_n``) and applies ``G_sigma``, so
   the photo's term reaches the channels through ``G_sigma`` as in one pass, and the
   reference's through ``(r_n / k_n) G_sigma``, a little less (:func:`deformation_channel_gain`).
+  After F5's photo passes the photo's phase noise level ``s^2 / (2 |b|^2)`` takes the deformed
+  photo's modulation, at the carrier, for ``|b|``: the one the last pass measured at.
 
 The carriers' noises are independent (disjoint bands of a white spectrum), and so are
 the image's and the reference's. Near region borders the first-order normalised
