@@ -54,7 +54,7 @@ from scipy import ndimage
 from . import fourier as F
 
 __all__ = [
-    "deformation_grid", "deformed_photo", "displacement_to_phase", "fill_nearest", "grow", "phase_to_displacement_px",
+    "deformation_grid", "deformed_photo", "displacement_to_phase", "fill_nearest", "grow", "off_frame", "phase_to_displacement_px",
     "photo_spline", "to_frame", "to_grid", "warped_reference",
 ]
 
@@ -276,6 +276,17 @@ def deformed_photo(spline: np.ndarray, pred: np.ndarray, grid: F.SamplingGrid, c
     wy += np.arange(H, dtype=np.float32)[:, None]
     out = ndimage.map_coordinates(spline, [wy, wx], order=3, mode="mirror", prefilter=False, output=np.float32)
     return out, outside
+
+
+def off_frame(pred: np.ndarray, grid: F.SamplingGrid, carriers: F.CarrierPair) -> np.ndarray:
+    """Samples ``r`` of ``grid`` (photo frame) whose ``r - u(r)`` lies off the image: the backdrop the photo shows there
+    lies beyond the reference's view, no sample of the deformed photo draws from it, and :func:`to_frame` reads
+    the edge there (``pred`` (h, w, 2), rad, as for :func:`to_frame`)."""
+    u = phase_to_displacement_px(pred, carriers)
+    H, W = grid.full_shape
+    yy, xx = grid.coords()
+    sx, sy = xx - u[..., 0], yy - u[..., 1]
+    return (sx < 0) | (sx > W - 1) | (sy < 0) | (sy > H - 1)
 
 
 def to_frame(z: np.ndarray, src: F.SamplingGrid, pred: np.ndarray, grid: F.SamplingGrid, carriers: F.CarrierPair) -> np.ndarray:
