@@ -54,8 +54,8 @@ from scipy import ndimage
 from . import fourier as F
 
 __all__ = [
-    "deformation_grid", "deformed_photo", "displacement_to_phase", "fill_nearest", "grow", "off_frame", "phase_to_displacement_px",
-    "photo_spline", "to_frame", "to_grid", "warped_reference",
+    "deformation_grid", "deformed_photo", "displacement_to_phase", "fill_nearest", "grow", "off_frame",
+    "phase_to_displacement_px", "photo_spline", "to_frame", "to_grid", "warped_reference",
 ]
 
 # A sample joins the measured region only where its wrapped residual is the true one with a
