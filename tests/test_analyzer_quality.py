@@ -385,7 +385,7 @@ def test_uncertainty_matches_the_scatter_of_single_captures_of_a_strong_wave(met
     and 1.58 / 1.61 before F5's passes entered its sigma). The Direct Method's displacement carries Block I's
     baseline, which moves between captures (not in the per-pixel sigma): its best change of homography is removed
     per capture (``minus_homography_change``, a plain least-squares fit). With three photo passes (opt-in), 12
-    captures: 0.98 / 1.00 / 1.06 / 1.06 Comparative, 1.16 / 1.14 / 1.01 / 0.97 Direct (0.88 / 0.90 / 0.88 / 0.98
+    captures: 0.98 / 1.00 / 1.05 / 1.05 Comparative, 1.18 / 1.17 / 1.00 / 0.97 Direct (0.88 / 0.90 / 0.88 / 0.98
     and 0.98 / 0.96 / 0.80 / 0.88 while their noise was taken over the photo's modulation at its local frequency
     instead of the deformed photo's, at the carrier). The displacement is held to 0.85-1.15: every case reads
     within it (0.90 / 0.92 Comparative and 0.94 / 0.95 Direct without photo passes)."""
