@@ -172,8 +172,32 @@ def test_accuracy_takes_analyzer_parameters_and_refuses_bad_ones(tmp_path, capsy
     bad.write_text('{"deformation_min_deviaton": 0}')
     assert main(["experiment", "accuracy", "--params", str(bad), "--out", str(tmp_path / "o2"), "--no-progress"]) == 2
     assert "deformation_min_deviaton" in capsys.readouterr().err
-    assert main(["experiment", "parity", "--params", str(f5), "--out", str(tmp_path / "o3"), "--no-progress"]) == 2
-    assert "accuracy experiment only" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("name", ["parity", "pitch", "rotation", "transfer"])
+def test_every_experiment_takes_analyzer_parameters_and_refuses_bad_ones_before_rendering(name, tmp_path, capsys,
+                                                                                          monkeypatch):
+    import glassdist.experiments._common as C
+
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"deformation_min_deviaton": 0}')
+    # nothing renders: a render would fail this test
+    monkeypatch.setattr(C, "render_inputs", lambda *a, **k: pytest.fail("rendered before the parameters were checked"))
+    monkeypatch.setattr(C.RunOptions, "render", lambda *a, **k: pytest.fail("rendered before the parameters were checked"))
+    assert main(["experiment", name, "--params", str(bad), "--out", str(tmp_path / "o"), "--no-progress"]) == 2
+    assert "deformation_min_deviaton" in capsys.readouterr().err
+
+
+def test_parity_runs_with_analyzer_parameters(tmp_path):
+    f5 = tmp_path / "f5.json"
+    f5.write_text('{"deformation_min_deviation": 0}')
+    out = tmp_path / "out"
+    assert main(["experiment", "parity", "--scale", "0.25", "--spp", "1", "--params", str(f5), "--no-progress",
+                 "--out", str(out)]) == 0
+    rec = json.loads((out / "parity.json").read_text())
+    assert rec["params"]["deformation_min_deviation"] == 0.0  # the file's, over the shipped 0.2
+    assert rec["detrend_degree"] == 0  # the experiment's own setting stays over the file
+    assert "--params" in rec["command"]
 
 
 def test_accuracy_unknown_scene_is_bad_input(tmp_path, capsys):

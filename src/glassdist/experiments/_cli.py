@@ -37,9 +37,9 @@ def register(subparsers):
     p.add_argument("--spp", type=int, help="samples per pixel (default: the scenes', 16)")
     p.add_argument("--sigma-mm", type=number_option(SIGMA_MM), help="reporting smoothing scale on the backdrop, mm (default: the experiment's)")
     p.add_argument("--scenes", help="accuracy only: comma-separated subset of its scenes")
-    p.add_argument("--params", metavar="FILE", help="accuracy only: analyzer parameters (JSON, as for glassdist analyze "
-                   "--params) over each scene's own analysis settings, e.g. {\"deformation_min_deviation\": 0} to "
-                   "run F5 on every scene")
+    p.add_argument("--params", metavar="FILE", help="analyzer parameters (JSON, as for glassdist analyze --params) over "
+                   "each scene's own analysis settings (the experiment's own sigma and detrend degree stay over them), "
+                   "e.g. {\"deformation_min_deviation\": 0} to run F5 on every scene")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_scheduler_options(p)
     p.set_defaults(func=run)
@@ -78,8 +78,6 @@ def run(args) -> int:
             raise InputError(f"--scenes applies to the accuracy experiment only, not to {args.name}")
         kwargs["scenes"] = args.scenes.split(",")
     if args.params:
-        if args.name != "accuracy":
-            raise InputError(f"--params applies to the accuracy experiment only, not to {args.name}")
         kwargs["params_file"] = args.params
     t0 = time.perf_counter()
     with open_executor(args.scheduler, args.workers) as executor, progress_reporter(not args.no_progress) as report:

@@ -287,6 +287,7 @@ def run_scenes(
     reference: bool,
     detrend_degree: int,
     sigma_mm: float,
+    params_file=None,
 ) -> dict:
     """Render each scene once and evaluate it with each method at one ``detrend_degree`` and ``sigma_mm``.
 
@@ -302,6 +303,10 @@ def run_scenes(
         Total degree N of the polynomial detrend.
     sigma_mm : float
         Reporting smoothing scale on the backdrop, mm.
+    params_file : path, optional
+        JSON file of analyzer parameters over each scene's own analysis settings
+        (:func:`glassdist.theory.analysis_params`); ``detrend_degree`` and ``sigma_mm``, the
+        experiment's own, stay over it. A bad file is bad input before anything renders.
 
     Returns
     -------
@@ -309,10 +314,16 @@ def run_scenes(
         In the order of ``scenes``.
     """
     prepared = {name: options.prepare(load_scene(path)) for name, path in scenes.items()}
+
+    def params_of(scene):
+        return analysis_params(scene, params_file, detrend_degree=detrend_degree, sigma_mm=sigma_mm)
+
+    if params_file is not None:
+        params_of(next(iter(prepared.values())))
     names, runs = list(prepared), {}
     for i, inputs in options.render_each(list(prepared.values()), reference=reference):
         scene = prepared[names[i]]
-        params = analysis_params(scene, detrend_degree=detrend_degree, sigma_mm=sigma_mm)
+        params = params_of(scene)
         runs[names[i]] = SceneRun(scene, inputs, params, {m: evaluate(inputs, method=m, params=params) for m in methods})
     return {name: runs[name] for name in names}
 

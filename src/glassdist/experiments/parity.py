@@ -46,6 +46,7 @@ def run_parity(
     scene_path: str | Path | None = None,
     sigma_mm: float = SIGMA_MM,
     ablation: bool = True,
+    params_file=None,
     **options,
 ) -> ExperimentResult:
     """Run the parity experiment.
@@ -58,6 +59,9 @@ def run_parity(
         Reporting smoothing scale on the backdrop, mm (the same for analyzer, model and truth).
     ablation : bool
         Also run the isotropic-bandpass ablation.
+    params_file : path, optional
+        JSON file of analyzer parameters over each scene's own analysis settings (the
+        experiment's ``sigma_mm`` and detrend degree stay over it): :func:`~glassdist.experiments._common.run_scenes`.
     **options
         ``engine``, ``scale``, ``spp``, ``progress``, ``executor``: see :class:`RunOptions`.
 
@@ -80,7 +84,7 @@ def run_parity(
     """
     run = run_scenes(
         {"parity": scene_path or SCENE}, RunOptions(**options),
-        methods=("direct",), reference=True, detrend_degree=DETREND_DEGREE, sigma_mm=sigma_mm,
+        methods=("direct",), reference=True, detrend_degree=DETREND_DEGREE, sigma_mm=sigma_mm, params_file=params_file,
     )["parity"]
     val = run.validations["direct"]
     direct = validation_record(val)

@@ -84,7 +84,7 @@ def _spread(values) -> float:
     return float(np.max(np.abs(v - v.mean())) / v.mean())
 
 
-def run_pitch(*, sigma_mm: float = SIGMA_MM, scenes: dict | None = None, **options) -> ExperimentResult:
+def run_pitch(*, sigma_mm: float = SIGMA_MM, scenes: dict | None = None, params_file=None, **options) -> ExperimentResult:
     """Run the grid-pitch experiment.
 
     Parameters
@@ -93,6 +93,9 @@ def run_pitch(*, sigma_mm: float = SIGMA_MM, scenes: dict | None = None, **optio
         Reporting smoothing scale on the backdrop, mm, shared by all pitches.
     scenes : dict, optional
         ``{'coarse' | 'medium' | 'fine': scene path}`` (default :data:`SCENES`).
+    params_file : path, optional
+        JSON file of analyzer parameters over each scene's own analysis settings (the
+        experiment's ``sigma_mm`` and detrend degree stay over it): :func:`~glassdist.experiments._common.run_scenes`.
     **options
         ``engine``, ``scale``, ``spp``, ``progress``, ``executor``: see :class:`RunOptions`.
 
@@ -114,7 +117,7 @@ def run_pitch(*, sigma_mm: float = SIGMA_MM, scenes: dict | None = None, **optio
     """
     runs = run_scenes(
         dict(SCENES if scenes is None else scenes), RunOptions(**options),
-        methods=METHODS, reference=True, detrend_degree=DETREND_DEGREE, sigma_mm=sigma_mm,
+        methods=METHODS, reference=True, detrend_degree=DETREND_DEGREE, sigma_mm=sigma_mm, params_file=params_file,
     )
     first = next(iter(runs.values()))
     common = common_region(runs)

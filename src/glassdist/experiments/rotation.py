@@ -47,7 +47,7 @@ DETREND_DEGREE = 2
 SIGMA_MM = 100.0
 
 
-def run_rotation(*, sigma_mm: float = SIGMA_MM, scenes: dict | None = None, **options) -> ExperimentResult:
+def run_rotation(*, sigma_mm: float = SIGMA_MM, scenes: dict | None = None, params_file=None, **options) -> ExperimentResult:
     """Run the grid-rotation experiment.
 
     Parameters
@@ -56,6 +56,9 @@ def run_rotation(*, sigma_mm: float = SIGMA_MM, scenes: dict | None = None, **op
         Reporting smoothing scale on the backdrop, mm.
     scenes : dict, optional
         ``{'aligned': path, 'rotated': path}`` (default :data:`SCENES`).
+    params_file : path, optional
+        JSON file of analyzer parameters over each scene's own analysis settings (the
+        experiment's ``sigma_mm`` and detrend degree stay over it): :func:`~glassdist.experiments._common.run_scenes`.
     **options
         ``engine``, ``scale``, ``spp``, ``progress``, ``executor``: see :class:`RunOptions`.
 
@@ -73,7 +76,8 @@ def run_rotation(*, sigma_mm: float = SIGMA_MM, scenes: dict | None = None, **op
     if set(paths) != {"aligned", "rotated"}:
         raise ValueError("scenes must map 'aligned' and 'rotated' to scene files")
     runs = run_scenes(
-        paths, RunOptions(**options), methods=("direct",), reference=False, detrend_degree=DETREND_DEGREE, sigma_mm=sigma_mm
+        paths, RunOptions(**options), methods=("direct",), reference=False, detrend_degree=DETREND_DEGREE, sigma_mm=sigma_mm,
+        params_file=params_file,
     )
     common = common_region(runs)
     record: dict = {

@@ -53,8 +53,11 @@ MIN_GAIN = 0.02
 BOUND = 0.01
 
 
-def measured_transfer(periods, sigma_periods, *, pitch_mm: float = 12.0, shape=(256, 512), method: str = "comparative"):
+def measured_transfer(periods, sigma_periods, *, pitch_mm: float = 12.0, shape=(256, 512), method: str = "comparative",
+                      params: dict | None = None):
     """Amplitude of the Analyzer's smoothed displacement / the true amplitude, synthetic sinusoids.
+
+    ``params``: analyzer parameters under the sweep's own detrend degree and sigma.
 
     Returns
     -------
@@ -75,7 +78,8 @@ def measured_transfer(periods, sigma_periods, *, pitch_mm: float = 12.0, shape=(
                                     displacement=wave_displacement(0.005 * pitch_mm, n * pitch_mm, 0.0))
             res = glassdist.analyze(cap.image, pitch_mm=pitch_mm, distance_m=10.0,
                                     reference=cap.reference if method == "comparative" else None,
-                                    params={"detrend_degree": 0 if method == "comparative" else 2, "sigma_mm": sp * pitch_mm})
+                                    params={**(params or {}), "detrend_degree": 0 if method == "comparative" else 2,
+                                            "sigma_mm": sp * pitch_mm})
             s = sp * pitch_mm / res.mm_per_px
             d = res.displacement_detrended_mm[..., 0]
             dist = ndimage.distance_transform_edt(np.pad(res.valid, 1))[1:-1, 1:-1]
@@ -215,7 +219,7 @@ def _ripple_pair(base, n: float, opts: RunOptions):
     return plus, replace(minus, reference=plus.reference)
 
 
-def _ripple_rows(pair, n: float, sigma_periods) -> list[dict]:
+def _ripple_rows(pair, n: float, sigma_periods, params_file=None) -> list[dict]:
     """Both methods, each sigma: the half difference of the +A and -A readings against the truth's."""
     from ..scene import landing_jacobian
 
@@ -227,7 +231,8 @@ def _ripple_rows(pair, n: float, sigma_periods) -> list[dict]:
     rows = []
     for method in ("comparative", "direct"):
         for sp in sigma_periods:
-            vals = [evaluate(i, method=method, params=analysis_params(i.scene, detrend_degree=2, sigma_mm=sp * p_c))
+            vals = [evaluate(i, method=method, params=analysis_params(i.scene, params_file, detrend_degree=2,
+                                                                     sigma_mm=sp * p_c))
                     for i in pair]
             res = vals[0].analysis
             s_px = sp * p_c / res.mm_per_px
@@ -253,13 +258,13 @@ def _ripple_rows(pair, n: float, sigma_periods) -> list[dict]:
     return rows
 
 
-def _lens_rows(scene, opts: RunOptions) -> list[dict]:
+def _lens_rows(scene, opts: RunOptions, params_file=None) -> list[dict]:
     """Both methods on a lens scene: ratio and r against the truth through the stack (valid region, and
     the interior more than 3 sigma inside it) and through the independent evaluation (interior)."""
     from ..scene import landing_jacobian
 
     inputs = render_inputs(scene, engine=opts.engine, reference=True, progress=opts.progress)
-    params = analysis_params(scene)
+    params = analysis_params(scene, params_file)
     fin = np.isfinite(inputs.truth.displacement_mm).all(-1)
     rows = []
     for method in ("comparative", "direct"):
@@ -292,27 +297,38 @@ def _bound(what: str, values, limit: float) -> dict:
     return {"what": what, "limit": limit, "value": v, "met": v <= limit}
 
 
-def run_transfer(*, periods=RIPPLE_PERIODS, sigma_periods=SIGMA_PERIODS, sigma_mm=None, **options) -> ExperimentResult:
+def run_transfer(*, periods=RIPPLE_PERIODS, sigma_periods=SIGMA_PERIODS, sigma_mm=None, params_file=None,
+                 **options) -> ExperimentResult:
     """Measured transfer function, ray-traced ripple sweep and large lenses (see the module notes).
 
     ``sigma_mm`` is refused: the sweep sets sigma in carrier periods (``sigma_periods``).
+    ``params_file``: analyzer parameters (JSON) under each run's own detrend degree and sigma, over
+    the scenes' analysis settings; a bad file is bad input before anything renders.
     """
     if sigma_mm is not None:
         from ..errors import InputError
 
         raise InputError("the transfer experiment sweeps sigma in carrier periods; leave out --sigma-mm")
+    file_params = {}
+    if params_file is not None:
+        from ..analyzer.params import load_params
+        from ..validation import load_mapping
+
+        file_params = load_mapping(params_file, "parameter file", option="--params", fmt="json",
+                                   expect="parameter: value pairs")
+        load_params(file_params)
     opts = RunOptions(**options)
     tf_periods = np.array([2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 14.0])
-    tf = measured_transfer(tf_periods, sigma_periods)
+    tf = measured_transfer(tf_periods, sigma_periods, params=file_params)
     record: dict = {"transfer_function": {"periods": tf_periods.tolist(), "measured": {str(k): v for k, v in tf.items()},
                                           "instrument": _instrument(tf_periods).tolist()}}
     base = opts.prepare(load_scene(_SCENES / "ripple_slab.yaml"))
-    rows = [r for n in periods for r in _ripple_rows(_ripple_pair(base, n, opts), n, sigma_periods)]
+    rows = [r for n in periods for r in _ripple_rows(_ripple_pair(base, n, opts), n, sigma_periods, params_file)]
     record["ripples"] = rows
     lens_rows = []
     for name in ("large_lens", "wide_gaussian_lens"):
         lens = load_scene(_SCENES / f"{name}.yaml")
-        lens_rows += _lens_rows(opts.prepare(lens) if opts.scale == 1.0 else lens, opts)
+        lens_rows += _lens_rows(opts.prepare(lens) if opts.scale == 1.0 else lens, opts, params_file)
     record["large_lens"] = lens_rows
     judged = [r for r in rows if r["judged"]]
     direct = next(r for r in lens_rows if r["scene"] == "large_lens" and r["method"] == "direct")
