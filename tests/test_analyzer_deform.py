@@ -312,3 +312,22 @@ def test_photo_passes_leave_what_the_reference_never_saw_to_the_warped_reference
     assert band.sum() > 1000
     e -= e[inner].mean()
     assert np.sqrt(np.mean(e[band] ** 2)) < 0.012
+
+
+def test_photo_passes_run_by_default_in_the_comparative_method_only(strong_wave):
+    # deformation_photo_passes 'auto': 6 with a reference, none without (docs/transfer_function.md, "Why the
+    # Comparative Method only"); an integer applies to both methods, and out-of-range values are refused.
+    from glassdist.analyzer.params import AUTO_PHOTO_PASSES, load_params
+    from glassdist.errors import InputError
+
+    p = load_params()
+    assert p.deformation_photo_passes == "auto"
+    assert (p.photo_passes_for(True), p.photo_passes_for(False)) == (AUTO_PHOTO_PASSES, 0) == (6, 0)
+    assert load_params({"deformation_photo_passes": 2}).photo_passes_for(False) == 2
+    with pytest.raises(InputError):
+        load_params({"deformation_photo_passes": 9})
+    settings = {"sigma_mm": 16.0, "detrend_degree": 1}
+    comparative = analyze(strong_wave.image, pitch_mm=PITCH, distance_m=10.0, reference=strong_wave.reference,
+                          params=settings)
+    direct = analyze(strong_wave.image, pitch_mm=PITCH, distance_m=10.0, params=settings)
+    assert comparative.photo_passes > 0 and direct.photo_passes == 0

@@ -39,17 +39,19 @@ def test_comparative_and_direct_agree_on_waves(real_data):
     assert (c.valid & d.valid).mean() > 0.6
     v = c.trusted & d.trusted  # compared where statistics are taken (outside the guard band)
     assert v.mean() > 0.4
-    # README ("Accuracy"): correlation 0.998 / 0.998 (measured 0.9982 / 0.9982); mean |phi| of the
-    # Direct Method 1.8 % above the Comparative on phi_eff (measured 1.0178) and 1.5 % on phi_shear (1.0147),
+    # README ("Accuracy"): correlation 0.997 / 0.997 (measured 0.9977 / 0.9977); mean |phi| of the
+    # Direct Method 1.9 % above the Comparative on phi_eff (measured 1.0194) and 1.7 % on phi_shear (1.0173),
+    # the Comparative with F5's photo passes (6, its default; without them r 0.9982 / 0.9982 and 1.0178 /
+    # 1.0147: the photo passes move the Comparative field towards FCD's, docs/transfer_function.md),
     # with F5 grown into the rings' steep flanks on its finer grid and Block A on 2 x 2 means of it
     # (1.0136 / 1.0104, r 0.9986 / 0.9988 on 4 x 4 means; 3.4 % / 3.6 % when F5 kept to the one pass's
     # region and grid; 1.7 % / 0.04 % before F5), the Comparative's A1 Jacobian through
     # the lens Block I fits on the glass-less reference. Both runs are
     # deterministic on the same photo; the margins (0.3 points) allow for platform differences of
     # the FFT and the unwrapper, not for a change of method (re-measure and update the README).
-    for ch, ratio in (("phi_eff_mD", 1.0178), ("phi_shear_mD", 1.0147)):
+    for ch, ratio in (("phi_eff_mD", 1.0194), ("phi_shear_mD", 1.0173)):
         a, b = getattr(c, ch)[v], getattr(d, ch)[v]
-        assert np.corrcoef(a, b)[0, 1] > 0.998, ch
+        assert np.corrcoef(a, b)[0, 1] > 0.997, ch
         assert np.mean(np.abs(b)) / np.mean(np.abs(a)) == pytest.approx(ratio, abs=0.003), ch
 
 
@@ -73,10 +75,10 @@ def _explains(ref, img, u, where) -> float:
 
 def test_waves_field_explains_the_photo_and_agrees_with_fcd(real_data):
     # docs/waves_peers.md: F5 grows into the rings' steep flanks. Measured: 92.1 % of the photo
-    # analysed in 2 parts (80.7 % without the growth, 80.4 % in one pass), 97.9 % of it within 0.1
-    # period of FCD's field (98.6 % with Block A on 4 x 4 means of F5's grid: the finer field resolves
-    # detail FCD's disc smooths away), and the reference warped by glassdist's field correlates with the
-    # photo at 0.9865 over that region (0.9845 on 4 x 4 means) against 0.9806 for FCD's field on the same pixels.
+    # analysed in 2 parts (80.7 % without the growth, 80.4 % in one pass), 99.2 % of it within 0.1
+    # period of FCD's field, and the reference warped by glassdist's field correlates with the photo at
+    # 0.9885 over that region against 0.9806 for FCD's field on the same pixels (Farneback's, in the
+    # benchmark, 0.9874). Without F5's photo passes (`deformation_photo_passes` 0): 97.9 % and 0.9865.
     ref, img = real_data["reference"], real_data["waves"]
     p = dict(P, detrend_degree=3)
     res = analyze(img, pitch_mm=5.0, distance_m=0.5, reference=ref, params=p)
@@ -86,9 +88,9 @@ def test_waves_field_explains_the_photo_and_agrees_with_fcd(real_data):
     v = res.valid
     assert v.mean() > 0.918 and res.n_regions <= 2
     close = np.max(np.abs(u - fcd), axis=-1) < 0.1 * period
-    assert close[v].mean() > 0.976
+    assert close[v].mean() > 0.99
     ours, peer = _explains(ref, img, u, v), _explains(ref, img, fcd, v)
-    assert ours > peer and ours > 0.986, (ours, peer)
+    assert ours > peer and ours > 0.988, (ours, peer)
     # the growth is what reaches the flanks: without it the region stays the one pass's
     one = analyze(img, pitch_mm=5.0, distance_m=0.5, reference=ref, params=dict(p, deformation_growth_passes=0))
     assert one.valid.mean() < 0.81

@@ -27,11 +27,14 @@ measured like the others; it stays measured only where its last update is below
 one pass's grid is too coarse for the reach (:func:`deformation_grid`), F5 works on one with
 twice its samples along each axis, so steep flanks do not alias into phase residues.
 
-Photo passes (opt-in, ``deformation_photo_passes``). The warped reference keeps the photo's local
-frequency, of which the bandpass passes only its gain. After its passes, F5 can instead deform the
-photo itself back to the reference's frame (:func:`deformed_photo`), where its grid sits at the
-carrier, demodulate that and read the residual back at the photo's samples (:func:`to_frame`),
-starting from the warped reference's field low-passed (docs/transfer_function.md, "Photo deformation").
+Photo passes (``deformation_photo_passes``; by default 6 in the Comparative Method, none in the
+Direct Method). The warped reference keeps the photo's local frequency, of which the bandpass
+passes only its gain. After its passes, F5 then deforms the photo itself back to the reference's
+frame (:func:`deformed_photo`), where its grid sits at the carrier, demodulates that and reads the
+residual back at the photo's samples (:func:`to_frame`), starting from the warped reference's field
+low-passed. Where the photo shows what the reference never saw (:func:`off_frame`) or the deformed
+photo draws from off the photo, the residual stays the warped reference's (docs/transfer_function.md,
+"Photo deformation").
 
 The phase handed on is ``pred + residual``: the filters' Gaussian ``G`` acts on the residual
 only. In the linear regime each pass measures ``G (true - B pred)`` (``B`` the bilinear

@@ -19,6 +19,10 @@ from pydantic import BaseModel, Field, field_validator
 
 from ..validation import MODEL_CONFIG, SIGMA_MM, load_mapping, safe_text, validate_model
 
+# F5's photo passes with deformation_photo_passes 'auto' in the Comparative Method: the waves photo is
+# explained at 0.9859 / 0.9871 / 0.9879 / 0.9885 after 3 / 4 / 5 / 6 (docs/transfer_function.md)
+AUTO_PHOTO_PASSES = 6
+
 __all__ = ["AnalyzerParams", "load_params", "default_params_path"]
 
 
@@ -120,13 +124,14 @@ class AnalyzerParams(BaseModel):
         "(strong local frequencies the one-pass bandpass clipped), never merging two of its parts; 0 = F5 stays "
         "within the one-pass region",
     )
-    deformation_photo_passes: int = Field(
-        0, ge=0, le=8,
-        description="F5, opt-in: largest number of passes, after the warped reference's, that deform the photo back to "
-        "the reference's frame by the current displacement and demodulate it there, so that the bandpass passes the "
-        "whole signal where the local frequency is far off the carrier; they start from the warped reference's field "
-        "low-passed (deformation_photo_restart_periods). docs/transfer_function.md, 'Photo deformation': with 6 the "
-        "waves photo is explained better than by both peers and the strong ripples read as without; 0 = none",
+    deformation_photo_passes: int | Literal["auto"] = Field(
+        "auto",
+        description="F5: largest number of passes, after the warped reference's, that deform the photo back to the "
+        "reference's frame by the current displacement and demodulate it there, so that the bandpass passes the whole "
+        "signal where the local frequency is far off the carrier; they start from the warped reference's field "
+        "low-passed (deformation_photo_restart_periods); 0 = none. 'auto': 6 in the Comparative Method, 0 in the "
+        "Direct Method, where Block I fits its baseline on F5's phases afterwards and, on ray-traced lenses whose "
+        "baseline is weakly determined, moved with them (docs/transfer_function.md, 'Photo deformation')",
     )
     deformation_photo_restart_periods: float = Field(
         0.5, gt=0, le=5.0,
@@ -164,6 +169,19 @@ class AnalyzerParams(BaseModel):
         "auto", description="Block A runs on m x m block means of the demodulation grid ('auto': as coarse as sigma and the "
         "demodulation's passband allow)"
     )
+
+    @field_validator("deformation_photo_passes")
+    @classmethod
+    def _check_photo_passes(cls, v):
+        if v != "auto" and not 0 <= int(v) <= 8:
+            raise ValueError("deformation_photo_passes must be 'auto' or an integer from 0 to 8")
+        return v
+
+    def photo_passes_for(self, comparative: bool) -> int:
+        """The photo passes F5 may run: ``deformation_photo_passes``, its ``'auto'`` resolved by the method."""
+        if self.deformation_photo_passes == "auto":
+            return AUTO_PHOTO_PASSES if comparative else 0
+        return int(self.deformation_photo_passes)
 
     @field_validator("decimation")
     @classmethod

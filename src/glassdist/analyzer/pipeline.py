@@ -492,12 +492,14 @@ def _follow_local_grid(img, refm: ReferenceModel | None, demod: _Demodulation, r
     # the linear transfer is (1 - (1 - G B)^n) / B, transfer.InstrumentTransfer).
     phase = pred + res
     n_photo, restart_px = 0, 0.0
-    if p.deformation_photo_passes > 0:
+    photo_max = p.photo_passes_for(refm is not None)
+    if photo_max > 0:
         # The photo passes start from the field low-passed: what it carries beyond the filters' passband
         # no pass can see, and the deformation would fold it into what they do see.
         restart_px = p.deformation_photo_restart_periods * period
         phase, n_photo, photo_mods = _photo_passes(img, refm, demod, bb_img, own,
-                                                   _low_passed(phase, measured, grid, restart_px), measured, grid, p)
+                                                   _low_passed(phase, measured, grid, restart_px), measured, grid, p,
+                                                   photo_max)
     total = [(np.abs(z) * np.exp(1j * phase[..., i])).astype(np.complex64) for i, z in enumerate(zs)]
     if grid is demod.grid:
         mods = list(demod.mods)
@@ -810,7 +812,7 @@ _OWN_ITERATIONS = 4
 
 
 def _photo_passes(img, refm: ReferenceModel | None, demod: _Demodulation, bb_img, own, pred: np.ndarray,
-                  measured: np.ndarray, grid: F.SamplingGrid, p: AnalyzerParams):
+                  measured: np.ndarray, grid: F.SamplingGrid, p: AnalyzerParams, max_passes: int):
     """F5's last passes: the photo deformed back to the reference's frame (:func:`~glassdist.analyzer.deform.deformed_photo`).
 
     ``pred``: the warped reference's field, low-passed (:func:`_low_passed`). Each pass
@@ -832,8 +834,9 @@ def _photo_passes(img, refm: ReferenceModel | None, demod: _Demodulation, bb_img
     through the detrend (1.0065 after 2, 1.0110 after 8; now 1.0046 and 1.0037).
 
     Returns ``(phase, passes, mods)``: the output phase ``pred + residual`` (rad, (h, w, 2) on
-    ``grid``, the Comparative phase as F4 unwraps it), the passes run (up to
-    ``deformation_photo_passes``, fewer once the RMS update is below ``deformation_tolerance_periods``)
+    ``grid``, the Comparative phase as F4 unwraps it), the passes run (up to ``max_passes``,
+    :meth:`~glassdist.analyzer.params.AnalyzerParams.photo_passes_for`, fewer once the RMS update is
+    below ``deformation_tolerance_periods``)
     and the modulation the last pass measured at, per carrier, read at the photo's samples: the
     deformed photo's (its grid at the carrier, so the bandpass's whole amplitude), the photo's own
     where the residual is the warped reference's. The phase noise goes as one over it, not over
@@ -880,7 +883,7 @@ def _photo_passes(img, refm: ReferenceModel | None, demod: _Demodulation, bb_img
             res = share * res + (1.0 - share) * np.stack([np.angle(z) for z in zr], axis=-1)
         step = _rms_update_periods(res, measured, ks, period)
         log.debug("F5 photo pass %d: RMS update %.4f period", n, step)
-        if n >= p.deformation_photo_passes or step < p.deformation_tolerance_periods:
+        if n >= max_passes or step < p.deformation_tolerance_periods:
             w_ = np.squeeze(share, -1) if np.ndim(share) else share
             mods = [(w_ * D.to_frame(_modulation(b, c.period_px, grid, p), grid, q, grid, ks)
                      + (1.0 - w_) * _modulation(b0, c.period_px, grid, p)).astype(np.float32)
