@@ -853,14 +853,17 @@ def _photo_passes(img, refm: ReferenceModel | None, demod: _Demodulation, bb_img
         q = pred - _own_shift(own_ph, demod.grid, q, grid, ks)
     ref_bb = None if refm is None else [D.to_grid(r, demod.grid, grid) for r in refm.baseband]
     spline = D.photo_spline(img)
+
+    def smoothed(zs):  # F3 on the heterodynes, as in the warped reference's passes (no coherence needed here)
+        return [F.smooth_complex(z, p.smoothing_periods * c.period_px, grid) for z, c in zip(zs, (ks.k1, ks.k2))]
+
     n = 0
     while True:
         n += 1
         deformed, outside = D.deformed_photo(spline, q, grid, ks)
         bb = _basebands(F.compute_spectrum(deformed), ks, covs, grid)
         del deformed
-        zs = bb if ref_bb is None else tuple(b * np.conj(r) for b, r in zip(bb, ref_bb))
-        zs = [F.smooth_complex(z, p.smoothing_periods * c.period_px, grid) for z, c in zip(zs, (ks.k1, ks.k2))]
+        zs = smoothed(bb if ref_bb is None else tuple(b * np.conj(r) for b, r in zip(bb, ref_bb)))
         res = np.stack([np.angle(D.to_frame(z, grid, q, grid, ks)) for z in zs], axis=-1)
         share = 1.0
         off = D.off_frame(q, grid, ks)
@@ -879,8 +882,7 @@ def _photo_passes(img, refm: ReferenceModel | None, demod: _Demodulation, bb_img
                 share = np.minimum(share, ramp(off).astype(np.float32))
             share = share[..., None]
             het, _ = _warped_heterodyne(bb_img, q + _own_shift(own_ph, demod.grid, q, grid, ks), own, grid, ks, covs)
-            zr = [F.smooth_complex(z, p.smoothing_periods * c.period_px, grid) for z, c in zip(het, (ks.k1, ks.k2))]
-            res = share * res + (1.0 - share) * np.stack([np.angle(z) for z in zr], axis=-1)
+            res = share * res + (1.0 - share) * np.stack([np.angle(z) for z in smoothed(het)], axis=-1)
         step = _rms_update_periods(res, measured, ks, period)
         log.debug("F5 photo pass %d: RMS update %.4f period", n, step)
         if n >= max_passes or step < p.deformation_tolerance_periods:
