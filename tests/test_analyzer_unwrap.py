@@ -2,8 +2,9 @@
 
 import numpy as np
 import pytest
+from scipy import ndimage
 
-from glassdist.analyzer.unwrap import label_regions, residues, unwrap, wrap
+from glassdist.analyzer.unwrap import branch_cuts, label_regions, residues, unwrap, wrap
 
 
 def test_wrap_then_unwrap_recovers_smooth_phase():
@@ -131,3 +132,55 @@ def test_coarse_unwrap_refuses_a_ridge_narrower_than_its_step():
         assert _unwrap_coarse(wrap(t), valid.T if t is not truth else valid, 0, 8) is None
     un = unwrap(wrap(truth), valid, labels, n, seed=0)  # the full-resolution unwrapper follows it
     assert np.ptp(un - truth) < 1e-9
+
+
+def _max_step(un: np.ndarray) -> float:
+    """Largest phase step between 4-neighbours that are both unwrapped (NaN elsewhere), rad."""
+    with np.errstate(invalid="ignore"):
+        return float(max(np.nanmax(np.abs(np.diff(un, axis=0))), np.nanmax(np.abs(np.diff(un, axis=1)))))
+
+
+def _unwrapped(phase, valid):
+    labels, n = label_regions(valid)
+    return unwrap(phase, valid, labels, n)
+
+
+def test_a_hole_the_phase_winds_around_is_cut_to_the_border_and_the_seam_lies_on_the_cut():
+    # A smooth field plus one turn around a point inside an excluded disc: every 2 x 2 loop of the
+    # region closes, yet every loop around the disc turns by 2 pi. Without a cut the unwrapper puts a
+    # whole-period seam where it likes inside the region; with it, the seam lies on the cut.
+    y, x = np.mgrid[0:120, 0:150].astype(float)
+    phase = wrap(0.2 * x + 0.1 * y + np.arctan2(y - 60.2, x - 80.3))
+    valid = np.hypot(y - 60, x - 80) > 12
+    assert not residues(phase)[valid].any()
+    assert _max_step(_unwrapped(phase, valid)) > np.pi
+    cut = branch_cuts([phase], valid)
+    assert cut.any() and not (cut & ~valid).any()
+    # the shortest way out: from the disc's rim to the nearest border (the top, 48 samples away)
+    assert 40 <= cut.sum() <= 52
+    assert _max_step(_unwrapped(phase, valid & ~cut)) < np.pi
+
+
+def test_two_opposite_holes_are_cut_to_each_other_and_a_neutral_hole_is_left_alone():
+    y, x = np.mgrid[0:200, 0:200].astype(float)
+    wind = np.arctan2(y - 100.3, x - 80.2) - np.arctan2(y - 100.3, x - 120.2)  # +1 and -1, 40 samples apart
+    phase = wrap(0.3 * x - 0.2 * y + wind)
+    neutral = np.hypot(y - 40, x - 150) <= 8  # a hole the phase does not wind around
+    valid = (np.hypot(y - 100, x - 80) > 6) & (np.hypot(y - 100, x - 120) > 6) & ~neutral
+    cut = branch_cuts([phase], valid)
+    # one straight cut between the rims (40 - 2 x 6 samples), not two to the border (about 90 each)
+    assert 26 <= cut.sum() <= 32
+    assert not cut[neutral].any() and not ndimage.binary_dilation(neutral, iterations=3)[cut].any()
+    assert _max_step(_unwrapped(phase, valid & ~cut)) < np.pi
+    # a smooth phase needs no cut, holes or not
+    assert not branch_cuts([wrap(0.3 * x - 0.2 * y)], valid).any()
+
+
+def test_the_cut_holds_for_either_phase():
+    # only the second carrier's phase winds: the hole is charged all the same
+    y, x = np.mgrid[0:80, 0:80].astype(float)
+    flat = wrap(0.25 * x)
+    winding = wrap(0.25 * y + np.arctan2(y - 40.4, x - 40.3))
+    valid = np.hypot(y - 40, x - 40) > 6
+    assert branch_cuts([flat, winding], valid).any()
+    assert not branch_cuts([flat, flat], valid).any()

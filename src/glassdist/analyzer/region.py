@@ -12,7 +12,9 @@ Every sample of the demodulation grid gets one integer label (:data:`LABELS`):
                          ``max_frequency_deviation`` (the bandpass cannot follow it); and
                          its margin
 4    phase residue       a 2x2 loop of the wrapped phase does not close (noise, occlusion
-                         or distortion beyond the sampling condition)
+                         or distortion beyond the sampling condition), or a branch cut
+                         between excluded areas the wrapped phase winds around
+                         (:func:`~glassdist.analyzer.unwrap.branch_cuts`)
 5    user mask           outside the region the user asked for
 6    guard band          measured (displacement and channels reported) but within the
                          guard band of an excluded area or the image edge: the metric
@@ -55,7 +57,7 @@ from scipy import ndimage
 from scipy.special import ndtri
 
 from . import fourier as F
-from .unwrap import label_regions, residues, wrap
+from .unwrap import branch_cuts, label_regions, residues, wrap
 
 __all__ = [
     "ANALYSED",
@@ -204,7 +206,7 @@ def erode(valid: np.ndarray, margin_px: float, grid: F.SamplingGrid, edge_margin
 
 def valid_region(
     phases, coherences, mods, carriers: F.CarrierPair, grid: F.SamplingGrid, p, user_mask, warn: list[str],
-    *, margin_px: float, edge_margin_px: float, deviation_phases=None, beyond=None, contrast=None,
+    *, margin_px: float, edge_margin_px: float, deviation_phases=None, beyond=None, contrast=None, cuts: bool = True,
 ) -> Region:
     """Labels of the demodulation grid from the modulation, coherence, local frequency, residues and the user mask.
 
@@ -232,6 +234,9 @@ def valid_region(
         its modulation somewhere): an excluded sample where the photo
         keeps its contrast but its own carriers lost their modulation shows the grid at a
         frequency the bandpass does not pass (:data:`BEYOND_RANGE`), not an occlusion.
+    cuts : bool
+        Cut the region's charged holes (:func:`~glassdist.analyzer.unwrap.branch_cuts`); False
+        where :func:`within` restricts the region first and cuts what is left.
     """
     period = max(carriers.k1.period_px, carriers.k2.period_px)
     dev_phases = phases if deviation_phases is None else deviation_phases
@@ -248,7 +253,7 @@ def valid_region(
     # The user mask excludes no phase: it is applied after the erosion (no margin around it).
     kept = _kept_beyond_margins(labels, ok, modulated, half, grid, margin_px, edge_margin_px)
     valid = _without_residues(list(phases) + ([] if deviation_phases is None else list(deviation_phases)), kept & in_mask,
-                              labels, warn)
+                              labels, warn, unwrapped=phases if cuts else ())
     min_size = int(p.min_region_fraction * valid.size)
     regions, n = label_regions(valid, max(min_size, 16))
     labels[valid & (regions == 0)] = FRAGMENT
@@ -461,8 +466,8 @@ def beyond_range_warning(labels: np.ndarray, user_mask, grid: F.SamplingGrid, p)
     )
 
 
-def _without_residues(phases, valid: np.ndarray, labels: np.ndarray, warn: list[str]) -> np.ndarray:
-    """``valid`` less the samples next to a phase residue of either wrapped phase.
+def _without_residues(phases, valid: np.ndarray, labels: np.ndarray, warn: list[str], unwrapped=None) -> np.ndarray:
+    """``valid`` less the samples next to a phase residue of either wrapped phase, and the branch cuts.
 
     Parameters
     ----------
@@ -474,38 +479,52 @@ def _without_residues(phases, valid: np.ndarray, labels: np.ndarray, warn: list[
         Quality labels; the removed samples become :data:`PHASE_RESIDUE` (in place).
     warn : list of str
         Receives a warning when over 1% of the region is removed.
+    unwrapped : sequence of ndarray (h, w), optional
+        The phases F4 unwraps (default ``phases``; none: no cuts): no hole of the region may hold a
+        net residue of theirs (:func:`~glassdist.analyzer.unwrap.branch_cuts`, the cut samples also
+        labelled :data:`PHASE_RESIDUE`).
 
     Returns
     -------
     ndarray of bool (h, w)
     """
+    n0 = max(int(valid.sum()), 1)
     res = np.zeros(valid.shape, bool)
     for ph in phases:
         res |= residues(ph)
     if res.any():
         res = ndimage.binary_dilation(res, iterations=1)
-        frac = float((res & valid).sum()) / max(valid.sum(), 1)
-        if frac > 0.01:
-            warn.append(f"{100 * frac:.1f}% of the region has phase residues (noise, occlusion or too strong distortion) and was excluded")
         labels[res & valid] = PHASE_RESIDUE
         valid &= ~res
+    cut = branch_cuts(phases if unwrapped is None else unwrapped, valid)
+    labels[cut] = PHASE_RESIDUE
+    valid &= ~cut
+    frac = 1.0 - float(valid.sum()) / n0
+    if frac > 0.01:
+        warn.append(f"{100 * frac:.1f}% of the region has phase residues (noise, occlusion or too strong distortion) and was excluded")
     return valid
 
 
-def within(region: Region, first: Region, p) -> Region:
+def within(region: Region, first: Region, p, phases=()) -> Region:
     """``region`` restricted to ``first``'s measured samples (F5's region, within the region its predictor was measured on).
 
     F5 measures the residual against a reference warped by its prediction; the prediction is
     measured on the one-pass region and on the samples F5 grew it into, a period at a time
     (:func:`~glassdist.analyzer.deform.grow`). Elsewhere (beyond reach, a gap the growth did
     not close) the predictor is a guess whose whole periods nothing can check, so those samples
-    stay excluded, with ``first``'s label (the one pass's). Connected parts are labelled anew
-    (:func:`~glassdist.analyzer.unwrap.label_regions`).
+    stay excluded, with ``first``'s label (the one pass's). The holes of what is left that the
+    wrapped ``phases`` (those F4 unwraps) wind around are cut
+    (:func:`~glassdist.analyzer.unwrap.branch_cuts`, :data:`PHASE_RESIDUE`), and connected parts
+    are labelled anew (:func:`~glassdist.analyzer.unwrap.label_regions`).
     """
     valid = region.valid & first.valid
     quality = region.quality.copy()
     dropped = region.valid & ~first.valid
     quality[dropped] = first.quality[dropped]
+    if len(phases):
+        cut = branch_cuts(phases, valid)
+        quality[cut] = PHASE_RESIDUE
+        valid &= ~cut
     regions, n = label_regions(valid, max(int(p.min_region_fraction * valid.size), 16))
     quality[valid & (regions == 0)] = FRAGMENT
     return Region(regions > 0, regions, n, quality)

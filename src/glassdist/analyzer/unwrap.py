@@ -17,7 +17,7 @@ import numpy as np
 from scipy import ndimage
 from skimage.restoration import unwrap_phase
 
-__all__ = ["wrap", "residues", "unwrap", "label_regions"]
+__all__ = ["wrap", "residues", "branch_cuts", "unwrap", "label_regions"]
 
 
 def wrap(phase: np.ndarray) -> np.ndarray:
@@ -51,6 +51,89 @@ def residues(phase: np.ndarray) -> np.ndarray:
     out[:-1, 1:] |= loop
     out[1:, 1:] |= loop
     return out
+
+
+def _charges(phase: np.ndarray) -> np.ndarray:
+    """Signed residue charge of every 2x2 loop of a wrapped phase, int8 (h-1, w-1): the loop's circulation / 2 pi."""
+    dh = wrap(np.diff(phase, axis=1))
+    dv = wrap(np.diff(phase, axis=0))
+    circ = dh[:-1, :] + dv[:, 1:] - dh[1:, :] - dv[:, :-1]
+    return np.rint(circ / (2 * np.pi)).astype(np.int8)
+
+
+def branch_cuts(phases, valid: np.ndarray) -> np.ndarray:
+    """Samples to remove from ``valid`` so that no loop inside it encloses a net phase residue.
+
+    A hole in the region (a connected area of excluded samples, 8-connected: the unwrapper's
+    4-connected paths cannot pass between diagonal neighbours) around which a wrapped phase
+    winds by a whole turn holds a net residue charge: the sum of the charges of the 2x2 loops
+    that touch it (discrete Stokes: the circulation along any loop of valid samples around it).
+    Where the phase turned by more than half a turn between samples there (a steep flank at the
+    edge of what the bandpass follows), it did so at the hole's rim; the unwrapper, going round
+    the hole one way or the other, then puts a whole period on one side of a seam it chooses
+    itself, anywhere in the region. Each charged hole is joined by a straight cut (Goldstein,
+    Zebker & Werner 1988, here between holes instead of single residues) to the nearest other
+    charged hole or to an excluded area that reaches the grid's border, until every hole is
+    neutral on every phase: the seam then lies on the shortest cut, and the region around it is
+    unwrapped without a whole-period jump.
+
+    Parameters
+    ----------
+    phases : sequence of ndarray (h, w)
+        Wrapped phases, rad (each carrier's; none: no cut).
+    valid : ndarray of bool (h, w)
+        The region, residue samples already removed (every loop of four valid samples closes).
+
+    Returns
+    -------
+    ndarray of bool (h, w)
+        The cut samples (valid ones only; empty when no hole is charged).
+    """
+    from skimage.draw import line
+
+    h, w = valid.shape
+    cut = np.zeros_like(valid)
+    if len(phases) == 0 or valid.all() or not valid.any() or h < 2 or w < 2:
+        return cut
+    holes, n = ndimage.label(~valid, structure=np.ones((3, 3), bool))
+    # each 2x2 loop with a charge has an excluded corner; all its excluded corners are 8-connected
+    corner = np.maximum.reduce([holes[:-1, :-1], holes[1:, :-1], holes[:-1, 1:], holes[1:, 1:]])
+    q = np.stack([np.bincount(corner.ravel(), weights=_charges(ph).ravel(), minlength=n + 1) for ph in phases], -1)
+    q = np.rint(q).astype(np.int64)
+    ground = np.zeros(n + 1, bool)
+    ground[np.unique(np.concatenate([holes[0], holes[-1], holes[:, 0], holes[:, -1]]))] = True
+    ground[0] = False
+    q[ground] = 0
+    while True:
+        charged = np.flatnonzero(np.any(q[1:] != 0, axis=1)) + 1
+        if charged.size == 0:
+            return cut
+        k = int(charged[0])
+        targets = (holes > 0) & (holes != k) & (ground[holes] | np.any(q[holes] != 0, axis=-1))
+        if not targets.any():  # nothing to discharge it into: the region around it is cut to the border
+            targets = np.zeros_like(valid)
+            targets[[0, -1], :] = targets[:, [0, -1]] = True
+        dist, (iy, ix) = ndimage.distance_transform_edt(~targets, return_indices=True)
+        src = np.flatnonzero((holes == k).ravel())
+        a = src[np.argmin(dist.ravel()[src])]
+        y0, x0 = divmod(int(a), w)
+        y1, x1 = int(iy[y0, x0]), int(ix[y0, x0])
+        rr, cc = line(y0, x0, y1, x1)
+        cut[rr, cc] |= valid[rr, cc]
+        other = int(holes[y1, x1])
+        # the cut joins the two holes into one: the merged charge is the sum (ground absorbs it)
+        holes[rr, cc] = k
+        if other > 0:
+            holes[holes == other] = k
+            if ground[other]:
+                ground[k] = True
+                q[k] = 0
+            else:
+                q[k] += q[other]
+            q[other] = 0
+        else:
+            ground[k] = True
+            q[k] = 0
 
 
 def label_regions(valid: np.ndarray, min_size: int = 1) -> tuple[np.ndarray, int]:
