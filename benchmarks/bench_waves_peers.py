@@ -36,8 +36,12 @@ Usage::
 
     python benchmarks/bench_waves_peers.py [--params JSON] [--image PATH] [--out FILE.md]
     python benchmarks/bench_waves_peers.py --farneback-sweep [--out FILE.md]
+    python benchmarks/bench_waves_peers.py --replica [--out FILE.md]
 
 ``--out docs/waves_peers.md`` is the table the docs show (the command is written in it).
+``--replica`` asks which of glassdist and FCD is right where the photo alone cannot say: it
+builds replicas of the photo with a known displacement (``replicas``) and scores every method
+against that truth (docs/waves_replica.md).
 ``--farneback-sweep`` runs the Farneback peer over a grid of its own settings (window, iterations,
 polynomial expansion) and tabulates, per setting, the area where the two peers agree and the share
 of glassdist's region inside it. A setting is judged by the peers' agreement alone, which does not
@@ -266,6 +270,125 @@ def run(image: Path, reference: Path, params: dict) -> dict:
             "border_bands": border_bands(res, warped_by, img)}
 
 
+# Replicas of the photo with a known displacement: each peer's field of the photo, smoothed by these
+# carrier periods (finer: the rings' steeper flanks kept), scaled by the factor the photo prefers for it.
+REPLICA_SMOOTHING_PERIODS = (0.25, 0.5, 1.0)
+REPLICA_SEED = 25
+# The amplitude is also scored this many carrier periods inside glassdist's region, away from its border.
+REPLICA_INNER_PERIODS = 3.0
+
+
+def noise_std(a: np.ndarray) -> float:
+    """White-noise standard deviation of an image, Immerkaer (1996): mean |Laplacian difference| x sqrt(pi/2)/6."""
+    from scipy import ndimage
+
+    m = np.array([[1.0, -2.0, 1.0], [-2.0, 4.0, -2.0], [1.0, -2.0, 1.0]])
+    c = ndimage.convolve(np.asarray(a, float), m)[1:-1, 1:-1]
+    return float(np.sqrt(np.pi / 2) * np.abs(c).mean() / 6)
+
+
+def replica(ref: np.ndarray, u: np.ndarray, sigma: float, seed: int) -> np.ndarray:
+    """``ref(r - u(r))`` (cubic spline, mirrored at the edges) plus independent white noise of ``sigma``."""
+    from scipy import ndimage
+
+    h, w = ref.shape
+    yy, xx = np.mgrid[0:h, 0:w].astype(float)
+    out = ndimage.map_coordinates(np.asarray(ref, float), [yy - u[..., 1], xx - u[..., 0]], order=3, mode="mirror")
+    return out + np.random.default_rng(seed).normal(0.0, sigma, out.shape)
+
+
+def replicas(image: Path, reference: Path, params: dict) -> dict:
+    """Every method on replicas of the photo whose displacement is known.
+
+    The truth of a replica is a peer's field of the photo (FCD's or Farneback's, never glassdist's),
+    Gaussian-smoothed by :data:`REPLICA_SMOOTHING_PERIODS` carrier periods and scaled about its mean
+    by the factor the photo prefers for that field (``best_scale``): rings as strong as the photo's,
+    as steep as the smoothing leaves them. The replica is the reference warped by it (``replica``),
+    plus independent noise at the reference's level (``noise_std``), so its noise is the reference's
+    (resampled) and as much again. Scores, over glassdist's region of the replica, all fields
+    smoothed by one carrier period over it as in ``run``:
+
+    * **amplitude against the truth**: ``slope`` of the field on the truth, over the whole region,
+      without the 1 % of its pixels where the field is furthest from the truth, and more than
+      :data:`REPLICA_INNER_PERIODS` carrier periods from the region's border;
+    * **against FCD**: the photo's bound, glassdist's slope on FCD's field through glassdist's transfer;
+    * **off**: the share of the region where the field (unsmoothed) is more than a quarter carrier
+      period from the truth: whole-period slips of the unwrapping show here;
+    * the correlation with the replica and the scale the replica prefers, as on the photo.
+    """
+    from scipy import ndimage
+
+    from glassdist.io import read_image
+
+    ref, img = read_image(reference), read_image(image)
+    res = analyze_waves(ref, img, params)
+    period = max(res.carriers.k1.period_px, res.carriers.k2.period_px)
+    sigma = noise_std(ref)
+    peers = {"FCD": fcd_displacement(ref, img), "Farneback": farneback_displacement(ref, img, **FARNEBACK)}
+    rows = []
+    for i, (src, field) in enumerate(peers.items()):
+        scale = best_scale(ref, img, field, res.valid)
+        for j, periods in enumerate(REPLICA_SMOOTHING_PERIODS):
+            base = np.stack([ndimage.gaussian_filter(field[..., c], periods * period) for c in range(2)], -1)
+            mean = base.mean(axis=(0, 1))
+            truth = mean + scale * (base - mean)
+            rep = replica(ref, truth, sigma, REPLICA_SEED + 10 * i + j)
+            t0 = time.perf_counter()
+            r = analyze_waves(ref, rep, params)
+            t = time.perf_counter() - t0
+            valid = r.valid
+            f = {"glassdist": field_px(r), "FCD": fcd_displacement(ref, rep),
+                 "Farneback": farneback_displacement(ref, rep, **FARNEBACK)}
+            sm = {k: smooth_nan(np.where(valid[..., None], v, np.nan), period) for k, v in f.items()}
+            sm_truth = smooth_nan(np.where(valid[..., None], truth, np.nan), period)
+            fcd_matched = smooth_nan(np.where(valid[..., None], matched(f["FCD"], r), np.nan), period)
+            grad = [np.hypot(*np.gradient(truth[..., c])) for c in range(2)]  # |grad u_x|, |grad u_y|
+            deep = ndimage.distance_transform_edt(valid) > REPLICA_INNER_PERIODS * period
+            methods = {}
+            for k, u in f.items():
+                err = np.max(np.abs(sm[k] - sm_truth), axis=-1)
+                worst = err > np.nanpercentile(err[valid], 99)
+                methods[k] = {"amplitude_vs_truth": slope(sm[k], sm_truth, valid),
+                              "amplitude_vs_truth_99": slope(sm[k], sm_truth, valid & ~worst),
+                              "amplitude_vs_truth_inner": slope(sm[k], sm_truth, deep),
+                              "off_quarter_period": float(np.mean(np.max(np.abs(u - truth), axis=-1)[valid] > 0.25 * period)),
+                              "correlation": correlation(warp_reference(ref, u), rep, valid),
+                              "best_scale": best_scale(ref, rep, u, valid)}
+            rows.append({"truth_from": src, "smoothing_periods": periods, "scale": scale,
+                         "gradient_p99": float(np.percentile(np.maximum(*grad)[valid], 99)),
+                         "analysed": float(valid.mean()), "inner_share": float(deep.sum() / valid.sum()),
+                         "glassdist_s": t, "demodulations": int(r.demodulations),
+                         "glassdist_vs_fcd": slope(sm["glassdist"], fcd_matched, valid), "methods": methods})
+    return {"period_px": period, "noise_std_added": sigma, "seed": REPLICA_SEED, "rows": rows}
+
+
+def replica_table(rec: dict) -> str:
+    lines = [f"Replicas of the waves photo with a known displacement (carrier period {rec['period_px']:.2f} px; "
+             f"independent noise of {rec['noise_std_added']:.4f} added, the reference's level; seed {rec['seed']} and "
+             "up). Per replica: the peer whose field of the photo is the truth, its smoothing (carrier periods), the "
+             "scale the photo prefers for that field, the truth's displacement gradient (p99 over glassdist's region) "
+             "and glassdist's region. Per method: its amplitude against the truth (one period of smoothing over "
+             "glassdist's region) over the whole region, without its 1 % furthest from the truth, and more than "
+             f"{REPLICA_INNER_PERIODS:g} periods inside; the share of the region where it is more than a quarter "
+             "period off the truth (unsmoothed); the correlation of the reference warped by it with the "
+             "replica; the scale the replica prefers. On glassdist's row: its amplitude on FCD's field through "
+             "its transfer, the waves photo's bound.", "",
+             "| truth | gradient p99 | analysed | method | amplitude / truth | without the worst 1 % | "
+             f"> {REPLICA_INNER_PERIODS:g} periods inside | off by > 1/4 period | correlation | preferred scale | "
+             "amplitude / FCD matched |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rec["rows"]:
+        head = (f"{r['truth_from']}, {r['smoothing_periods']:g}, x {r['scale']:.3f} | {r['gradient_p99']:.2f} | "
+                f"{100 * r['analysed']:.1f} % ({100 * r['inner_share']:.0f} % inside)")
+        for k in ("glassdist", "FCD", "Farneback"):
+            m = r["methods"][k]
+            vs = f"{r['glassdist_vs_fcd']:.3f}" if k == "glassdist" else ""
+            lines.append(f"| {head} | {k} | {m['amplitude_vs_truth']:.3f} | {m['amplitude_vs_truth_99']:.3f} | "
+                         f"{m['amplitude_vs_truth_inner']:.3f} | {100 * m['off_quarter_period']:.2f} % | {m['correlation']:.4f} | "
+                         f"{m['best_scale']:.3f} | {vs} |")
+            head = " | | "
+    return "\n".join(lines)
+
 def farneback_sweep(image: Path, reference: Path) -> dict:
     """The Farneback peer over a grid of its settings: the peers' agreement area and glassdist's share in it."""
     import itertools
@@ -346,7 +469,15 @@ def main(argv=None) -> int:
     ap.add_argument("--params", default="{}", help="analyzer parameter overrides, JSON")
     ap.add_argument("--out", type=Path, help="write the table (markdown) and the record (FILE.json beside it)")
     ap.add_argument("--farneback-sweep", action="store_true", help="the Farneback peer over a grid of its settings")
+    ap.add_argument("--replica", action="store_true", help="every method on replicas of the photo with a known displacement")
     a = ap.parse_args(argv)
+    if a.replica:
+        rec = replicas(a.image, a.reference, json.loads(a.params))
+        text = replica_table(rec)
+        print(text)
+        if a.out:
+            write_record(a.out, "bench_waves_peers.py", argv, text, rec)
+        return 0
     if a.farneback_sweep:
         rec = farneback_sweep(a.image, a.reference)
         text = sweep_table(rec)

@@ -11,6 +11,7 @@ from glassdist import analyze
 from glassdist.analyzer import fourier as F
 
 P = {"pattern": "checkerboard"}
+PERIOD_PX = 9.79  # the photos' carrier period (test_carriers_found_on_real_photos)
 
 
 def test_carriers_found_on_real_photos(real_data):
@@ -94,6 +95,63 @@ def test_waves_field_explains_the_photo_and_agrees_with_fcd(real_data):
     # the growth is what reaches the flanks: without it the region stays the one pass's
     one = analyze(img, pitch_mm=5.0, distance_m=0.5, reference=ref, params=dict(p, deformation_growth_passes=0))
     assert one.valid.mean() < 0.81
+
+
+def _waves_replica(real_data, peer: str, smoothing_periods: float, scale: float, seed: int):
+    """A replica of the waves photo (docs/waves_replica.md) and glassdist's analysis of it.
+
+    The truth is a peer's own field of the photo (never glassdist's), smoothed by ``smoothing_periods``
+    carrier periods and scaled about its mean by ``scale``; the replica is the reference warped by it
+    plus independent noise at the reference's level. Returns ``(bench, truth px, replica, result)``.
+    """
+    from _benchmarks import load_benchmark_module
+    from scipy import ndimage
+
+    B = load_benchmark_module("bench_waves_peers")
+    ref, img = real_data["reference"], real_data["waves"]
+    field = _fcd()(ref, img) if peer == "FCD" else B.farneback_displacement(ref, img, **B.FARNEBACK)
+    base = np.stack([ndimage.gaussian_filter(field[..., c], smoothing_periods * PERIOD_PX) for c in range(2)], -1)
+    mean = base.mean(axis=(0, 1))
+    truth = mean + scale * (base - mean)
+    rep = B.replica(ref, truth, B.noise_std(ref), seed=seed)
+    res = analyze(rep, pitch_mm=5.0, distance_m=0.5, reference=ref, params=dict(P, detrend_degree=3))
+    return B, truth, rep, res
+
+
+def test_on_a_replica_of_the_waves_photo_the_amplitude_is_the_truths_and_fcd_reads_short(real_data):
+    # docs/waves_replica.md: the photo's rings, known. The truth is FCD's field of the photo smoothed by
+    # half a carrier period and scaled by 1.061, the factor the photo prefers for it (docs/waves_peers.md).
+    # Measured (one period of smoothing over glassdist's region, plain mask-normalised Gaussians):
+    # glassdist 0.991 of the truth (0.968 without F5's photo passes, most of it within a period of the
+    # region's border), FCD 0.957, and glassdist 1.032 of FCD through its transfer: the waves photo's
+    # bound against FCD (3 %) is missed there by a field within 1 % of the truth. Bounds: glassdist
+    # within 1.2 % (the benchmark's replicas: 0.989-0.993), FCD short by more than 3 %.
+    B, truth, rep, res = _waves_replica(real_data, "FCD", 0.5, 1.061, seed=26)
+    v = res.valid
+    assert v.mean() > 0.94
+
+    def sm(u):
+        return B.smooth_nan(np.where(v[..., None], u, np.nan), PERIOD_PX)
+
+    fcd_rep = _fcd()(real_data["reference"], rep)
+    ours, peer, t = sm(-res.displacement_mm / res.mm_per_px), sm(fcd_rep), sm(truth)
+    assert B.slope(ours, t, v) == pytest.approx(1.0, abs=0.012)
+    assert B.slope(peer, t, v) < 0.97
+    assert B.slope(ours, sm(B.matched(fcd_rep, res)), v) > 1.025
+
+
+def test_no_whole_period_slips_on_a_replica_with_steeper_rings(real_data):
+    # docs/waves_replica.md: the truth is the Farneback peer's field of the photo smoothed by a quarter
+    # of a carrier period and scaled by 1.05 (the factor the photo prefers for it): rings steeper than the
+    # photo's (displacement gradient p99 0.66). Excluded areas on their flanks held a net phase residue:
+    # the unwrapper, going round them, put a whole carrier period on 23.5 % of the region (quality
+    # "analysed", nothing said). With the branch cuts between them (unwrap.branch_cuts): 0.71 % of the
+    # region is more than a quarter period off the truth, all of it in the guard band.
+    _, truth, _, res = _waves_replica(real_data, "Farneback", 0.25, 1.05, seed=35)
+    v = res.valid
+    assert v.mean() > 0.95
+    err = np.max(np.abs(-res.displacement_mm / res.mm_per_px - truth), axis=-1)
+    assert np.mean(err[v] > 0.25 * PERIOD_PX) < 0.01
 
 
 def test_the_boards_own_reading_is_said_when_the_lens_comes_from_a_calibration_photo(real_data):
