@@ -145,13 +145,15 @@ def _unwrapped(phase, valid):
     return unwrap(phase, valid, labels, n)
 
 
-def test_a_hole_the_phase_winds_around_is_cut_to_the_border_and_the_seam_lies_on_the_cut():
+@pytest.mark.parametrize("turn", [0, 1, 2, 3])
+def test_a_hole_the_phase_winds_around_is_cut_to_the_border_and_the_seam_lies_on_the_cut(turn):
     # A smooth field plus one turn around a point inside an excluded disc: every 2 x 2 loop of the
     # region closes, yet every loop around the disc turns by 2 pi. Without a cut the unwrapper puts a
-    # whole-period seam where it likes inside the region; with it, the seam lies on the cut.
+    # whole-period seam where it likes inside the region; with it, the seam lies on the cut. The view
+    # turned by 90 deg steps: the cut goes to each edge in turn.
     y, x = np.mgrid[0:120, 0:150].astype(float)
-    phase = wrap(0.2 * x + 0.1 * y + np.arctan2(y - 60.2, x - 80.3))
-    valid = np.hypot(y - 60, x - 80) > 12
+    phase = np.ascontiguousarray(np.rot90(wrap(0.2 * x + 0.1 * y + np.arctan2(y - 60.2, x - 80.3)), turn))
+    valid = np.ascontiguousarray(np.rot90(np.hypot(y - 60, x - 80) > 12, turn))
     assert not residues(phase)[valid].any()
     assert _max_step(_unwrapped(phase, valid)) > np.pi
     cut = branch_cuts([phase], valid)
@@ -184,3 +186,44 @@ def test_the_cut_holds_for_either_phase():
     valid = np.hypot(y - 40, x - 40) > 6
     assert branch_cuts([flat, winding], valid).any()
     assert not branch_cuts([flat, flat], valid).any()
+
+
+def test_a_charged_hole_that_reaches_the_image_edge_needs_no_cut():
+    # no loop of the region can go round it: nothing to cut (an excluded area at the edge is ground)
+    y, x = np.mgrid[0:80, 0:100].astype(float)
+    phase = wrap(0.2 * x + np.arctan2(y - 3.3, x - 50.2))
+    valid = ~((np.abs(x - 50) <= 6) & (y <= 10))
+    assert not branch_cuts([phase], valid).any()
+    assert not branch_cuts([], np.hypot(y - 40, x - 50) > 6).any()
+
+
+def test_like_charges_merge_and_go_to_the_nearest_edge_together():
+    # two +1 holes 30 samples apart, the right one 25 samples from the right edge: joined (+2), then
+    # cut to that edge, the way of the nearest excluded sample; the unwrapped region has no seam
+    y, x = np.mgrid[0:120, 0:160].astype(float)
+    phase = wrap(0.15 * y + np.arctan2(y - 60.3, x - 105.2) + np.arctan2(y - 60.3, x - 135.2))
+    valid = (np.hypot(y - 60, x - 105) > 5) & (np.hypot(y - 60, x - 135) > 5)
+    cut = branch_cuts([phase], valid)
+    gap, out = 30 - 2 * 5 - 1, 160 - 1 - (135 + 5)
+    assert gap + out - 2 <= cut.sum() <= gap + out + 2
+    assert not cut[:, :100].any()  # nothing towards the far (left) edge
+    assert _max_step(_unwrapped(phase, valid & ~cut)) < np.pi
+
+
+
+@pytest.mark.parametrize("turn", [0, 1, 2, 3])
+def test_a_charged_hole_is_cut_to_the_nearest_area_at_the_edge_past_a_neutral_one(turn):
+    # a +1 hole; below it, 23 samples away, an excluded strip that reaches the bottom edge (ground); to
+    # its right, 14 samples away, a neutral hole; the top edge 44 samples away. The cut goes down to the
+    # strip, nowhere near the neutral hole, and the region unwraps without a seam. Turned by 90 deg steps
+    # so that the strip meets each edge in turn.
+    y, x = np.mgrid[0:120, 0:200].astype(float)
+    phase = wrap(0.1 * x + 0.05 * y + np.arctan2(y - 50.3, x - 100.2))
+    strip = (y >= 80) & (np.abs(x - 100) <= 5)
+    neutral = np.hypot(y - 50, x - 125) <= 5
+    valid = (np.hypot(y - 50, x - 100) > 6) & ~strip & ~neutral
+    phase, valid, neutral = (np.ascontiguousarray(np.rot90(a, turn)) for a in (phase, valid, neutral))
+    cut = branch_cuts([phase], valid)
+    assert 21 <= cut.sum() <= 25
+    assert not ndimage.binary_dilation(neutral, iterations=3)[cut].any()
+    assert _max_step(_unwrapped(phase, valid & ~cut)) < np.pi
