@@ -314,6 +314,10 @@ def replicas(image: Path, reference: Path, params: dict) -> dict:
     * **against FCD**: the photo's bound, glassdist's slope on FCD's field through glassdist's transfer;
     * **off**: the share of the region where the field (unsmoothed) is more than a quarter carrier
       period from the truth: whole-period slips of the unwrapping show here;
+    * **phi_eff**: each field's phi_eff by the plain evaluation
+      (:func:`glassdist.experiments.transfer.independent_phi_eff`: glassdist's detrend region, degree 3
+      and sigma, the scale ``mm_per_px`` without perspective) against the truth's, and glassdist's own
+      phi_eff map against the truth's, more than 3 sigma inside glassdist's trusted pixels;
     * the correlation with the replica and the scale the replica prefers, as on the photo.
     """
     from scipy import ndimage
@@ -344,6 +348,18 @@ def replicas(image: Path, reference: Path, params: dict) -> dict:
             fcd_matched = smooth_nan(np.where(valid[..., None], matched(f["FCD"], r), np.nan), period)
             grad = [np.hypot(*np.gradient(truth[..., c])) for c in range(2)]  # |grad u_x|, |grad u_y|
             deep = ndimage.distance_transform_edt(valid) > REPLICA_INNER_PERIODS * period
+            # phi_eff of each field by the plain evaluation (glassdist's settings: its detrend region, degree 3,
+            # its sigma; the scale mm_per_px, no perspective), against the truth's, 3 sigma inside the trusted pixels
+            from glassdist.experiments.transfer import _interior, independent_phi_eff
+
+            s_px = r.sigma_mm / r.mm_per_px
+
+            def plain_phi(u):
+                return independent_phi_eff(-np.nan_to_num(u) * r.mm_per_px, r.detrend_region, jacobian=np.eye(2) * r.mm_per_px,
+                                           sigma_px=s_px, degree=3, distance_m=0.5)
+
+            phi_truth = plain_phi(truth)
+            inner_phi = _interior(r.trusted, s_px) & np.isfinite(phi_truth) & np.isfinite(r.phi_eff_mD)
             methods = {}
             for k, u in f.items():
                 err = np.max(np.abs(sm[k] - sm_truth), axis=-1)
@@ -352,13 +368,16 @@ def replicas(image: Path, reference: Path, params: dict) -> dict:
                               "amplitude_vs_truth_99": slope(sm[k], sm_truth, valid & ~worst),
                               "amplitude_vs_truth_inner": slope(sm[k], sm_truth, deep),
                               "off_quarter_period": float(np.mean(np.max(np.abs(u - truth), axis=-1)[valid] > 0.25 * period)),
+                              "phi_eff_plain_vs_truth": slope(plain_phi(u)[..., None], phi_truth[..., None], inner_phi),
                               "correlation": correlation(warp_reference(ref, u), rep, valid),
                               "best_scale": best_scale(ref, rep, u, valid)}
             rows.append({"truth_from": src, "smoothing_periods": periods, "scale": scale,
                          "gradient_p99": float(np.percentile(np.maximum(*grad)[valid], 99)),
                          "analysed": float(valid.mean()), "inner_share": float(deep.sum() / valid.sum()),
                          "glassdist_s": t, "demodulations": int(r.demodulations),
-                         "glassdist_vs_fcd": slope(sm["glassdist"], fcd_matched, valid), "methods": methods})
+                         "glassdist_vs_fcd": slope(sm["glassdist"], fcd_matched, valid),
+                         "phi_eff_stack_vs_truth": slope(r.phi_eff_mD[..., None], phi_truth[..., None], inner_phi),
+                         "phi_interior": float(inner_phi.sum() / valid.sum()), "methods": methods})
     return {"period_px": period, "noise_std_added": sigma, "seed": REPLICA_SEED, "rows": rows}
 
 
@@ -370,22 +389,25 @@ def replica_table(rec: dict) -> str:
              "and glassdist's region. Per method: its amplitude against the truth (one period of smoothing over "
              "glassdist's region) over the whole region, without its 1 % furthest from the truth, and more than "
              f"{REPLICA_INNER_PERIODS:g} periods inside; the share of the region where it is more than a quarter "
-             "period off the truth (unsmoothed); the correlation of the reference warped by it with the "
+             "period off the truth (unsmoothed); its phi_eff by the plain evaluation against the truth's (more than "
+             "3 sigma inside glassdist's trusted pixels; on glassdist's row also its own phi_eff map's, after the "
+             "slash); the correlation of the reference warped by it with the "
              "replica; the scale the replica prefers. On glassdist's row: its amplitude on FCD's field through "
              "its transfer, the waves photo's bound.", "",
              "| truth | gradient p99 | analysed | method | amplitude / truth | without the worst 1 % | "
-             f"> {REPLICA_INNER_PERIODS:g} periods inside | off by > 1/4 period | correlation | preferred scale | "
-             "amplitude / FCD matched |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+             f"> {REPLICA_INNER_PERIODS:g} periods inside | off by > 1/4 period | phi_eff / truth | correlation | "
+             "preferred scale | amplitude / FCD matched |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rec["rows"]:
         head = (f"{r['truth_from']}, {r['smoothing_periods']:g}, x {r['scale']:.3f} | {r['gradient_p99']:.2f} | "
                 f"{100 * r['analysed']:.1f} % ({100 * r['inner_share']:.0f} % inside)")
         for k in ("glassdist", "FCD", "Farneback"):
             m = r["methods"][k]
             vs = f"{r['glassdist_vs_fcd']:.3f}" if k == "glassdist" else ""
+            phi = f"{m['phi_eff_plain_vs_truth']:.4f}" + (f" / {r['phi_eff_stack_vs_truth']:.4f}" if k == "glassdist" else "")
             lines.append(f"| {head} | {k} | {m['amplitude_vs_truth']:.3f} | {m['amplitude_vs_truth_99']:.3f} | "
-                         f"{m['amplitude_vs_truth_inner']:.3f} | {100 * m['off_quarter_period']:.2f} % | {m['correlation']:.4f} | "
-                         f"{m['best_scale']:.3f} | {vs} |")
+                         f"{m['amplitude_vs_truth_inner']:.3f} | {100 * m['off_quarter_period']:.2f} % | {phi} | "
+                         f"{m['correlation']:.4f} | {m['best_scale']:.3f} | {vs} |")
             head = " | | "
     return "\n".join(lines)
 
