@@ -227,3 +227,25 @@ def test_a_charged_hole_is_cut_to_the_nearest_area_at_the_edge_past_a_neutral_on
     assert 21 <= cut.sum() <= 25
     assert not ndimage.binary_dilation(neutral, iterations=3)[cut].any()
     assert _max_step(_unwrapped(phase, valid & ~cut)) < np.pi
+
+
+def test_a_region_riddled_with_charged_holes_is_cut_to_the_edge_at_once():
+    # 80 vortices of either sign, each inside its own 6 x 6 excluded square: more than MAX_PAIRED_HOLES,
+    # so each is cut straight to the edge in one pass (one distance transform); the region then
+    # unwraps without a seam, where without the cuts it cannot
+    from glassdist.analyzer.unwrap import MAX_PAIRED_HOLES
+
+    rng = np.random.default_rng(3)
+    n, m = 300, 80
+    assert m > MAX_PAIRED_HOLES
+    y, x = np.mgrid[0:n, 0:n].astype(float)
+    cy, cx = rng.uniform(10, n - 10, m).astype(int), rng.uniform(10, n - 10, m).astype(int)
+    sign = rng.choice([-1.0, 1.0], m)
+    phase = wrap(0.2 * x + sum(s * np.arctan2(y - a - 0.3, x - b - 0.2) for a, b, s in zip(cy, cx, sign)))
+    valid = np.ones((n, n), bool)
+    for a, b in zip(cy, cx):
+        valid[a - 2 : a + 4, b - 2 : b + 4] = False
+    assert not residues(phase)[valid].any()
+    assert _max_step(_unwrapped(phase, valid)) > np.pi
+    cut = branch_cuts([phase], valid)
+    assert _max_step(_unwrapped(phase, valid & ~cut)) < np.pi

@@ -53,6 +53,10 @@ def residues(phase: np.ndarray) -> np.ndarray:
     return out
 
 
+#: Above this many charged holes each is cut straight to the border's excluded areas (:func:`branch_cuts`).
+MAX_PAIRED_HOLES = 64
+
+
 def _charges(phase: np.ndarray) -> np.ndarray:
     """Signed residue charge of every 2x2 loop of a wrapped phase, int8 (h-1, w-1): the loop's circulation / 2 pi."""
     dh = wrap(np.diff(phase, axis=1))
@@ -75,7 +79,8 @@ def branch_cuts(phases, valid: np.ndarray) -> np.ndarray:
     Zebker & Werner 1988, here between holes instead of single residues) to the nearest other
     charged hole or to an excluded area that reaches the grid's border, until every hole is
     neutral on every phase: the seam then lies on the shortest cut, and the region around it is
-    unwrapped without a whole-period jump.
+    unwrapped without a whole-period jump. Above :data:`MAX_PAIRED_HOLES` charged holes each is
+    cut to the border's excluded areas instead, all at once (bounded cost).
 
     Parameters
     ----------
@@ -104,27 +109,37 @@ def branch_cuts(phases, valid: np.ndarray) -> np.ndarray:
     ground[np.unique(np.concatenate([holes[0], holes[-1], holes[:, 0], holes[:, -1]]))] = True
     ground[0] = False
     q[ground] = 0
+    # merged holes: each label's representative (charge and ground kept on it) and its bounding box, so
+    # that a cut costs the neighbourhood it searches, not the whole grid
+    root = np.arange(n + 1)
+    box = np.zeros((n + 1, 4), np.int64)
+    box[1:] = [(sl[0].start, sl[0].stop, sl[1].start, sl[1].stop) for sl in ndimage.find_objects(holes)]
+    charged = np.flatnonzero(np.any(q[1:] != 0, axis=1)) + 1
+    if charged.size > MAX_PAIRED_HOLES:
+        return _cut_to_ground(holes, ground, charged, valid)
     while True:
         charged = np.flatnonzero(np.any(q[1:] != 0, axis=1)) + 1
         if charged.size == 0:
             return cut
         k = int(charged[0])
-        targets = (holes > 0) & (holes != k) & (ground[holes] | np.any(q[holes] != 0, axis=-1))
-        if not targets.any():  # nothing to discharge it into: the region around it is cut to the border
-            targets = np.zeros_like(valid)
-            targets[[0, -1], :] = targets[:, [0, -1]] = True
-        dist, (iy, ix) = ndimage.distance_transform_edt(~targets, return_indices=True)
-        src = np.flatnonzero((holes == k).ravel())
-        a = src[np.argmin(dist.ravel()[src])]
-        y0, x0 = divmod(int(a), w)
-        y1, x1 = int(iy[y0, x0]), int(ix[y0, x0])
+        live = ground | np.any(q != 0, axis=1)  # what a charged hole may discharge into
+        live[[0, k]] = False
+        if live[root[1:]].any():
+            (y0, x0), (y1, x1) = _nearest_target(holes, root, live, k, box[k], r=8)
+        else:  # nothing to discharge it into: the region around it is cut to the nearest image edge
+            (y0, x0), (y1, x1) = _nearest_edge(holes, root, k, box[k])
         rr, cc = line(y0, x0, y1, x1)
-        cut[rr, cc] |= valid[rr, cc]
-        other = int(holes[y1, x1])
+        other = int(root[holes[y1, x1]]) if holes[y1, x1] > 0 else 0
+        on = valid[rr, cc]
+        cut[rr[on], cc[on]] = True
         # the cut joins the two holes into one: the merged charge is the sum (ground absorbs it)
-        holes[rr, cc] = k
+        holes[rr[on], cc[on]] = k
+        b = box[k]
+        box[k] = (min(b[0], rr.min()), max(b[1], rr.max() + 1), min(b[2], cc.min()), max(b[3], cc.max() + 1))
         if other > 0:
-            holes[holes == other] = k
+            root[root == other] = k
+            b, o = box[k], box[other]
+            box[k] = (min(b[0], o[0]), max(b[1], o[1]), min(b[2], o[2]), max(b[3], o[3]))
             if ground[other]:
                 ground[k] = True
                 q[k] = 0
@@ -135,6 +150,59 @@ def branch_cuts(phases, valid: np.ndarray) -> np.ndarray:
             ground[k] = True
             q[k] = 0
 
+
+def _cut_to_ground(holes, ground, charged, valid):
+    """Each hole of ``charged`` cut straight to the nearest area at the grid's border (or the border itself), at once.
+
+    Longer cuts than pairing charged holes with each other, at the cost of one distance transform:
+    for a region riddled with charged holes (noise beyond what the residue test removes), where
+    pairing them one at a time costs a transform of the neighbourhood each.
+    """
+    from skimage.draw import line
+
+    targets = ground[holes]
+    targets[[0, -1], :] = targets[:, [0, -1]] = True
+    dist, (iy, ix) = ndimage.distance_transform_edt(~targets, return_indices=True)
+    cut = np.zeros_like(valid)
+    for y0, x0 in ndimage.minimum_position(dist, labels=holes, index=charged):
+        rr, cc = line(int(y0), int(x0), int(iy[y0, x0]), int(ix[y0, x0]))
+        cut[rr, cc] = True
+    return cut & valid
+
+
+def _nearest_target(holes, root, live, k: int, box, r: int):
+    """The sample of hole ``k`` nearest to a sample of another ``live`` hole, and that sample: ``((y0, x0), (y1, x1))``.
+
+    Searched in ``k``'s bounding box widened by ``r`` samples, doubled until the nearest target lies
+    within ``r`` (then nothing outside the window can be nearer) or the window is the whole grid.
+    """
+    h, w = holes.shape
+    while True:
+        ya, yb, xa, xb = max(box[0] - r, 0), min(box[1] + r, h), max(box[2] - r, 0), min(box[3] + r, w)
+        lab = root[holes[ya:yb, xa:xb]]
+        lab[holes[ya:yb, xa:xb] == 0] = 0
+        targets = live[lab]
+        whole = (ya, yb, xa, xb) == (0, h, 0, w)
+        if targets.any():
+            dist, (iy, ix) = ndimage.distance_transform_edt(~targets, return_indices=True)
+            mine = np.flatnonzero((lab == k).ravel())
+            a = mine[np.argmin(dist.ravel()[mine])]
+            if dist.ravel()[a] <= r or whole:
+                y0, x0 = divmod(int(a), xb - xa)
+                return (ya + y0, xa + x0), (ya + int(iy[y0, x0]), xa + int(ix[y0, x0]))
+        r *= 2
+
+
+def _nearest_edge(holes, root, k: int, box):
+    """The sample of hole ``k`` nearest to the grid's border, and its foot on the border: ``((y0, x0), (y1, x1))``."""
+    h, w = holes.shape
+    ya, yb, xa, xb = box
+    ys, xs = np.nonzero((root[holes[ya:yb, xa:xb]] == k) & (holes[ya:yb, xa:xb] > 0))
+    ys, xs = ys + ya, xs + xa
+    d = np.stack([ys, h - 1 - ys, xs, w - 1 - xs])
+    i, side = np.unravel_index(int(np.argmin(d.T)), (ys.size, 4))
+    y0, x0 = int(ys[i]), int(xs[i])
+    return (y0, x0), ((0, x0), (h - 1, x0), (y0, 0), (y0, w - 1))[side]
 
 def label_regions(valid: np.ndarray, min_size: int = 1) -> tuple[np.ndarray, int]:
     """4-connected regions of ``valid`` (the unwrapper's neighbourhood); regions smaller than ``min_size`` dropped.
