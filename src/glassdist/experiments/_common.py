@@ -28,7 +28,7 @@ from .._version import __version__
 from ..errors import InputError
 from ..render import get_renderer, render_scene
 from ..scene import Scene, load_scene
-from ..theory import Prediction, analysis_params, predict_displacement
+from ..theory import Prediction, analysis_params, predict_displacement, read_params_file
 from ..virtual import Validation, compare_with_scene, exact_truth
 
 __all__ = [
@@ -314,11 +314,12 @@ def run_scenes(
         In the order of ``scenes``.
     """
     prepared = {name: options.prepare(load_scene(path)) for name, path in scenes.items()}
+    file_params = None if params_file is None else read_params_file(params_file)  # read once, for every scene
 
     def params_of(scene):
-        return analysis_params(scene, params_file, detrend_degree=detrend_degree, sigma_mm=sigma_mm)
+        return analysis_params(scene, file_params, detrend_degree=detrend_degree, sigma_mm=sigma_mm)
 
-    if params_file is not None:
+    if file_params is not None:  # a bad file is bad input before anything renders
         params_of(next(iter(prepared.values())))
     names, runs = list(prepared), {}
     for i, inputs in options.render_each(list(prepared.values()), reference=reference):

@@ -27,7 +27,7 @@ from ..analyzer.metrics import channel_statistics
 from ..errors import InputError
 from ..render.tracer import GLASS
 from ..scene import load_scene
-from ..theory import analysis_params
+from ..theory import analysis_params, read_params_file
 from ._common import ExperimentResult, RunOptions, evaluate, validation_record
 
 __all__ = [
@@ -248,7 +248,8 @@ def run_accuracy(*, sigma_mm: float | None = None, scenes=None, params_file=None
         raise InputError(f"unknown accuracy scene(s) {', '.join(unknown)}; choose from {', '.join(SCENES)}")
     opts = RunOptions(**options)
     overrides = {} if sigma_mm is None else {"sigma_mm": sigma_mm}
-    if params_file is not None:  # a bad file is bad input before anything renders
+    if params_file is not None:  # read once; a bad file is bad input before anything renders
+        params_file = read_params_file(params_file)
         analysis_params(SCENES[names[0]][1](), params_file, **overrides)
     t0 = time.perf_counter()
     entries = {}

@@ -37,7 +37,7 @@ import numpy as np
 from scipy import ndimage
 
 from ..scene import load_scene
-from ..theory import analysis_params, predict_channels
+from ..theory import analysis_params, predict_channels, read_params_file
 from ._common import ExperimentResult, RunOptions, evaluate, render_inputs, share_fig_ax
 
 __all__ = ["measured_transfer", "independent_phi_eff", "minus_homography_change", "run_transfer", "RIPPLE_PERIODS",
@@ -219,7 +219,7 @@ def _ripple_pair(base, n: float, opts: RunOptions):
     return plus, replace(minus, reference=plus.reference)
 
 
-def _ripple_rows(pair, n: float, sigma_periods, params_file=None) -> list[dict]:
+def _ripple_rows(pair, n: float, sigma_periods, file_params=None) -> list[dict]:
     """Both methods, each sigma: the half difference of the +A and -A readings against the truth's."""
     from ..scene import landing_jacobian
 
@@ -231,7 +231,7 @@ def _ripple_rows(pair, n: float, sigma_periods, params_file=None) -> list[dict]:
     rows = []
     for method in ("comparative", "direct"):
         for sp in sigma_periods:
-            vals = [evaluate(i, method=method, params=analysis_params(i.scene, params_file, detrend_degree=2,
+            vals = [evaluate(i, method=method, params=analysis_params(i.scene, file_params, detrend_degree=2,
                                                                      sigma_mm=sp * p_c))
                     for i in pair]
             res = vals[0].analysis
@@ -258,13 +258,13 @@ def _ripple_rows(pair, n: float, sigma_periods, params_file=None) -> list[dict]:
     return rows
 
 
-def _lens_rows(scene, opts: RunOptions, params_file=None) -> list[dict]:
+def _lens_rows(scene, opts: RunOptions, file_params=None) -> list[dict]:
     """Both methods on a lens scene: ratio and r against the truth through the stack (valid region, and
     the interior more than 3 sigma inside it) and through the independent evaluation (interior)."""
     from ..scene import landing_jacobian
 
     inputs = render_inputs(scene, engine=opts.engine, reference=True, progress=opts.progress)
-    params = analysis_params(scene, params_file)
+    params = analysis_params(scene, file_params)
     fin = np.isfinite(inputs.truth.displacement_mm).all(-1)
     rows = []
     for method in ("comparative", "direct"):
@@ -310,12 +310,10 @@ def run_transfer(*, periods=RIPPLE_PERIODS, sigma_periods=SIGMA_PERIODS, sigma_m
 
         raise InputError("the transfer experiment sweeps sigma in carrier periods; leave out --sigma-mm")
     file_params = {}
-    if params_file is not None:
+    if params_file is not None:  # read once; a bad file is bad input before anything renders
         from ..analyzer.params import load_params
-        from ..validation import load_mapping
 
-        file_params = load_mapping(params_file, "parameter file", option="--params", fmt="json",
-                                   expect="parameter: value pairs")
+        file_params = read_params_file(params_file)
         load_params(file_params)
     opts = RunOptions(**options)
     tf_periods = np.array([2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 14.0])
@@ -323,12 +321,12 @@ def run_transfer(*, periods=RIPPLE_PERIODS, sigma_periods=SIGMA_PERIODS, sigma_m
     record: dict = {"transfer_function": {"periods": tf_periods.tolist(), "measured": {str(k): v for k, v in tf.items()},
                                           "instrument": _instrument(tf_periods).tolist()}}
     base = opts.prepare(load_scene(_SCENES / "ripple_slab.yaml"))
-    rows = [r for n in periods for r in _ripple_rows(_ripple_pair(base, n, opts), n, sigma_periods, params_file)]
+    rows = [r for n in periods for r in _ripple_rows(_ripple_pair(base, n, opts), n, sigma_periods, file_params)]
     record["ripples"] = rows
     lens_rows = []
     for name in ("large_lens", "wide_gaussian_lens"):
         lens = load_scene(_SCENES / f"{name}.yaml")
-        lens_rows += _lens_rows(opts.prepare(lens) if opts.scale == 1.0 else lens, opts, params_file)
+        lens_rows += _lens_rows(opts.prepare(lens) if opts.scale == 1.0 else lens, opts, file_params)
     record["large_lens"] = lens_rows
     judged = [r for r in rows if r["judged"]]
     direct = next(r for r in lens_rows if r["scene"] == "large_lens" and r["method"] == "direct")

@@ -10,7 +10,8 @@ from .._lazy import lazy_exports
 
 # loaded on first use: the sub-commands register without the analysis stack
 __getattr__, __dir__ = lazy_exports(__name__, {
-    **dict.fromkeys(("analysis_params", "carrier_period_mm", "predict_channels", "reflection_geometry"), ".channels"),
+    **dict.fromkeys(("analysis_params", "carrier_period_mm", "predict_channels", "read_params_file", "reflection_geometry"),
+                   ".channels"),
     **dict.fromkeys(("Prediction", "nominal_mm_per_px", "predict_displacement", "slab_shift"), ".model"),
 })
 
@@ -20,6 +21,7 @@ __all__ = [
     "predict_channels",
     "reflection_geometry",
     "analysis_params",
+    "read_params_file",
     "carrier_period_mm",
     "slab_shift",
     "nominal_mm_per_px",

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -10,7 +11,7 @@ from ..errors import InputError
 from ..scene import Scene, landing_jacobian, pixel_directions, pixel_grid
 from .model import Prediction, nominal_mm_per_px, predict_displacement
 
-__all__ = ["analysis_params", "carrier_period_mm", "predict_channels", "reflection_geometry"]
+__all__ = ["analysis_params", "carrier_period_mm", "predict_channels", "read_params_file", "reflection_geometry"]
 
 
 def reflection_geometry(scene: Scene):
@@ -55,21 +56,30 @@ def carrier_period_mm(scene: Scene) -> float:
     return p if scene.backdrop.pattern == "lines" else p * math.sqrt(2.0)
 
 
+def read_params_file(params_file) -> dict:
+    """The ``--params`` file of analyzer parameters as a mapping (JSON), read once for many scenes.
+
+    Raises :class:`InputError` when it cannot be read or parsed; the values are checked where
+    they meet a scene (:func:`analysis_params`).
+    """
+    from ..validation import load_mapping
+
+    return load_mapping(params_file, "parameter file", option="--params", fmt="json", expect="parameter: value pairs")
+
+
 def analysis_params(scene: Scene, params_file=None, **overrides):
     """Analyzer parameters for a scene: shipped defaults < ``scene.analysis`` < file < overrides.
 
-    The pattern always follows the scene's backdrop. Returns an
-    :class:`glassdist.analyzer.AnalyzerParams`; raises :class:`InputError` for
-    unknown keys or bad values.
+    ``params_file``: a path (:func:`read_params_file`) or the mapping read from it, as
+    :func:`glassdist.analyzer.params.load_params` takes either. The pattern always follows the
+    scene's backdrop. Returns an :class:`glassdist.analyzer.AnalyzerParams`; raises
+    :class:`InputError` for unknown keys or bad values.
     """
     from ..analyzer.params import load_params
 
-    from ..validation import load_mapping
-
     data = dict(scene.analysis)
     if params_file is not None:
-        data.update(load_mapping(params_file, "parameter file", option="--params", fmt="json",
-                                 expect="parameter: value pairs"))
+        data.update(params_file if isinstance(params_file, Mapping) else read_params_file(params_file))
     data["pattern"] = scene.backdrop.pattern
     return load_params(data, **overrides)
 
