@@ -412,18 +412,21 @@ def _demodulate(img: np.ndarray, refm: ReferenceModel | None, p: AnalyzerParams,
 
 
 def _region(demod: _Demodulation, p: AnalyzerParams, mask, warn: list[str], margins, residual=None, mods=None,
-            beyond=None, contrast=None, cuts: bool = True) -> Region:
+            beyond=None, contrast=None, first: Region | None = None) -> Region:
     """F4's valid region of a demodulation.
 
     After F5: ``residual`` (its residual phases, for the local-frequency test), ``mods`` (the
-    modulations over the bandpass's gain at the local frequency) and ``beyond`` (where that
-    gain is out of reach). ``contrast``: the photo's local contrast, for the cause of an exclusion.
-    ``cuts``: the branch cuts (:func:`~glassdist.analyzer.region.valid_region`).
+    modulations over the bandpass's gain at the local frequency), ``beyond`` (where that
+    gain is out of reach) and ``first``, the region its predictor was measured on: the region is
+    restricted to it and its branch cuts drawn on what is left
+    (:func:`~glassdist.analyzer.region.within`). ``contrast``: the photo's local contrast, for the
+    cause of an exclusion.
     """
     wrapped = [np.angle(z) for z in demod.signals]
-    return valid_region(wrapped, demod.coherences, demod.mods if mods is None else mods, demod.carriers, demod.grid, p,
-                        mask, warn, margin_px=margins[0], edge_margin_px=margins[1], deviation_phases=residual,
-                        beyond=beyond, contrast=contrast, cuts=cuts)
+    region = valid_region(wrapped, demod.coherences, demod.mods if mods is None else mods, demod.carriers, demod.grid,
+                          p, mask, warn, margin_px=margins[0], edge_margin_px=margins[1], deviation_phases=residual,
+                          beyond=beyond, contrast=contrast, cuts=first is None)
+    return region if first is None else within(region, first, p, wrapped)
 
 
 def _follow_local_grid(img, refm: ReferenceModel | None, demod: _Demodulation, region: Region, phases: np.ndarray,
@@ -1318,9 +1321,8 @@ def _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn
     f5 = _follow_local_grid(inp.image, inp.reference, demod, region, phases, p, contrast)  # F5
     if f5 is not None:
         f5_warn: list[str] = []
-        f5_region = within(_region(f5.demod, p, inp.mask, f5_warn, margins, f5.residual, f5.region_mods, f5.beyond,
-                                   lambda: contrast(f5.demod.grid), cuts=False), f5.measured, p,
-                           [np.angle(z) for z in f5.demod.signals])
+        f5_region = _region(f5.demod, p, inp.mask, f5_warn, margins, f5.residual, f5.region_mods, f5.beyond,
+                            lambda: contrast(f5.demod.grid), first=f5.measured)
         if f5_region.n == 0:  # nothing F5 could measure: the one pass stands
             f5 = None
     if f5 is None:
