@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 from scipy import ndimage
+from skimage.draw import line
 from skimage.restoration import unwrap_phase
 
 __all__ = ["wrap", "residues", "branch_cuts", "unwrap", "label_regions"]
@@ -23,6 +24,17 @@ __all__ = ["wrap", "residues", "branch_cuts", "unwrap", "label_regions"]
 def wrap(phase: np.ndarray) -> np.ndarray:
     """Wrap a phase to [-pi, pi] (the nearest multiple of 2 pi removed; keeps float32 as float32)."""
     return phase - (2 * np.pi) * np.rint(phase * (1 / (2 * np.pi)))
+
+
+def _charges(phase: np.ndarray) -> np.ndarray:
+    """Signed residue charge of every 2x2 loop of a wrapped phase, int8 (h-1, w-1): the loop's circulation / 2 pi."""
+    dh = wrap(np.diff(phase, axis=1))  # wrapped differences along rows, (h, w-1)
+    dv = wrap(np.diff(phase, axis=0))  # and along columns, (h-1, w)
+    # Each 2x2 loop: top edge left -> right, right edge down, bottom edge back, left edge up.
+    circ = dh[:-1, :] + dv[:, 1:]
+    circ -= dh[1:, :]
+    circ -= dv[:, :-1]
+    return np.rint(circ * (1 / (2 * np.pi))).astype(np.int8)  # a multiple of 2 pi: 0, +-1, +-2 turns
 
 
 def residues(phase: np.ndarray) -> np.ndarray:
@@ -38,13 +50,7 @@ def residues(phase: np.ndarray) -> np.ndarray:
     ndarray of bool, (h, w)
         True on the four corners of every residue loop.
     """
-    dh = wrap(np.diff(phase, axis=1))  # wrapped differences along rows, (h, w-1)
-    dv = wrap(np.diff(phase, axis=0))  # and along columns, (h-1, w)
-    # Each 2x2 loop: top edge left -> right, right edge down, bottom edge back, left edge up.
-    circ = dh[:-1, :] + dv[:, 1:]
-    circ -= dh[1:, :]
-    circ -= dv[:, :-1]
-    loop = np.abs(circ) > np.pi  # the sum is a multiple of 2 pi: 0 or +-2 pi
+    loop = _charges(phase) != 0
     out = np.zeros(phase.shape, bool)
     out[:-1, :-1] |= loop
     out[1:, :-1] |= loop
@@ -55,14 +61,6 @@ def residues(phase: np.ndarray) -> np.ndarray:
 
 #: Above this many charged holes each is cut straight to the border's excluded areas (:func:`branch_cuts`).
 MAX_PAIRED_HOLES = 64
-
-
-def _charges(phase: np.ndarray) -> np.ndarray:
-    """Signed residue charge of every 2x2 loop of a wrapped phase, int8 (h-1, w-1): the loop's circulation / 2 pi."""
-    dh = wrap(np.diff(phase, axis=1))
-    dv = wrap(np.diff(phase, axis=0))
-    circ = dh[:-1, :] + dv[:, 1:] - dh[1:, :] - dv[:, :-1]
-    return np.rint(circ / (2 * np.pi)).astype(np.int8)
 
 
 def branch_cuts(phases, valid: np.ndarray) -> np.ndarray:
@@ -94,8 +92,6 @@ def branch_cuts(phases, valid: np.ndarray) -> np.ndarray:
     ndarray of bool (h, w)
         The cut samples (valid ones only; empty when no hole is charged).
     """
-    from skimage.draw import line
-
     h, w = valid.shape
     cut = np.zeros_like(valid)
     if len(phases) == 0 or valid.all() or not valid.any() or h < 2 or w < 2:
@@ -134,21 +130,21 @@ def branch_cuts(phases, valid: np.ndarray) -> np.ndarray:
         cut[rr[on], cc[on]] = True
         # the cut joins the two holes into one: the merged charge is the sum (ground absorbs it)
         holes[rr[on], cc[on]] = k
-        b = box[k]
-        box[k] = (min(b[0], rr.min()), max(b[1], rr.max() + 1), min(b[2], cc.min()), max(b[3], cc.max() + 1))
+        box[k] = _union(box[k], (rr.min(), rr.max() + 1, cc.min(), cc.max() + 1))
         if other > 0:
             root[root == other] = k
-            b, o = box[k], box[other]
-            box[k] = (min(b[0], o[0]), max(b[1], o[1]), min(b[2], o[2]), max(b[3], o[3]))
-            if ground[other]:
-                ground[k] = True
-                q[k] = 0
-            else:
-                q[k] += q[other]
-            q[other] = 0
-        else:
+            box[k] = _union(box[k], box[other])
+        if other == 0 or ground[other]:  # the image edge or an area at it
             ground[k] = True
             q[k] = 0
+        else:
+            q[k] += q[other]
+        q[other] = 0
+
+
+def _union(a, b) -> tuple:
+    """The bounding box ``(y0, y1, x0, x1)`` (ends exclusive) of two boxes."""
+    return min(a[0], b[0]), max(a[1], b[1]), min(a[2], b[2]), max(a[3], b[3])
 
 
 def _cut_to_ground(holes, ground, charged, valid):
@@ -158,8 +154,6 @@ def _cut_to_ground(holes, ground, charged, valid):
     for a region riddled with charged holes (noise beyond what the residue test removes), where
     pairing them one at a time costs a transform of the neighbourhood each.
     """
-    from skimage.draw import line
-
     targets = ground[holes]
     targets[[0, -1], :] = targets[:, [0, -1]] = True
     dist, (iy, ix) = ndimage.distance_transform_edt(~targets, return_indices=True)
