@@ -496,6 +496,13 @@ def _follow_local_grid(img, refm: ReferenceModel | None, demod: _Demodulation, r
     # the linear transfer is (1 - (1 - G B)^n) / B, transfer.InstrumentTransfer).
     phase = pred + res
     n_photo, restart_px = 0, 0.0
+    held: list = []
+
+    def img_mods():  # the photo's modulation on F5's grid, computed once, only where something needs it
+        if not held:
+            held.extend(_modulation(b, c.period_px, grid, p) for b, c in zip(bb_img, (ks.k1, ks.k2)))
+        return held
+
     photo_max = p.photo_passes_for(refm is not None)
     if photo_max > 0:
         # The photo passes start from the field low-passed: what it carries beyond the filters' passband
@@ -503,13 +510,12 @@ def _follow_local_grid(img, refm: ReferenceModel | None, demod: _Demodulation, r
         restart_px = p.deformation_photo_restart_periods * period
         phase, n_photo, photo_mods = _photo_passes(img, refm, demod, bb_img, own,
                                                    _low_passed(phase, measured, grid, restart_px), measured, grid, p,
-                                                   photo_max)
+                                                   photo_max, img_mods)
     total = [(np.abs(z) * np.exp(1j * phase[..., i])).astype(np.complex64) for i, z in enumerate(zs)]
     if grid is demod.grid:
         mods = list(demod.mods)
     else:  # the photo's on F5's grid, the reference's brought to it
-        mods = [_modulation(b, c.period_px, grid, p) for b, c in zip(bb_img, (ks.k1, ks.k2))]
-        mods += [D.to_grid(m_, demod.grid, grid) for m_ in demod.mods[2:]]
+        mods = list(img_mods()) + [D.to_grid(m_, demod.grid, grid) for m_ in demod.mods[2:]]
     # The bandpass's gain at the local frequency, read off the warped reference (a uniform grid
     # of amplitude 1/2 per carrier): the photo's modulation is judged against it (a faint grid where the gain
     # explains it is not occluded), and where the gain is below its value at
@@ -816,7 +822,7 @@ _OWN_ITERATIONS = 4
 
 
 def _photo_passes(img, refm: ReferenceModel | None, demod: _Demodulation, bb_img, own, pred: np.ndarray,
-                  measured: np.ndarray, grid: F.SamplingGrid, p: AnalyzerParams, max_passes: int):
+                  measured: np.ndarray, grid: F.SamplingGrid, p: AnalyzerParams, max_passes: int, img_mods):
     """F5's last passes: the photo deformed back to the reference's frame (:func:`~glassdist.analyzer.deform.deformed_photo`).
 
     ``pred``: the warped reference's field, low-passed (:func:`_low_passed`). Each pass
@@ -843,7 +849,8 @@ def _photo_passes(img, refm: ReferenceModel | None, demod: _Demodulation, bb_img
     below ``deformation_tolerance_periods``)
     and the modulation the last pass measured at, per carrier, read at the photo's samples: the
     deformed photo's (its grid at the carrier, so the bandpass's whole amplitude), the photo's own
-    where the residual is the warped reference's. The phase noise goes as one over it, not over
+    where the residual is the warped reference's (``img_mods()``: the photo's on ``grid``, per carrier,
+    computed once by the caller). The phase noise goes as one over it, not over
     the photo's at its local frequency (the strong wave of ``test_analyzer_quality``, Direct:
     its x displacement scattered 0.80 of a sigma predicted from the photo's, 12 captures).
     """
@@ -890,10 +897,11 @@ def _photo_passes(img, refm: ReferenceModel | None, demod: _Demodulation, bb_img
         step = _rms_update_periods(res, measured, ks, period)
         log.debug("F5 photo pass %d: RMS update %.4f period", n, step)
         if n >= max_passes or step < p.deformation_tolerance_periods:
-            w_ = np.squeeze(share, -1) if np.ndim(share) else share
-            mods = [(w_ * D.to_frame(_modulation(b, c.period_px, grid, p), grid, q, grid, ks)
-                     + (1.0 - w_) * _modulation(b0, c.period_px, grid, p)).astype(np.float32)
-                    for b, b0, c in zip(bb, bb_img, (ks.k1, ks.k2))]
+            mods = [D.to_frame(_modulation(b, c.period_px, grid, p), grid, q, grid, ks) for b, c in zip(bb, (ks.k1, ks.k2))]
+            if np.ndim(share):  # blended with the photo's own where the residual is the warped reference's
+                w_ = np.squeeze(share, -1)
+                mods = [w_ * m_ + (1.0 - w_) * m0 for m_, m0 in zip(mods, img_mods())]
+            mods = [m_.astype(np.float32) for m_ in mods]
             q = q + res
             return q + _own_shift(own_ph, demod.grid, q, grid, ks), n, mods
         q = q + D.fill_nearest(np.where(measured[..., None], res, 0.0), measured)
