@@ -26,6 +26,13 @@ AUTO_PHOTO_PASSES = 6
 __all__ = ["AnalyzerParams", "load_params", "default_params_path"]
 
 
+def _auto_or_int(name: str, v, lo: int, hi: int):
+    """``v`` unchanged if it is ``'auto'`` or an integer from ``lo`` to ``hi``; else the validation error saying so."""
+    if v != "auto" and not lo <= int(v) <= hi:
+        raise ValueError(f"{name} must be 'auto' or an integer from {lo} to {hi}")
+    return v
+
+
 class AnalyzerParams(BaseModel):
     """Algorithmic parameters of the Distortion Analyzer (paper §2.2).
 
@@ -173,9 +180,7 @@ class AnalyzerParams(BaseModel):
     @field_validator("deformation_photo_passes")
     @classmethod
     def _check_photo_passes(cls, v):
-        if v != "auto" and not 0 <= int(v) <= 8:
-            raise ValueError("deformation_photo_passes must be 'auto' or an integer from 0 to 8")
-        return v
+        return _auto_or_int("deformation_photo_passes", v, 0, 8)
 
     def photo_passes_for(self, comparative: bool) -> int:
         """The photo passes F5 may run: ``deformation_photo_passes``, its ``'auto'`` resolved by the method."""
@@ -186,9 +191,7 @@ class AnalyzerParams(BaseModel):
     @field_validator("decimation")
     @classmethod
     def _check_decimation(cls, v):
-        if v != "auto" and not 1 <= int(v) <= 64:
-            raise ValueError("decimation must be 'auto' or an integer from 1 to 64")
-        return v
+        return _auto_or_int("decimation", v, 1, 64)
 
     def resolved(self) -> dict:
         """The parameters as a JSON-serialisable dict (recorded in every output)."""
