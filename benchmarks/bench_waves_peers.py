@@ -67,6 +67,8 @@ from _flow import farneback_displacement  # noqa: E402
 from _record import write_record  # noqa: E402
 
 TOL_PERIODS = 0.1
+# The photos' nominal glass-to-grid distance (their source records none; the README's Quick start)
+DISTANCE_M = 0.5
 # The Farneback peer's setting: the largest agreement with FCD over --farneback-sweep (a choice
 # that involves the peers alone, not glassdist).
 FARNEBACK = {"winsize": 15, "iterations": 30, "poly_n": 7, "poly_sigma": 1.5}
@@ -153,7 +155,7 @@ def analyze_waves(ref: np.ndarray, img: np.ndarray, params: dict | None = None):
     """glassdist's Comparative analysis of the photo (the settings of the README's Quick start)."""
     from glassdist import analyze
 
-    return analyze(img, reference=ref, pattern="checkerboard", pitch_mm=5.0, distance_m=0.5, detrend_degree=3,
+    return analyze(img, reference=ref, pattern="checkerboard", pitch_mm=5.0, distance_m=DISTANCE_M, detrend_degree=3,
                    params=params or None)
 
 
@@ -287,6 +289,15 @@ def noise_std(a: np.ndarray) -> float:
     return float(np.sqrt(np.pi / 2) * np.abs(c).mean() / 6)
 
 
+def replica_truth(field: np.ndarray, smoothing_px: float, scale: float) -> np.ndarray:
+    """A replica's displacement (px): ``field`` Gaussian-smoothed by ``smoothing_px``, scaled by ``scale`` about its mean."""
+    from scipy import ndimage
+
+    base = np.stack([ndimage.gaussian_filter(field[..., c], smoothing_px) for c in range(2)], -1)
+    mean = base.mean(axis=(0, 1))
+    return mean + scale * (base - mean)
+
+
 def replica(ref: np.ndarray, u: np.ndarray, sigma: float, seed: int) -> np.ndarray:
     """``ref(r - u(r))`` (cubic spline, mirrored at the edges) plus independent white noise of ``sigma``."""
     from scipy import ndimage
@@ -322,6 +333,7 @@ def replicas(image: Path, reference: Path, params: dict) -> dict:
     """
     from scipy import ndimage
 
+    from glassdist.experiments.transfer import _interior, independent_phi_eff
     from glassdist.io import read_image
 
     ref, img = read_image(reference), read_image(image)
@@ -333,9 +345,7 @@ def replicas(image: Path, reference: Path, params: dict) -> dict:
     for i, (src, field) in enumerate(peers.items()):
         scale = best_scale(ref, img, field, res.valid)
         for j, periods in enumerate(REPLICA_SMOOTHING_PERIODS):
-            base = np.stack([ndimage.gaussian_filter(field[..., c], periods * period) for c in range(2)], -1)
-            mean = base.mean(axis=(0, 1))
-            truth = mean + scale * (base - mean)
+            truth = replica_truth(field, periods * period, scale)
             rep = replica(ref, truth, sigma, REPLICA_SEED + 10 * i + j)
             t0 = time.perf_counter()
             r = analyze_waves(ref, rep, params)
@@ -350,13 +360,11 @@ def replicas(image: Path, reference: Path, params: dict) -> dict:
             deep = ndimage.distance_transform_edt(valid) > REPLICA_INNER_PERIODS * period
             # phi_eff of each field by the plain evaluation (glassdist's settings: its detrend region, degree 3,
             # its sigma; the scale mm_per_px, no perspective), against the truth's, 3 sigma inside the trusted pixels
-            from glassdist.experiments.transfer import _interior, independent_phi_eff
-
             s_px = r.sigma_mm / r.mm_per_px
 
             def plain_phi(u):
                 return independent_phi_eff(-np.nan_to_num(u) * r.mm_per_px, r.detrend_region, jacobian=np.eye(2) * r.mm_per_px,
-                                           sigma_px=s_px, degree=3, distance_m=0.5)
+                                           sigma_px=s_px, degree=3, distance_m=DISTANCE_M)
 
             phi_truth = plain_phi(truth)
             inner_phi = _interior(r.trusted, s_px) & np.isfinite(phi_truth) & np.isfinite(r.phi_eff_mD)

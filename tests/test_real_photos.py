@@ -105,14 +105,11 @@ def _waves_replica(real_data, peer: str, smoothing_periods: float, scale: float,
     plus independent noise at the reference's level. Returns ``(bench, truth px, replica, result)``.
     """
     from _benchmarks import load_benchmark_module
-    from scipy import ndimage
 
     B = load_benchmark_module("bench_waves_peers")
     ref, img = real_data["reference"], real_data["waves"]
     field = _fcd()(ref, img) if peer == "FCD" else B.farneback_displacement(ref, img, **B.FARNEBACK)
-    base = np.stack([ndimage.gaussian_filter(field[..., c], smoothing_periods * PERIOD_PX) for c in range(2)], -1)
-    mean = base.mean(axis=(0, 1))
-    truth = mean + scale * (base - mean)
+    truth = B.replica_truth(field, smoothing_periods * PERIOD_PX, scale)
     rep = B.replica(ref, truth, B.noise_std(ref), seed=seed)
     res = analyze(rep, pitch_mm=5.0, distance_m=0.5, reference=ref, params=dict(P, detrend_degree=3))
     return B, truth, rep, res
