@@ -457,23 +457,93 @@ PositiveLength_mm = Annotated[float, Field(gt=0, le=1e7, allow_inf_nan=False)]
 Angle_deg = Annotated[float, Field(ge=-3600, le=3600, allow_inf_nan=False)]
 
 
-def format_validation_error(exc: ValidationError, what: str, source: str, hint: str, *, most: int = 3) -> str:
+#: how an error names the n-th item of a list key (``criteria[0]`` is "criterion 1")
+_ITEM_NAMES = {"criteria": "criterion", "zones": "zone", "panes": "pane", "corners_px": "corner",
+               "corners_frac": "corner", "polygon_mm": "vertex", "captures": "capture", "layers": "layer"}
+
+
+def _item_model(annotation):
+    """The pydantic model an annotation holds (directly, or as the items of a tuple, list or optional)."""
+    import inspect
+    import typing
+
+    from pydantic import BaseModel
+
+    if inspect.isclass(annotation) and issubclass(annotation, BaseModel):
+        return annotation
+    for arg in typing.get_args(annotation):
+        found = _item_model(arg)
+        if found is not None:
+            return found
+    return None
+
+
+def _keys_at(model, loc) -> list[str]:
+    """The keys the model accepts at ``loc`` (a pydantic error location without its last key); [] when unknown."""
+    for part in loc:
+        if isinstance(part, int) or model is None:
+            continue  # an item of a list: the item's model is the list annotation's
+        field = model.model_fields.get(part)
+        model = None if field is None else _item_model(field.annotation)
+    return [] if model is None else [f.alias or name for name, f in model.model_fields.items()]
+
+
+def _where(loc) -> tuple[str, str]:
+    """``(key, place)`` of an error location: the dotted key after the last list index, and where that item is.
+
+    List indices count from 1, as a person counts: ``('criteria', 0, 'max_md')`` is
+    ``('max_md', 'criterion 1')``; ``('pane', 'colour')`` is ``('pane.colour', '')``.
+    """
+    parts = list(loc)
+    last = max((i for i, p in enumerate(parts) if isinstance(p, int)), default=None)
+    if last is None:
+        return ".".join(str(p) for p in parts), ""
+    key = ".".join(str(p) for p in parts[last + 1:])
+    owner = parts[last - 1] if last > 0 and isinstance(parts[last - 1], str) else ""
+    head = ".".join(str(p) for p in parts[: max(last - 1, 0)] if not isinstance(p, int))
+    item = (f"{_ITEM_NAMES[owner]} {parts[last] + 1}" if owner in _ITEM_NAMES
+            else f"item {parts[last] + 1} of '{owner}'" if owner else f"item {parts[last] + 1}")
+    return key, (f"{item} of '{head}'" if head else item)
+
+
+def _suggestion(key: str, known) -> str:
+    """`` (did you mean 'x'?)`` for a mistyped key: the same key in another case, else the closest by difflib."""
+    import difflib
+
+    last = key.rsplit(".", 1)[-1]
+    same = [k for k in known if k.lower() == last.lower()]
+    close = same or difflib.get_close_matches(last, list(known), n=1, cutoff=0.6)
+    return f" (did you mean '{safe_text(close[0], 60)}'?)" if close else ""
+
+
+def format_validation_error(exc: ValidationError, what: str, source: str, hint: str, *, most: int = 3,
+                            model=None) -> str:
     """One line from a pydantic :class:`~pydantic.ValidationError`.
 
-    ``invalid WHAT in SOURCE: unknown key 'x'; 'a.b': Input should be greater than 0; HINT``
-    (at most ``most`` problems, keys neutralised with :func:`safe_text`).
+    ``invalid WHAT in SOURCE: unknown key 'max_md' in criterion 1 (did you mean 'max_mD'?); 'a.b': Input should
+    be greater than 0; HINT`` (at most ``most`` problems, keys neutralised with :func:`safe_text`). List items
+    are counted from 1; with ``model`` (the model validated) an unknown key gets the closest known key as a
+    suggestion.
     """
     parts = []
     errors = exc.errors()
+    # a list whose only items failed is also reported too short: the items' errors say it
+    errors = [e for e in errors if not (e["type"] == "too_short" and any(
+        len(o["loc"]) > len(e["loc"]) and tuple(o["loc"][: len(e["loc"])]) == tuple(e["loc"]) for o in errors))]
     for err in errors[:most]:
-        loc = safe_text(".".join(str(x) for x in err["loc"]) or "(root)", 80)
+        key, place = _where(err["loc"])
+        key = safe_text(key or "(root)", 80)
+        at = f" in {safe_text(place, 80)}" if place else ""
         msg = safe_text(err["msg"].removeprefix("Value error, "), 200)
         if err["type"] == "extra_forbidden":
-            parts.append(f"unknown key '{loc}'")
+            known = _keys_at(model, err["loc"][:-1]) if model is not None else []
+            parts.append(f"unknown key '{key}'{at}{_suggestion(key, known)}")
         elif err["type"] == "missing":
-            parts.append(f"missing key '{loc}'")
+            parts.append(f"missing key '{key}'{at}")
+        elif key == "(root)" and place:
+            parts.append(f"{safe_text(place, 80)}: {msg}")
         else:
-            parts.append(f"'{loc}': {msg}")
+            parts.append(f"'{key}'{at}: {msg}")
     if len(errors) > most:
         parts.append(f"{len(errors) - most} more problem(s)")
     return f"invalid {what} in {source}: " + "; ".join(parts) + f"; {hint}"
@@ -486,7 +556,7 @@ def validate_model(model, data, what: str, source: str, hint: str):
     try:
         return model(**data)
     except ValidationError as exc:
-        raise InputError(format_validation_error(exc, what, source, hint)) from None
+        raise InputError(format_validation_error(exc, what, source, hint, model=model)) from None
     except (TypeError, ValueError, OverflowError, RecursionError) as exc:  # keyword names that are not strings, ...
         raise InputError(f"invalid {what} in {source}: {safe_text(exc, 200)}; {hint}") from None
 

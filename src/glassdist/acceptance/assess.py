@@ -16,7 +16,7 @@ import numpy as np
 from .regions import REGION_CHANNELS, all_worst_regions, regions_csv
 from .spec import as_spec, check_capture, spec_channels, spec_limits, spec_verdict
 from .stats import CHANNEL_FIELDS, regions_statistics, share_percent, shared_limit
-from .zones import measured_region, pane_frame, zone_masks, zone_statistics
+from .zones import check_pane, measured_region, pane_frame, zone_masks, zone_statistics
 
 __all__ = ["Acceptance", "assess", "colour_limits", "METADATA_KEYS"]
 
@@ -145,13 +145,16 @@ def assess(result, spec=None, *, protocol=None, mask=None, metadata=None, camera
     Raises
     ------
     InputError
-        The capture violates the protocol's capture limits.
+        The capture violates the protocol's capture limits, or the specification's pane or a
+        zone lies outside the photo or disagrees with its measured scale
+        (:func:`~glassdist.acceptance.zones.check_pane`).
     """
     loaded = as_spec(spec) if spec is not None else None
     spec = loaded.spec if loaded is not None else None
     limits = loaded.limits if loaded is not None else {}
     if loaded is not None:  # a capture outside the protocol is not judged (exit 2)
         check_capture(spec.protocol, result, spec_label=loaded.label)
+        check_pane(spec.pane, spec.zones, result, spec_label=loaded.label)
     # the power channels always; the uncertainty channels where a criterion judges them
     channels = tuple(dict.fromkeys((*CHANNEL_FIELDS, *(spec_channels(spec) if spec is not None else ()))))
     measured = measured_region(result)

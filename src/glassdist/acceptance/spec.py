@@ -6,7 +6,7 @@ A specification is a JSON object::
       "name": "Line 2 acceptance, 6 mm float",
       "protocol": {"method": "comparative", "distance_m": 1.0, "pitch_mm": 5.0, "pattern": "checkerboard",
                    "sigma_periods": 2, "detrend_degree": 2, "min_px_per_period": 6},
-      "pane": {"corners_px": [[10, 12], [1010, 8], [1014, 760], [6, 764]], "size_mm": [1200, 900]},
+      "pane": {"corners_frac": [[0.01, 0.015], [0.986, 0.01], [0.99, 0.95], [0.006, 0.955]], "size_mm": [1200, 900]},
       "zones": [{"name": "edge", "edge_band_mm": 50}, {"name": "vision", "inset_mm": 50}],
       "criteria": [
         {"channel": "phi_eff",   "statistic": "p95_abs",   "max_mD": 60, "zone": "vision"},
@@ -162,16 +162,33 @@ _NAME_RE = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
 
 
 class Pane(BaseModel):
-    """The pane's outline in the photograph: four corners (px) and its size (mm).
+    """The pane's outline in the photograph: four corners and the pane's size (mm).
 
-    ``corners_px`` are ``[x, y]`` (x along columns, y down the rows) in the order
-    top-left, top-right, bottom-right, bottom-left of the pane as seen; the pane
-    frame's origin is the top-left corner, x along the top edge, y along the left edge.
+    The corners are ``[x, y]`` (x along columns, y down the rows) in the order top-left,
+    top-right, bottom-right, bottom-left of the pane as seen; the pane frame's origin is the
+    top-left corner, x along the top edge, y along the left edge. Give them in exactly one
+    of two forms:
+
+    * ``corners_frac``: fractions of the image, ``[0, 0]`` the photo's top-left corner (the
+      outer edge of its first pixel) and ``[1, 1]`` its bottom-right one. The same file then
+      serves every resolution of the same set-up (camera, framing, pane): a corner lands at
+      ``x_px = fx * W - 0.5``, ``y_px = fy * H - 0.5`` of a ``W x H`` photo (pixel centres at
+      integer coordinates). ``[[0, 0], [1, 0], [1, 1], [0, 1]]``: the pane fills the photo.
+    * ``corners_px``: pixels of the photo the specification was written for (centres at
+      integer coordinates); valid for that resolution only.
+
+    Either way the corners are checked against each photo judged
+    (:func:`glassdist.acceptance.zones.check_pane`): they must lie inside it, and their span
+    in backdrop millimetres by the measured scale (``mm_per_px``) must agree with
+    ``size_mm`` for the capture geometry, or the run is refused (exit 2) rather than judging
+    a part of the photo that is not the pane.
     """
 
     model_config = MODEL_CONFIG
 
-    corners_px: tuple[tuple[float, float], tuple[float, float], tuple[float, float], tuple[float, float]]
+    corners_px: tuple[tuple[float, float], tuple[float, float], tuple[float, float], tuple[float, float]] | None = None
+    corners_frac: tuple[tuple[float, float], tuple[float, float], tuple[float, float], tuple[float, float]] | None = (
+        Field(None, description="corners as fractions of the image's width and height, 0 to 1"))
     size_mm: tuple[float, float]
 
     @model_validator(mode="after")
@@ -180,16 +197,36 @@ class Pane(BaseModel):
 
         if not all(np.isfinite(v) and v > 0 for v in self.size_mm):
             raise ValueError("'size_mm' must be two positive numbers [width, height]")
-        c = np.asarray(self.corners_px, dtype=float)
+        if (self.corners_px is None) == (self.corners_frac is None):
+            raise ValueError("give the corners as 'corners_frac' (fractions of the image, any resolution) or "
+                             "'corners_px' (pixels of one resolution), exactly one of them")
+        key = "corners_px" if self.corners_px is not None else "corners_frac"
+        c = np.asarray(getattr(self, key), dtype=float)
         if not np.all(np.isfinite(c)):
-            raise ValueError("'corners_px' must be finite numbers")
+            raise ValueError(f"'{key}' must be finite numbers")
+        if key == "corners_frac" and not np.all((c >= 0) & (c <= 1)):
+            raise ValueError("'corners_frac' must lie between 0 and 1 (fractions of the image's width and height)")
         # a convex quadrilateral in the stated order: every turn has the same sign
         d = np.roll(c, -1, axis=0) - c
         turns = d[:, 0] * np.roll(d, -1, axis=0)[:, 1] - d[:, 1] * np.roll(d, -1, axis=0)[:, 0]
         if not (np.all(turns > 0) or np.all(turns < 0)):
-            raise ValueError("'corners_px' must be a convex quadrilateral: top-left, top-right, bottom-right, "
+            raise ValueError(f"'{key}' must be a convex quadrilateral: top-left, top-right, bottom-right, "
                              "bottom-left")
         return self
+
+    @property
+    def corners_key(self) -> str:
+        """``"corners_frac"`` or ``"corners_px"``: the form the corners were given in."""
+        return "corners_px" if self.corners_px is not None else "corners_frac"
+
+    def corners_in(self, shape):
+        """The corners on a photo of ``shape`` ``(H, W)``, px (array (4, 2) of ``x, y``, pixel centres at integers)."""
+        import numpy as np
+
+        if self.corners_px is not None:
+            return np.asarray(self.corners_px, dtype=np.float64)
+        c = np.asarray(self.corners_frac, dtype=np.float64)
+        return c * np.array([shape[1], shape[0]], dtype=np.float64) - 0.5
 
 
 class Zone(BaseModel):
@@ -298,7 +335,13 @@ class Spec(BaseModel):
 
 @dataclass(frozen=True)
 class Check:
-    """Outcome of one criterion: ``value`` compared with ``limit`` (``value <= limit`` or ``>=``)."""
+    """Outcome of one criterion: ``value`` compared with ``limit`` (``value <= limit`` or ``>=``).
+
+    ``covers_percent`` and ``covers``: for a criterion on the channels, the trusted share
+    (percent) of the part it judges (``"zone 'vision'"``, ``"the image"`` or ``"the mask"``):
+    what the value speaks for; the rest of that part was not judged. None for the protocol
+    and coverage checks.
+    """
 
     criterion: str
     value: float | str | None
@@ -307,14 +350,20 @@ class Check:
     comparison: str
     passed: bool
     note: str = ""
+    covers_percent: float | None = None
+    covers: str = ""
 
     def line(self):
-        """One line for the console, e.g. ``PASS  p95 |phi_eff| <= 60 mD  (value 41.2 mD)``."""
+        """One line for the console, e.g. ``PASS  p95 |phi_eff| <= 60 mD  (value 41.2 mD; over the trusted 71.97 % of zone 'vision')``."""
         if isinstance(self.value, float):
             value = "not computable" if math.isnan(self.value) else f"{self.value:.4g} {self.unit}".rstrip()
         else:
             value = str(self.value)
-        tail = f"; {self.note}" if self.note else ""
+        tail = ""
+        if self.covers_percent is not None:
+            share = "none" if math.isnan(self.covers_percent) else f"the trusted {self.covers_percent:.4g} %"
+            tail = f"; over {share} of {self.covers}"
+        tail += f"; {self.note}" if self.note else ""
         return f"{'PASS' if self.passed else 'FAIL'}  {safe_text(self.criterion)}  (value {safe_text(value)}{safe_text(tail)})"
 
 
@@ -349,8 +398,9 @@ class Verdict:
         checks = []
         for c in self.checks:
             d = asdict(c)
-            if isinstance(d["value"], float) and math.isnan(d["value"]):
-                d["value"] = None
+            for k in ("value", "covers_percent"):
+                if isinstance(d[k], float) and math.isnan(d[k]):
+                    d[k] = None
             checks.append(d)
         return {
             "result": self.label, "passed": self.passed, "spec_name": self.spec_name,
@@ -816,9 +866,8 @@ def spec_verdict(spec, stats, result, *, spec_path="", spec_sha256="", zones=Non
         if trusted_percent is None:
             from .zones import measured_region
 
-            cov = share_percent(measured_region(result))
-        else:
-            cov = float(trusted_percent)
+            trusted_percent = share_percent(measured_region(result))
+        cov = float(trusted_percent)
         where = "the mask" if of_mask else "the image"
         checks.append(Check(f"trusted area >= {spec.min_valid_percent:g} % of {where}", cov,
                             spec.min_valid_percent, "%", ">=", cov >= spec.min_valid_percent))
@@ -828,12 +877,21 @@ def spec_verdict(spec, stats, result, *, spec_path="", spec_sha256="", zones=Non
             ok = (not math.isnan(cov)) and cov >= z.min_valid_percent
             checks.append(Check(f"trusted area >= {z.min_valid_percent:g} % of zone '{z.name}'", cov,
                                 z.min_valid_percent, "%", ">=", ok, "zone not in the photo" if math.isnan(cov) else ""))
+    if trusted_percent is None:
+        from .zones import measured_region
+
+        trusted_percent = share_percent(measured_region(result))
     for c in spec.criteria:
-        source = stats if c.zone is None else (zones.get(c.zone) or {}).get("statistics", {})
+        if c.zone is None:
+            source, covers, cov = stats, "the mask" if of_mask else "the image", float(trusted_percent)
+        else:
+            z = zones.get(c.zone) or {}
+            source, covers = z.get("statistics", {}), f"zone '{c.zone}'"
+            cov = float(z.get("trusted_percent", float("nan")))
         value = float(source.get(c.channel, {}).get(c.stat_key, float("nan")))
         limit = c.max_percent if c.statistic == "area_over" else c.max_mD
         unit = "%" if c.statistic == "area_over" else "mD"
         ok = (not math.isnan(value)) and value <= limit
         checks.append(Check(c.describe(), value, limit, unit, "<=", ok,
-                            "no valid pixel to measure" if math.isnan(value) else ""))
+                            "no valid pixel to measure" if math.isnan(value) else "", cov, covers))
     return Verdict(spec.name, str(spec_path), spec_sha256, tuple(checks))

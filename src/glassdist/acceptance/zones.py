@@ -7,7 +7,7 @@ A specification's ``"zones"`` name parts of the pane in millimetres (see
 between image pixels ``(x, y)`` (x along columns, y down the rows, pixel centres
 at integer coordinates) and frame millimetres ``(u, v)``:
 
-* **pane given in the specification** (``"pane": {"corners_px", "size_mm"}``): the
+* **pane given in the specification** (``"pane": {"corners_frac" or "corners_px", "size_mm"}``): the
   homography taking the four corners to the rectangle ``[0, w] x [0, h]`` mm; the
   frame is the pane's own (``units = "pane_mm"``), exact for any perspective, and a
   pixel's distance to the outline is ``min(u, w - u, v, h - v)``;
@@ -36,7 +36,7 @@ import numpy as np
 
 from .stats import CHANNEL_FIELDS, regions_statistics
 
-__all__ = ["PaneFrame", "distance_to_outside", "fill_holes", "grow_region", "pane_frame", "pane_frame_from_corners", "pane_frame_from_region", "zone_masks",
+__all__ = ["PaneFrame", "check_pane", "PANE_SCALE_RANGE", "distance_to_outside", "fill_holes", "grow_region", "pane_frame", "pane_frame_from_corners", "pane_frame_from_region", "zone_masks",
            "zone_statistics", "measured_region", "region_statistics"]
 
 
@@ -284,7 +284,7 @@ def pane_frame_from_region(valid, mm_per_px, *, grow_px=0.0):
         region = filled
         source = "analysed_region"
         warning = ("no pane outline visible all round (the grid reaches the photo's edges): the analysed region "
-                   "stands in for the pane in the zones; give 'pane': {'corners_px', 'size_mm'} in the specification "
+                   "stands in for the pane in the zones; give 'pane': {'corners_frac', 'size_mm'} in the specification "
                    "for zones on the pane itself")
     else:
         source = "image"
@@ -310,6 +310,91 @@ def _edge_distance_mm(region, mm_per_px):
     return dist
 
 
+#: accepted ratio of the pane's span on the backdrop (its corners' px times ``mm_per_px``) to its stated size,
+#: transmission: a pane at distance C from the camera, L in front of the grid, spans ``(C + L) / C`` times its size
+#: there (1 for a far camera, 3 for one at L / 2 from the pane); down to 0.75 for a pane seen up to 40 deg
+#: obliquely (its foreshortened side). Reflection: the scale is on the pane (ratio 1, oblique view as above).
+PANE_SCALE_RANGE = {"transmission": (0.75, 3.0), "reflection": (0.75, 1.0 / 0.75)}
+
+#: largest ratio between the two sides' scale ratios (one camera distance for both; a pane seen obliquely)
+_PANE_ASPECT_RATIO = 1.0 / 0.75
+
+#: corners this far (px) beyond the photo's outer edge are still inside it (rounding of a corner picked by hand)
+_CORNER_SLACK_PX = 1.0
+
+
+def check_pane(pane, zones, result, *, spec_label="the specification"):
+    """Refuse a pane or zone that the photo cannot show: outside it, or at odds with its measured scale.
+
+    Parameters
+    ----------
+    pane : glassdist.acceptance.spec.Pane or None
+    zones : sequence of glassdist.acceptance.spec.Zone
+    result : AnalysisResult
+        ``valid`` (the photo's shape), ``mm_per_px`` (backdrop mm per px, or pane mm in
+        reflection) and ``optics``.
+    spec_label : str
+        How the message names the specification.
+
+    Checks, in order: every corner lies inside the photo (within 1 px of its outer edge);
+    the corners' span in backdrop millimetres (mean of the two opposite sides' lengths, px,
+    times ``mm_per_px``) divided by ``size_mm`` lies in :data:`PANE_SCALE_RANGE` for each
+    side, and the two sides' ratios agree within 4:3 (one camera distance for both); a
+    polygon zone lies on the pane; an ``inset_mm`` zone leaves some of the pane.
+
+    Raises
+    ------
+    InputError
+        One line naming the mismatch and the fix (exit 2): the specification cannot judge
+        what the photo did not measure.
+    """
+    from ..errors import InputError
+
+    if pane is not None:
+        H, W = np.asarray(result.valid).shape
+        c = pane.corners_in((H, W))
+        key = pane.corners_key
+        lo, hi = -0.5 - _CORNER_SLACK_PX, np.array([W, H]) - 0.5 + _CORNER_SLACK_PX
+        out = np.flatnonzero(np.any((c < lo) | (c > hi), axis=1))
+        if out.size:
+            x, y = c[out[0]]
+            raise InputError(
+                f"the pane of {spec_label} has a corner at ({x:.6g}, {y:.6g}) px, outside the {W} x {H} px photo: "
+                f"its '{key}' were written for another photo; give the corners of the pane in this photo, or as "
+                "fractions of the image ('corners_frac') to serve every resolution")
+        s = float(result.mm_per_px)
+        side = lambda a, b: float(np.hypot(*(c[a] - c[b])))  # noqa: E731
+        span = ((side(1, 0) + side(2, 3)) / 2 * s, (side(3, 0) + side(2, 1)) / 2 * s)
+        size = tuple(float(v) for v in pane.size_mm)
+        ratio = (span[0] / size[0], span[1] / size[1])
+        optics = "reflection" if getattr(result, "optics", None) is not None else "transmission"
+        r_lo, r_hi = PANE_SCALE_RANGE[optics]
+        aspect = max(ratio) / max(min(ratio), 1e-300)
+        if not all(r_lo <= r <= r_hi for r in ratio) or aspect > _PANE_ASPECT_RATIO:
+            where = "on the backdrop" if optics == "transmission" else "on the pane"
+            raise InputError(
+                f"the pane of {spec_label} spans {span[0]:.4g} x {span[1]:.4g} mm {where} by the measured scale "
+                f"({s:.4g} mm per px) but its size_mm is {size[0]:.4g} x {size[1]:.4g} mm (ratio {ratio[0]:.2g} x "
+                f"{ratio[1]:.2g}; the capture geometry allows {r_lo:g} to {r_hi:g} on both sides alike): its '{key}' "
+                "were written for another resolution or set-up, or size_mm, pitch_mm or the photo is not the one "
+                "meant; give the corners of the pane in this photo (as fractions of the image, 'corners_frac', for "
+                "every resolution) and its true size")
+    w_h = None if pane is None else tuple(float(v) for v in pane.size_mm)
+    for i, z in enumerate(zones, 1):
+        if w_h is None:
+            continue
+        if z.polygon_mm is not None:
+            p = np.asarray(z.polygon_mm, dtype=np.float64)
+            if np.any(p < -1e-9) or np.any(p > np.array(w_h) + 1e-9):
+                raise InputError(
+                    f"zone {i} ('{z.name}') of {spec_label} reaches beyond the {w_h[0]:g} x {w_h[1]:g} mm pane "
+                    "('polygon_mm' is in pane mm from its top-left corner); keep its vertices on the pane")
+        if z.inset_mm is not None and 2 * z.inset_mm >= min(w_h):
+            raise InputError(
+                f"zone {i} ('{z.name}') of {spec_label} is empty: an inset of {z.inset_mm:g} mm leaves nothing of the "
+                f"{w_h[0]:g} x {w_h[1]:g} mm pane; give an inset_mm under {min(w_h) / 2:g}")
+
+
 def pane_frame(result, pane=None):
     """The :class:`PaneFrame` of an analysis: from the specification's ``pane``, else found in the image.
 
@@ -322,7 +407,7 @@ def pane_frame(result, pane=None):
     """
     valid = np.asarray(result.valid, dtype=bool)
     if pane is not None:
-        return pane_frame_from_corners(pane.corners_px, pane.size_mm, valid.shape)
+        return pane_frame_from_corners(pane.corners_in(valid.shape), pane.size_mm, valid.shape)
     grow = float(getattr(result, "margin_px", (0.0, 0.0))[0])
     return pane_frame_from_region(valid, float(result.mm_per_px), grow_px=grow)
 

@@ -112,14 +112,16 @@ def _verdict_section(verdict):
         label = "PASS" if c.passed else "FAIL"
         value = _num(c.value) + (f" {escape(c.unit)}" if c.unit and isinstance(c.value, (int, float)) else "")
         note = f"<br><span class='small'>{escape(c.note)}</span>" if c.note else ""
+        covers = "—" if c.covers_percent is None else f"{_num(c.covers_percent)} % of {escape(c.covers)}"
         rows += (f'<tr class="{label}"><td>{escape(c.criterion)}</td><td class="num">{value}</td>'
-                 f"<td>{escape(c.comparison)} {_num(c.limit)} {escape(c.unit)}</td><td><b>{label}</b>{note}</td></tr>")
+                 f"<td>{escape(c.comparison)} {_num(c.limit)} {escape(c.unit)}</td><td class='covers'>{covers}</td>"
+                 f"<td><b>{label}</b>{note}</td></tr>")
     n_ok = sum(c.passed for c in verdict.checks)
     return (f'<div class="verdict {verdict.label}" id="verdict">{verdict.label}</div>'
             f"<p>Specification <b>{escape(verdict.spec_name)}</b>: {n_ok} of {len(verdict.checks)} criteria passed. "
             f"Specification file <code>{escape(verdict.spec_path)}</code>, SHA-256 "
             f"<code>{escape(verdict.spec_sha256)}</code>.</p>"
-            f'<table id="criteria"><tr><th>criterion</th><th>value</th><th>limit</th><th>result</th></tr>{rows}</table>')
+            f'<table id="criteria"><tr><th>criterion</th><th>value</th><th>limit</th><th>judged over (trusted share)</th><th>result</th></tr>{rows}</table>')
 
 
 def _input_rows(label, info):
