@@ -4,8 +4,11 @@ Every plot function takes arrays (or an analysis result), draws on ``ax`` (a new
 figure when ``ax`` is None) and returns ``(fig, ax)``; nothing is shown on
 screen (figures use the non-interactive Agg canvas). Images are drawn in pixel
 coordinates, ``(row, col)`` with ``x`` along columns and ``y`` down the rows, as
-the photograph was taken. Values are in millidiopters (mD); pixels outside the
-valid analysis region are drawn in light grey and never enter a colour limit.
+the photograph was taken. Values are in millidiopters (mD). A map draws in its colour
+scale only the pixels the statistics use (``valid``: the trusted ones); the others never
+enter a colour limit and are drawn in greys named in the figure's legend: the guard band
+(``guard``, measured but not trusted) in :data:`GUARD_RGBA`, every other pixel (excluded,
+not analysed) in :data:`EXCLUDED_RGBA`.
 
 Colour conventions
 ------------------
@@ -46,6 +49,11 @@ __all__ = [
     "save_channel_heatmaps",
     "save_figure",
     "figure_png",
+    "add_legend",
+    "EXCLUDED_RGBA",
+    "GUARD_RGBA",
+    "LOW_SHEAR_RGBA",
+    "MASK_COLOURS",
 ]
 
 logger = logging.getLogger(__name__)
@@ -57,7 +65,67 @@ CHANNEL_STYLES = {
     "phi_total": ("phi_total_mD", r"$\phi_{total}$ (Frobenius norm)", "magma", False),
 }
 
-_INVALID_RGBA = (0.85, 0.85, 0.85, 1.0)
+#: colour of the pixels not analysed (excluded, or outside the region); in no colour map used here
+EXCLUDED_RGBA = (0.85, 0.85, 0.85, 1.0)
+#: colour of the guard band: measured, not trusted, so outside every statistic and colour scale
+GUARD_RGBA = (0.55, 0.55, 0.55, 1.0)
+_INVALID_RGBA = EXCLUDED_RGBA
+
+_GUARD_TEXT = "guard band (measured, not trusted)"
+_EXCLUDED_TEXT = "excluded / not analysed"
+
+
+def _untrusted_patches(valid, guard):
+    """Legend patches of the greys a map shows: the guard band (where ``guard`` has a pixel) and the excluded pixels."""
+    from matplotlib.patches import Patch
+
+    handles = []
+    if guard is not None and np.any(guard):
+        handles.append(Patch(facecolor=GUARD_RGBA, edgecolor="0.3", label=_GUARD_TEXT))
+    shown = np.ones(np.shape(valid), bool) if valid is None else np.asarray(valid, bool)
+    if guard is not None:
+        shown = shown | np.asarray(guard, bool)
+    if not shown.all():
+        handles.append(Patch(facecolor=EXCLUDED_RGBA, edgecolor="0.3", label=_EXCLUDED_TEXT))
+    return handles
+
+
+def _draw_guard(ax, guard, valid, extent):
+    """Overlay the guard band (``guard & ~valid``) in :data:`GUARD_RGBA` on a map (a second image, transparent elsewhere)."""
+    if guard is None:
+        return
+    g = np.asarray(guard, bool)
+    if valid is not None:
+        g = g & ~np.asarray(valid, bool)
+    if not g.any():
+        return
+    rgba = np.zeros((*g.shape, 4), np.float32)
+    rgba[g] = GUARD_RGBA
+    ax.imshow(rgba, interpolation="nearest", extent=extent)
+
+
+def add_legend(ax, handles, *, below=False):
+    """Legend of a map: under the axes in a figure :func:`_map_ax` made room for, else inside the axes, lower right.
+
+    Returns the legend (None without handles).
+    """
+    if not handles:
+        return None
+    if below:
+        return ax.figure.legend(handles=handles, loc="lower left", bbox_to_anchor=(0.01, 0.005),
+                                fontsize="x-small", frameon=False, ncol=_legend_columns(handles), handlelength=1.2,
+                                columnspacing=1.0)
+    return ax.legend(handles=handles, loc="lower right", fontsize="x-small", framealpha=0.85)
+
+
+def _legend_columns(handles) -> int:
+    """Two columns of short legend entries, one of long ones."""
+    return 2 if all(len(h.get_label()) <= 36 for h in handles) else 1
+
+
+def count_legend_rows(handles) -> int:
+    """Rows the legend of ``handles`` takes under a map (:func:`add_legend`)."""
+    return -(-len(handles) // _legend_columns(handles)) if handles else 0
 
 
 def _new_ax(ax, figsize=(6.4, 3.6)):
@@ -69,12 +137,13 @@ def _new_ax(ax, figsize=(6.4, 3.6)):
     return fig, fig.add_subplot()
 
 
-def _map_ax(ax, shape, extent=None, colorbar=True, px_axis=None):
+def _map_ax(ax, shape, extent=None, colorbar=True, px_axis=None, legend_rows=0):
     """``(fig, ax, cax)`` for a map of ``shape`` (h, w): ``ax``'s figure, or a new one sized to the map.
 
     The axes are placed by hand: a layout solver cost more than drawing the map. ``cax``
     is the colour bar's axes (None with ``ax`` given: matplotlib takes room from ``ax``).
-    With ``px_axis`` the top margin holds the secondary pixel axis too.
+    With ``px_axis`` the top margin holds the secondary pixel axis too; ``legend_rows`` rows
+    of legend fit under the x axis label.
     """
     if ax is not None:
         return ax.figure, ax, None
@@ -87,7 +156,7 @@ def _map_ax(ax, shape, extent=None, colorbar=True, px_axis=None):
     if h_in > 5.0 or h_in < 1.2:  # very tall or very flat maps keep a readable size
         h_in = min(max(h_in, 1.2), 5.0)
         w_in = min(h_in / aspect, 7.0)
-    left, bottom, top, right = 0.9, 0.6, (1.25 if px_axis else 0.75), (1.4 if colorbar else 0.3)
+    left, bottom, top, right = 0.9, 0.6 + 0.2 * legend_rows, (1.25 if px_axis else 0.75), (1.4 if colorbar else 0.3)
     W, H = left + w_in + right, bottom + h_in + top
     fig = Figure(figsize=(W, H))
     ax = fig.add_axes((left / W, bottom / H, w_in / W, h_in / H))
@@ -138,19 +207,19 @@ def _masked(field, valid):
 
 
 def plot_channel(field, valid=None, *, signed=True, vmax=None, cmap=None, title=None, ax=None, colorbar=True,
-                 extent=None, axis_units="px", px_axis=None):
-    """Heatmap of one power channel, in mD, over the valid region.
+                 extent=None, axis_units="px", px_axis=None, guard=None, legend=()):
+    """Heatmap of one power channel, in mD, over the pixels the statistics use.
 
     Parameters
     ----------
     field : ndarray, shape (H, W)
         Channel in mD; NaN where invalid.
     valid : ndarray of bool, shape (H, W), optional
-        Pixels drawn; the others are light grey.
+        Pixels drawn in the colour scale (the trusted ones); the others are grey.
     signed : bool
         True: diverging map, limits ``[-vmax, vmax]``; False: sequential, ``[0, vmax]``.
     vmax : float, optional
-        Colour limit in mD; default :func:`shared_limit` of this field.
+        Colour limit in mD; default :func:`shared_limit` of this field over ``valid``.
     cmap : str, optional
         Matplotlib colour-map name; default ``RdBu_r`` (signed) or ``viridis``.
     title : str, optional
@@ -164,23 +233,34 @@ def plot_channel(field, valid=None, *, signed=True, vmax=None, cmap=None, title=
     px_axis : (float, float), optional
         ``(scale, offset)``: column px = scale * x + offset; a secondary axis in the
         photo's pixels along the top (every map: mm below, px above).
+    guard : ndarray of bool, shape (H, W), optional
+        The guard band: drawn in :data:`GUARD_RGBA` (not in the colour scale), the other
+        pixels outside ``valid`` in :data:`EXCLUDED_RGBA`; both named in the legend.
+    legend : sequence of matplotlib artists
+        More legend entries (e.g. the zones, what the numbers on the map are).
 
     Returns
     -------
     fig, ax
+        ``ax.images[0]`` holds the values drawn (masked outside ``valid``), ``ax.images[1]``
+        the guard band where there is one.
     """
     import matplotlib
 
-    fig, ax, cax = _map_ax(ax, np.shape(field), extent, colorbar, px_axis)
+    handles = [*_untrusted_patches(valid, guard), *legend]
+    own = ax is None
+    fig, ax, cax = _map_ax(ax, np.shape(field), extent, colorbar, px_axis, legend_rows=count_legend_rows(handles))
     data, _ = _masked(field, valid)
     if vmax is None:
         vmax = shared_limit(field, valid=valid)
-    cmap_obj = matplotlib.colormaps[cmap or ("RdBu_r" if signed else "viridis")].with_extremes(bad=_INVALID_RGBA)
+    cmap_obj = matplotlib.colormaps[cmap or ("RdBu_r" if signed else "viridis")].with_extremes(bad=EXCLUDED_RGBA)
     norm = Normalize(-vmax, vmax) if signed else Normalize(0.0, vmax)
     im = ax.imshow(data, cmap=cmap_obj, norm=norm, interpolation="nearest", extent=extent)
+    _draw_guard(ax, guard, valid, extent)
     _label_image_axes(ax, title, axis_units, px_axis)
     if colorbar:
         fig.colorbar(im, ax=ax, cax=cax, label="mD", extend="both" if signed else "max", shrink=1.0 if cax else 0.9)
+    add_legend(ax, handles, below=own)
     return fig, ax
 
 
@@ -240,8 +320,12 @@ def plot_quality(labels, *, counts=None, title=None, ax=None, extent=None, axis_
     return fig, ax
 
 
+#: colour of the trusted pixels whose astigmatism is too small for an axis (twilight never reaches white)
+LOW_SHEAR_RGBA = (1.0, 1.0, 1.0, 1.0)
+
+
 def plot_axis(axis_deg, phi_shear, valid=None, *, min_shear_mD=None, title=None, ax=None, colorbar=True, extent=None,
-              axis_units="px", px_axis=None):
+              axis_units="px", px_axis=None, guard=None):
     """Principal axis of the astigmatism (direction of largest stretch), degrees.
 
     Parameters
@@ -251,32 +335,46 @@ def plot_axis(axis_deg, phi_shear, valid=None, *, min_shear_mD=None, title=None,
     phi_shear : ndarray, shape (H, W)
         Astigmatism in mD; the axis is drawn only where ``phi_shear >= min_shear_mD``.
     valid : ndarray of bool, shape (H, W), optional
+        Pixels drawn (the trusted ones); the others grey, as :func:`plot_channel`.
     min_shear_mD : float, optional
-        Below this the axis is undefined in practice and is drawn grey; default
-        10 % of the 95th percentile of ``phi_shear``.
+        Below this the axis is undefined in practice and is drawn white; default
+        10 % of the 95th percentile of ``phi_shear`` over ``valid``.
     title : str, optional
     ax : matplotlib Axes, optional
     colorbar : bool
+    guard : ndarray of bool, shape (H, W), optional
+        The guard band (see :func:`plot_channel`).
 
     Returns
     -------
     fig, ax
     """
     import matplotlib
+    from matplotlib.patches import Patch
 
-    fig, ax, cax = _map_ax(ax, np.shape(axis_deg), extent, colorbar, px_axis)
+    handles = [Patch(facecolor=LOW_SHEAR_RGBA, edgecolor="0.3", label="phi_shear too small for an axis"),
+               *_untrusted_patches(valid, guard)]
+    own = ax is None
+    fig, ax, cax = _map_ax(ax, np.shape(axis_deg), extent, colorbar, px_axis, legend_rows=count_legend_rows(handles))
     shear, ok = _masked(phi_shear, valid)
     if min_shear_mD is None:
         min_shear_mD = 0.1 * float(np.percentile(np.asarray(phi_shear)[ok], 95)) if ok.any() else 0.0
-    show = ok & np.isfinite(axis_deg) & (np.nan_to_num(np.asarray(phi_shear), nan=-1.0) >= min_shear_mD)
+    ok &= np.isfinite(axis_deg)
+    show = ok & (np.nan_to_num(np.asarray(phi_shear), nan=-1.0) >= min_shear_mD)
+    low = np.zeros((*np.shape(axis_deg), 4), np.float32)
+    low[~ok] = EXCLUDED_RGBA
+    low[ok & ~show] = LOW_SHEAR_RGBA
+    ax.imshow(low, interpolation="nearest", extent=extent)
     data = np.ma.masked_where(~show, np.asarray(axis_deg, dtype=np.float64))
-    cmap_obj = matplotlib.colormaps["twilight"].with_extremes(bad=_INVALID_RGBA)
+    cmap_obj = matplotlib.colormaps["twilight"].with_extremes(bad=(0, 0, 0, 0))
     im = ax.imshow(data, cmap=cmap_obj, norm=Normalize(-90.0, 90.0), interpolation="nearest", extent=extent)
+    _draw_guard(ax, guard, valid, extent)
     _label_image_axes(ax, title or f"astigmatism axis (where $\\phi_{{shear}}$ ≥ {min_shear_mD:.3g} mD)", axis_units,
                       px_axis)
     if colorbar:
         cb = fig.colorbar(im, ax=ax, cax=cax, label="axis (deg from +x towards +y, down)", shrink=1.0 if cax else 0.9)
         cb.set_ticks([-90, -45, 0, 45, 90])
+    add_legend(ax, handles, below=own)
     return fig, ax
 
 
@@ -306,15 +404,20 @@ def plot_input(image, valid=None, *, title=None, ax=None, extent=None, axis_unit
     return fig, ax
 
 
+#: colours of a threshold mask: under the limit, over it
+MASK_COLOURS = ("white", "tab:red")
+
+
 def plot_threshold_mask(field, valid=None, *, limit_mD, absolute=True, name="φ", title=None, ax=None, extent=None,
-                        axis_units="px", px_axis=None):
-    """Pixels over a limit: red over the limit, white under it, grey outside the region.
+                        axis_units="px", px_axis=None, guard=None, share_percent=None):
+    """Pixels over a limit: red over the limit, white under it, greys outside the trusted region (named in the legend).
 
     Parameters
     ----------
     field : ndarray, shape (H, W)
         Channel in mD.
     valid : ndarray of bool, shape (H, W), optional
+        The pixels judged (the trusted ones, those of the statistics).
     limit_mD : float
         Threshold in mD; a pixel is over when ``|field| > limit_mD`` (``absolute``)
         or ``field > limit_mD``.
@@ -323,23 +426,38 @@ def plot_threshold_mask(field, valid=None, *, limit_mD, absolute=True, name="φ"
         Channel name used in the default title.
     title : str, optional
     ax : matplotlib Axes, optional
+    guard : ndarray of bool, shape (H, W), optional
+        The guard band (see :func:`plot_channel`).
+    share_percent : float, optional
+        The share over the limit the title states: the statistics' ``area_over`` (the
+        Results table's number, computed over every trusted pixel); default the share of
+        the pixels drawn, the same number when they are all of them.
 
     Returns
     -------
     fig, ax
+        ``ax.images[0]`` holds the mask drawn (1 over, 0 under, masked outside ``valid``).
     """
     from matplotlib.colors import ListedColormap
+    from matplotlib.patches import Patch
 
-    fig, ax, _ = _map_ax(ax, np.shape(field), extent, colorbar=False, px_axis=px_axis)
+    op = f"|{name}|" if absolute else name
+    handles = [Patch(facecolor=MASK_COLOURS[1], edgecolor="0.3", label=f"{op} > {limit_mD:g} mD"),
+               Patch(facecolor=MASK_COLOURS[0], edgecolor="0.3", label=f"{op} ≤ {limit_mD:g} mD"),
+               *_untrusted_patches(valid, guard)]
+    own = ax is None
+    fig, ax, _ = _map_ax(ax, np.shape(field), extent, colorbar=False, px_axis=px_axis,
+                         legend_rows=count_legend_rows(handles))
     data, ok = _masked(field, valid)
     values = np.abs(np.asarray(field)) if absolute else np.asarray(field)
     over = ok & (np.nan_to_num(values, nan=-np.inf) > limit_mD)
     img = np.ma.masked_where(~ok, over.astype(float))
-    cmap_obj = ListedColormap(["white", "tab:red"]).with_extremes(bad=_INVALID_RGBA)
+    cmap_obj = ListedColormap(list(MASK_COLOURS)).with_extremes(bad=EXCLUDED_RGBA)
     ax.imshow(img, cmap=cmap_obj, vmin=0, vmax=1, interpolation="nearest", extent=extent)
-    frac = 100.0 * over.sum() / max(int(ok.sum()), 1)
-    op = f"|{name}|" if absolute else name
-    _label_image_axes(ax, title or f"{op} > {limit_mD:g} mD: {frac:.2f} % of the region", axis_units, px_axis)
+    _draw_guard(ax, guard, valid, extent)
+    frac = 100.0 * over.sum() / max(int(ok.sum()), 1) if share_percent is None else float(share_percent)
+    _label_image_axes(ax, title or f"{op} > {limit_mD:g} mD: {frac:.4g} % of the trusted region", axis_units, px_axis)
+    add_legend(ax, handles, below=own)
     return fig, ax
 
 
@@ -441,8 +559,11 @@ def save_channel_heatmaps(result, out_dir, *, vmax=None):
     list of Path
         The files written.
     """
+    from ..acceptance.zones import measured_region
+
     out_dir = Path(out_dir)
-    valid = np.asarray(result.valid, dtype=bool)
+    valid = measured_region(result)  # the statistics' pixels: the guard band is grey, not in the colour scale
+    guard = np.asarray(result.valid, dtype=bool) & ~valid
     if vmax is None:
         vmax = shared_limit(result.phi_eff_mD, result.phi_shear_mD, valid=valid)
     method = getattr(result, "method", "")
@@ -450,12 +571,12 @@ def save_channel_heatmaps(result, out_dir, *, vmax=None):
     for name in ("phi_eff", "phi_shear"):
         attr, label, cmap, signed = CHANNEL_STYLES[name]
         fig, _ = plot_channel(
-            getattr(result, attr), valid, signed=signed, vmax=vmax, cmap=cmap,
+            getattr(result, attr), valid, signed=signed, vmax=vmax, cmap=cmap, guard=guard,
             title=f"{label}\n{method} method, mD" if method else f"{label}, mD",
         )
         written.append(save_figure(fig, out_dir / f"{name}.png"))
     if getattr(result, "axis_deg", None) is not None:
-        fig, _ = plot_axis(result.axis_deg, result.phi_shear_mD, valid)
+        fig, _ = plot_axis(result.axis_deg, result.phi_shear_mD, valid, guard=guard)
         written.append(save_figure(fig, out_dir / "axis.png"))
     logger.debug("heatmaps written: %s", ", ".join(p.name for p in written))
     return written

@@ -2,57 +2,140 @@
 
 :func:`run_figures` returns every figure of ``glassdist analyze`` as ``(stem, caption,
 PNG bytes)``: the input with the analysed region, the channel heatmaps with the
-acceptance overlays (:func:`draw_overlays`: zones, numbered worst regions) on millimetre
-axes (:func:`heatmap_axes`), the axis, quality and uncertainty maps, a threshold mask per
-specification limit and the histograms.
+acceptance overlays (:func:`draw_overlays`: zones, numbered worst regions, named in the
+legend by :func:`overlay_legend`) on millimetre axes (:func:`heatmap_axes`), the axis,
+quality and uncertainty maps, a threshold mask per specification limit and the
+histograms. Figures draw only what the statistics use: the maps' colour scales hold the
+trusted pixels alone (:func:`map_samples`), and a mask's title states the statistics'
+share, the Results table's number.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from matplotlib.figure import Figure
 
-from ..acceptance.stats import shared_limit
+from ..acceptance.stats import format_limit, shared_limit
 from ..io import preview
 from . import figures as F
 
-__all__ = ["draw_overlays", "describe_clipping", "heatmap_axes", "run_figures"]
+__all__ = ["MAP_PX", "MapSamples", "draw_overlays", "describe_clipping", "heatmap_axes", "map_samples", "overlay_legend",
+           "run_figures"]
 
-def _map_of(result, attr):
-    """Field ``attr`` on the result's analysis grid (what every figure draws), NaN outside the region."""
-    f = np.array(result.grid_field(attr), dtype=np.float64)
-    f[~result.grid_valid] = np.nan
-    return f
+#: largest side (samples) of a map drawn: a photo up to this size is drawn pixel for pixel
+MAP_PX = 1200
 
 
-def _heatmap(result, name, field, gv, v, chosen, axes, acceptance):
-    """``(stem, caption, png)`` of one channel's heatmap (analysis grid), with the acceptance overlays."""
+@dataclass(frozen=True)
+class MapSamples:
+    """The pixels a run's maps draw: every ``step``-th pixel of the photo's pixel grid, in both directions.
+
+    Attributes
+    ----------
+    step : int
+        Pixels between two samples (1: every pixel, for a photo up to :data:`MAP_PX` a side).
+    fields : dict
+        ``{field name: ndarray (h, w)}``: the pixel-grid fields at the samples, bit-identical
+        to the result's (:meth:`~glassdist.analyzer.result.AnalysisResult.pixel_rows`).
+    trusted : ndarray of bool, shape (h, w)
+        Samples the statistics use (:func:`~glassdist.acceptance.zones.measured_region`): the
+        only ones drawn in a colour scale.
+    guard : ndarray of bool, shape (h, w)
+        Samples measured but not trusted (the guard band), drawn grey.
+    extent_px : (float, float, float, float)
+        ``(left, right, bottom, top)`` of the samples' cells in pixel coordinates.
+    """
+
+    step: int
+    fields: dict
+    trusted: np.ndarray
+    guard: np.ndarray
+    extent_px: tuple
+
+
+def map_samples(result, names, max_px=MAP_PX) -> MapSamples:
+    """The fields ``names`` of ``result`` at every ``step``-th pixel (step: the least making each side <= ``max_px``).
+
+    One pass over the pixel grid, by blocks of rows; at ``step`` 1 (a photo up to ``max_px`` a
+    side) the maps draw every pixel the statistics are taken over, so a mask's share of red
+    among its coloured pixels is the statistics' area share exactly.
+    """
+    from ..acceptance.zones import measured_region
+
+    H, W = result.valid.shape
+    k = max(1, -(-max(H, W) // int(max_px)))
+    parts: dict = {n: [] for n in names}
+    if names:
+        for rows, block in result.pixel_rows(list(names)):
+            first = (-(rows.start or 0)) % k
+            for n, b in block.items():
+                parts[n].append(np.asarray(b)[first::k, ::k])
+    fields = {n: np.concatenate(v) for n, v in parts.items()}
+    trusted = np.asarray(measured_region(result), bool)[::k, ::k]
+    guard = np.asarray(result.valid, bool)[::k, ::k] & ~trusted
+    h, w = trusted.shape
+    return MapSamples(k, fields, trusted, guard, (-0.5, -0.5 + k * w, -0.5 + k * h, -0.5))
+
+
+def _extent(samples, to_axes):
+    """``imshow`` extent of the samples' cells in the maps' axes."""
+    x0, x1, y1, y0 = samples.extent_px
+    (ax0, ax1), (ay0, ay1) = (np.asarray(c, float) for c in to_axes(np.array([x0, x1]), np.array([y0, y1])))
+    return float(ax0), float(ax1), float(ay1), float(ay0)
+
+
+def overlay_legend(acceptance, channel) -> list:
+    """Legend entries of the overlays :func:`draw_overlays` puts on ``channel``'s heatmap: zones, worst-region numbers."""
+    from matplotlib.lines import Line2D
+
+    handles = []
+    for i, (name, m) in enumerate(acceptance.masks.items()):
+        if m.any():
+            handles.append(Line2D([], [], color=_ZONE_COLOURS[i % len(_ZONE_COLOURS)], linestyle="--",
+                                  label=f"zone '{name}'"))
+    entry = acceptance.regions.get(channel) or {}
+    n = len(entry.get("regions", ()))
+    if n:
+        span = "1" if n == 1 else f"1-{n}"
+        handles.append(Line2D([], [], linestyle="none", marker="$1$", color="black", markersize=6,
+                              label=f"{span}: worst regions, |{channel}| > {entry['threshold_mD']:.4g} mD "
+                                    f"({entry['threshold_source']}), 1 the highest peak (worst_regions.csv)"))
+    return handles
+
+
+def _heatmap(name, samples, v, chosen, axes, acceptance):
+    """``(stem, caption, png)`` of one channel's heatmap, with the acceptance overlays."""
     extent, to_axes, units, px_axis = axes
     _, label, cmap, signed = F.CHANNEL_STYLES[name]
-    fig, ax = F.plot_channel(field, gv, signed=signed, vmax=v, cmap=cmap, title=f"{label}, mD", extent=extent,
-                             axis_units=units, px_axis=px_axis)
+    field = samples.fields[F.CHANNEL_STYLES[name][0]]
+    legend = overlay_legend(acceptance, name) if acceptance is not None else []
+    fig, ax = F.plot_channel(field, samples.trusted, signed=signed, vmax=v, cmap=cmap, title=f"{label}, mD",
+                             extent=_extent(samples, to_axes), axis_units=units, px_axis=px_axis,
+                             guard=samples.guard, legend=legend)
     span = f"[-{v:.3g}, {v:.3g}]" if signed else f"[0, {v:.3g}]"
     caption = f"{name} in mD; colour limits {span} mD" + ("." if chosen else " shared by both channels.")
+    top = acceptance.stats.get(name, {}).get("max_abs") if acceptance is not None else None
+    # the maximum and the clipped share over the trusted pixels, as the statistics
+    clip = describe_clipping(field, samples.trusted, v, top)
+    F.map_title(ax, f"{label}, mD\n{clip}", fontsize="medium")
+    caption += f" {clip} (trusted pixels)."
     if acceptance is not None:
         draw_overlays(ax, acceptance, name, to_axes, extent)
-        # the maximum and the clipped share over the trusted samples, as the statistics
-        clip = describe_clipping(field, gv & np.asarray(result.grid_trusted, bool), v,
-                                 acceptance.stats.get(name, {}).get("max_abs"))
-        F.map_title(ax, f"{label}, mD\n{clip}", fontsize="medium")
         n = len(acceptance.regions.get(name, {}).get("regions", ()))
-        caption += (f" Axes in {units}. {clip} (trusted pixels). Dashed: zones; numbers: the "
-                    f"{n} worst regions (worst_regions.csv).")
-    return name, caption + " Grey: not analysed.", F.figure_png(fig)
+        caption += f" Axes in {units}. Dashed: zones; numbers: the {n} worst regions (worst_regions.csv)."
+    return name, caption + (" Only the trusted pixels are in the colour scale: dark grey the guard band (measured, "
+                            "not trusted), light grey not analysed."), F.figure_png(fig)
 
 
-def _quality_figures(result, gv, axes, max_px=900):
+def _quality_figures(result, samples, axes, max_px=900):
     """The quality map (labels, reduced by striding to at most ``max_px`` a side) and the phi_eff uncertainty map.
 
-    ``axes``: ``(extent, units, px_axis)`` of every map (:func:`_map_axes`).
+    ``axes``: ``(extent, to_axes, units, px_axis)`` of every map (:func:`_map_axes`).
     """
-    extent, units, px_axis = axes
+    extent, to_axes, units, px_axis = axes
     held = {f.name for f in result.field_specs()}
     out = []
     if "quality" in held:
@@ -62,25 +145,48 @@ def _quality_figures(result, gv, axes, max_px=900):
                                 axis_units=units, px_axis=px_axis)
         out.append(("quality", "Quality map: every pixel's label (README, quality labels). Statistics, verdicts and "
                                "the maximum use label 0 only; label 6 is reported but not trusted.", F.figure_png(fig)))
-    if "phi_eff_sigma_mD" in held:
-        sig = _map_of(result, "phi_eff_sigma_mD")
-        trusted = gv & np.asarray(result.grid_trusted, bool)
+    if "phi_eff_sigma_mD" in samples.fields:
+        sig = samples.fields["phi_eff_sigma_mD"]
         floor = result.noise_floor()["phi_eff_sigma_mD"]["median"]
-        fig, _ = F.plot_channel(sig, gv, signed=False, vmax=shared_limit(sig, valid=trusted), cmap="magma",
+        fig, _ = F.plot_channel(sig, samples.trusted, signed=False, vmax=shared_limit(sig, valid=samples.trusted),
+                                cmap="magma", guard=samples.guard,
                                 title=f"standard uncertainty of $\\phi_{{eff}}$, mD\nnoise floor {floor:.3g} mD",
-                                extent=extent, axis_units=units, px_axis=px_axis)
+                                extent=_extent(samples, to_axes), axis_units=units, px_axis=px_axis)
         out.append(("uncertainty", f"Standard uncertainty of phi_eff from the image noise (phi_eff_sigma_mD), mD; "
                                    f"noise floor (median over the trusted pixels) {floor:.3g} mD. Values of |phi_eff| "
-                                   "within about 2 of it are not distinguishable from noise.", F.figure_png(fig)))
+                                   "within about 2 of it are not distinguishable from noise. Trusted pixels only.",
+                    F.figure_png(fig)))
+    return out
+
+
+def _threshold_masks(samples, limits, stats, axes):
+    """One mask per limit of each power channel, titled with the statistics' share (the Results table's number)."""
+    extent, to_axes, units, px_axis = axes
+    out = []
+    for name, lims in ((n, v) for n, v in limits.items() if n in F.CHANNEL_STYLES):
+        field = samples.fields[F.CHANNEL_STYLES[name][0]]
+        for lim in lims:
+            share = (stats.get(name) or {}).get(format_limit(lim))
+            fig, ax = F.plot_threshold_mask(field, samples.trusted, limit_mD=lim, name=name,
+                                            extent=_extent(samples, to_axes), axis_units=units, px_axis=px_axis,
+                                            guard=samples.guard, share_percent=share)
+            ax.set_xlim(extent[0], extent[1])
+            ax.set_ylim(extent[2], extent[3])
+            shown = ax.get_title().split(": ", 1)[-1]
+            out.append((f"mask_{name}_{lim:g}mD", f"{name}: pixels with |{name}| > {lim:g} mD in red, {shown} "
+                                                  "(the Results table's share); greys: not judged.",
+                        F.figure_png(fig)))
     return out
 
 
 def run_figures(result, image=None, limits=None, *, heatmaps=True, acceptance=None):
-    """Render the figures of a run, from its analysis grid.
+    """Render the figures of a run.
 
-    Every map is drawn from the fields on the analysis grid (``result.grid_field``), placed
-    over the photo's pixels (or millimetres) by its extent: at camera resolution,
-    resampling the pixel-grid fields for a 600 px figure cost more than the analysis.
+    Every map draws the pixel-grid fields at the samples of :func:`map_samples` (every pixel
+    of a photo up to :data:`MAP_PX` a side), and only the trusted ones, the pixels the
+    statistics use, in its colour scale; the guard band and the pixels not analysed are
+    drawn in greys named in the legend. The threshold masks' titles state the statistics'
+    area shares (the Results table's numbers).
 
     Parameters
     ----------
@@ -95,8 +201,8 @@ def run_figures(result, image=None, limits=None, *, heatmaps=True, acceptance=No
         Include the channel and axis heatmaps (ids ``phi_eff``, ``phi_shear``, ``axis``).
     acceptance : Acceptance, optional
         Zones and numbered worst regions drawn on the heatmaps, which then have
-        millimetre axes and the colour limits it chose
-        (:mod:`glassdist.acceptance`).
+        millimetre axes and the colour limits it chose, and the statistics whose
+        shares the masks state (:mod:`glassdist.acceptance`).
 
     Returns
     -------
@@ -104,15 +210,18 @@ def run_figures(result, image=None, limits=None, *, heatmaps=True, acceptance=No
         ``(file stem, caption, PNG bytes)`` in report order.
     """
     limits = limits or {}
-    H, W = result.valid.shape
-    gv = np.asarray(result.grid_valid, dtype=bool)
-    trusted = gv & np.asarray(result.grid_trusted, dtype=bool)  # the statistics' pixels
-    sy, sx = result.analysis_grid.step
-    maps = {name: _map_of(result, F.CHANNEL_STYLES[name][0]) for name in ("phi_eff", "phi_shear")}
+    held = {f.name for f in result.field_specs()}
+    names = ["phi_eff_mD", "phi_shear_mD"]
+    names += [F.CHANNEL_STYLES[n][0] for n in limits if n in F.CHANNEL_STYLES and F.CHANNEL_STYLES[n][0] not in names]
+    names += [n for n in ("axis_deg", "phi_eff_sigma_mD") if n in held and (heatmaps or n != "axis_deg")]
+    samples = map_samples(result, [n for n in dict.fromkeys(names) if n in held])
+    stats = acceptance.stats if acceptance is not None else {}
+    eff, shear = samples.fields["phi_eff_mD"], samples.fields["phi_shear_mD"]
     out = []
-    vmax = shared_limit(*maps.values(), valid=trusted)
+    vmax = shared_limit(eff, shear, valid=samples.trusted)
     vmaxes = dict(acceptance.colour_limits) if acceptance is not None else {}
-    extent, to_axes, units, px_axis = _map_axes(result, acceptance)
+    axes = _map_axes(result, acceptance)
+    extent, to_axes, units, px_axis = axes
     if image is not None:
         import cv2
 
@@ -121,30 +230,25 @@ def run_figures(result, image=None, limits=None, *, heatmaps=True, acceptance=No
         fig, _ = F.plot_input(small, region.astype(bool), extent=extent, axis_units=units, px_axis=px_axis)
         out.append(("input_region", "Input photograph; the analysed region is outlined in orange.", F.figure_png(fig)))
     for name in ("phi_eff", "phi_shear") if heatmaps else ():
-        out.append(_heatmap(result, name, maps[name], gv, vmaxes.get(name, vmax), bool(vmaxes),
-                            (extent, to_axes, units, px_axis), acceptance))
-    if heatmaps and any(f.name == "axis_deg" for f in result.field_specs()):
-        fig, _ = F.plot_axis(_map_of(result, "axis_deg"), maps["phi_shear"], gv, extent=extent, axis_units=units,
-                             px_axis=px_axis)
-        out.append(("axis", "Astigmatism axis (direction of largest stretch), degrees from +x towards +y (down); "
-                            "grey where phi_shear is too small for the axis to be meaningful.", F.figure_png(fig)))
-    out += _quality_figures(result, gv, (extent, units, px_axis))
-    for name, lims in ((n, v) for n, v in limits.items() if n in F.CHANNEL_STYLES):  # masks of the power channels
-        field = maps[name] if name in maps else _map_of(result, F.CHANNEL_STYLES[name][0])
-        for lim in lims:
-            fig, _ = F.plot_threshold_mask(field, gv, limit_mD=lim, name=name, extent=extent, axis_units=units,
-                                           px_axis=px_axis)
-            out.append((f"mask_{name}_{lim:g}mD", f"{name}: pixels with |{name}| > {lim:g} mD in red.",
-                        F.figure_png(fig)))
-    stats = acceptance.stats if acceptance is not None else {}
+        out.append(_heatmap(name, samples, vmaxes.get(name, vmax), bool(vmaxes), axes, acceptance))
+    if heatmaps and "axis_deg" in samples.fields:
+        fig, _ = F.plot_axis(samples.fields["axis_deg"], shear, samples.trusted, extent=_extent(samples, to_axes),
+                             axis_units=units, px_axis=px_axis, guard=samples.guard)
+        out.append(("axis", "Astigmatism axis (direction of largest stretch), degrees from +x towards +y (down), "
+                            "over the trusted pixels; white where phi_shear is too small for the axis to be "
+                            "meaningful.", F.figure_png(fig)))
+    out += _quality_figures(result, samples, axes)
+    out += _threshold_masks(samples, limits, stats, axes)
     fig = Figure(figsize=(10, 3.8))
     fig.subplots_adjust(left=0.09, right=0.98, bottom=0.14, top=0.9, wspace=0.3)
     for ax, name in zip(fig.subplots(1, 2), ("phi_eff", "phi_shear")):
         _, label, _, signed = F.CHANNEL_STYLES[name]
-        F.plot_histogram(maps[name], trusted, signed=signed, limits_mD=limits.get(name, ()), ax=ax, title=label,
-                         weight=sy * sx, max_abs_mD=stats.get(name, {}).get("max_abs"))
-    out.append(("histograms", "Histograms over the trusted pixels (quality label 0, the statistics' pixels; "
-                              "analysis-grid samples weighted by their cells); axis range: the statistics' largest "
+        F.plot_histogram(samples.fields[F.CHANNEL_STYLES[name][0]], samples.trusted, signed=signed,
+                         limits_mD=limits.get(name, ()), ax=ax, title=label, weight=samples.step ** 2,
+                         max_abs_mD=stats.get(name, {}).get("max_abs"))
+    out.append(("histograms", "Histograms over the trusted pixels (quality label 0, the statistics' pixels"
+                              + ("" if samples.step == 1 else f"; every {samples.step}th pixel, weighted by "
+                                 f"{samples.step ** 2}") + "); axis range: the statistics' largest "
                               "|value| (or a specification limit beyond it, dashed red).", F.figure_png(fig)))
     return out
 
