@@ -84,7 +84,7 @@ def test_threshold_mask_title_reports_area_over_limit():
     field = np.zeros((10, 10))
     field[:, :3] = 5.0  # 30 % of the pixels over 4 mD
     _, ax = figures.plot_threshold_mask(field, None, limit_mD=4.0)
-    assert "30.00 %" in ax.get_title()
+    assert "30 % of the trusted region" in ax.get_title()  # 4 significant figures, as the Results table
 
 
 def test_heatmap_caption_speaks_of_trusted_pixels():

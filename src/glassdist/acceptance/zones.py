@@ -362,7 +362,7 @@ def check_pane(pane, zones, result, *, spec_label="the specification"):
                 f"the pane of {spec_label} has a corner at ({x:.6g}, {y:.6g}) px, outside the {W} x {H} px photo: "
                 f"its '{key}' were written for another photo; give the corners of the pane in this photo, or as "
                 "fractions of the image ('corners_frac') to serve every resolution")
-        s = float(result.mm_per_px)
+        s = float(getattr(result, "mm_per_px", float("nan")))
         side = lambda a, b: float(np.hypot(*(c[a] - c[b])))  # noqa: E731
         span = ((side(1, 0) + side(2, 3)) / 2 * s, (side(3, 0) + side(2, 1)) / 2 * s)
         size = tuple(float(v) for v in pane.size_mm)
@@ -370,15 +370,15 @@ def check_pane(pane, zones, result, *, spec_label="the specification"):
         optics = "reflection" if getattr(result, "optics", None) is not None else "transmission"
         r_lo, r_hi = PANE_SCALE_RANGE[optics]
         aspect = max(ratio) / max(min(ratio), 1e-300)
-        if not all(r_lo <= r <= r_hi for r in ratio) or aspect > _PANE_ASPECT_RATIO:
+        if math.isfinite(s) and (not all(r_lo <= r <= r_hi for r in ratio) or aspect > _PANE_ASPECT_RATIO):
             where = "on the backdrop" if optics == "transmission" else "on the pane"
+            r_text = f"{ratio[0]:.2g}" if f"{ratio[0]:.2g}" == f"{ratio[1]:.2g}" else f"{ratio[0]:.2g} x {ratio[1]:.2g}"
             raise InputError(
                 f"the pane of {spec_label} spans {span[0]:.4g} x {span[1]:.4g} mm {where} by the measured scale "
-                f"({s:.4g} mm per px) but its size_mm is {size[0]:.4g} x {size[1]:.4g} mm (ratio {ratio[0]:.2g} x "
-                f"{ratio[1]:.2g}; the capture geometry allows {r_lo:g} to {r_hi:g} on both sides alike): its '{key}' "
-                "were written for another resolution or set-up, or size_mm, pitch_mm or the photo is not the one "
-                "meant; give the corners of the pane in this photo (as fractions of the image, 'corners_frac', for "
-                "every resolution) and its true size")
+                f"({s:.4g} mm per px) but its size_mm is {size[0]:.4g} x {size[1]:.4g} mm (ratio {r_text}; the capture "
+                f"geometry allows {r_lo:g} to {r_hi:.3g}, alike on both sides): its '{key}' were written for another "
+                "resolution or set-up, or its size_mm or the pitch is wrong; give the pane's corners in this photo, or "
+                "as fractions of the image ('corners_frac') to serve every resolution")
     w_h = None if pane is None else tuple(float(v) for v in pane.size_mm)
     for i, z in enumerate(zones, 1):
         if w_h is None:
