@@ -127,7 +127,7 @@ def _table_shares(report: str) -> dict:
         channel = re.search(r"<th>(.*?)</th>", row).group(1)
         cells = re.findall(r'<td class="num">(.*?)</td>', row)
         for title, cell in zip(head[1:], cells):
-            m = re.match(r"\|φ\| > ([0-9.]+) mD", title)
+            m = re.match(r"\|φ\| > ([0-9.]+) mD \(% of the trusted region\)", title)
             if m and cell != "—":
                 out[(channel, float(m.group(1)))] = cell
     return out

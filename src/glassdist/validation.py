@@ -499,11 +499,11 @@ def _where(loc) -> tuple[str, str]:
     if last is None:
         return ".".join(str(p) for p in parts), ""
     key = ".".join(str(p) for p in parts[last + 1:])
-    owner = parts[last - 1] if last > 0 and isinstance(parts[last - 1], str) else ""
-    head = ".".join(str(p) for p in parts[: max(last - 1, 0)] if not isinstance(p, int))
-    item = (f"{_ITEM_NAMES[owner]} {parts[last] + 1}" if owner in _ITEM_NAMES
-            else f"item {parts[last] + 1} of '{owner}'" if owner else f"item {parts[last] + 1}")
-    return key, (f"{item} of '{head}'" if head else item)
+    owner = ".".join(str(p) if not isinstance(p, int) else f"[{p + 1}]" for p in parts[:last]).replace(".[", "[")
+    n = parts[last] + 1
+    if owner in _ITEM_NAMES:  # a top-level list: "criterion 2"
+        return key, f"{_ITEM_NAMES[owner]} {n}"
+    return key, f"item {n} of '{owner}'" if owner else f"item {n}"
 
 
 def _suggestion(key: str, known) -> str:

@@ -50,7 +50,8 @@ _CONVENTIONS = (
     "curvature. φ_eff = tr(ε)/L (area change; negative for a converging lens), φ_shear = 2·max shear/L (shape "
     "change, ≥ 0), with ε = sym(∇δ) and L the glass-to-grid distance; values in millidiopters (mD). The "
     "astigmatism axis is the direction of largest stretch, degrees from +x towards +y. Statistics are taken over "
-    "the analysed region only; area percentages are of that region."
+    "the trusted pixels only (quality label 0: analysed, outside the guard band); area percentages are of them, "
+    "and the maps draw them alone in their colour scales."
 )
 
 _CSS = """
@@ -94,7 +95,7 @@ def _stats_table(stats):
     area_keys = sorted({k for s in stats.values() for k in s if k.startswith("area_over_")},
                        key=lambda k: float(k.removeprefix("area_over_")))
     head = "".join(f"<th>{escape(k)} (mD)</th>" for k in STATISTICS)
-    head += "".join(f"<th>|φ| &gt; {escape(k.removeprefix('area_over_'))} mD (% of region)</th>" for k in area_keys)
+    head += "".join(f"<th>|φ| &gt; {escape(k.removeprefix('area_over_'))} mD (% of the trusted region)</th>" for k in area_keys)
     rows = ""
     for ch, s in stats.items():
         cells = "".join(f'<td class="num">{_num(s.get(k))}</td>' for k in STATISTICS + tuple(area_keys))
