@@ -42,7 +42,6 @@ are comments.
 
 from __future__ import annotations
 
-import csv
 import hashlib
 import json
 import logging
@@ -59,7 +58,7 @@ from pathlib import Path
 from ..errors import InputError
 from ..history.options import record_as_args
 from ..validation import DISTANCE_M, PITCH_MM, SIGMA_MM, check_number, read_csv_rows, safe_text
-from ..fs import atomic_write_text
+from ..fs import atomic_write_text, write_csv
 from ..storage import EXIT_SPEC_FAIL
 from .runner import PaneOutcome, lock_job_folder, place_folder, prepare_job_folder, read_json, subprocess_runner
 
@@ -72,8 +71,6 @@ __all__ = [
     "write_index",
     "pane_defaults",
     "check_panes",
-    "write_csv",
-    "csv_cell",
 ]
 
 logger = logging.getLogger(__name__)
@@ -552,30 +549,6 @@ def _index_rows(panes, out):
 
 def _round(v):
     return "" if v is None else f"{float(v):.4g}"
-
-
-_FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
-
-
-def csv_cell(value):
-    """A text cell that a spreadsheet would run as a formula (``=``, ``+``, ``-``, ``@``, tab, CR) gets a ``'``."""
-    if isinstance(value, str) and value.startswith(_FORMULA_START):
-        try:
-            float(value)
-        except ValueError:
-            return "'" + value
-    return value
-
-
-def write_csv(path, rows):
-    """Write rows (dicts with the same keys) as a CSV file, atomically; formula-like text cells neutralised."""
-    import io
-
-    buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
-    writer.writeheader()
-    writer.writerows({k: csv_cell(v) for k, v in row.items()} for row in rows)
-    return atomic_write_text(path, buf.getvalue())
 
 
 def write_index(panes, out, *, figures=True):
