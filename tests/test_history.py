@@ -426,6 +426,24 @@ def test_batch_records_each_pane_with_its_manifest_lot_into_db_and_not_with_no_h
     assert len(_rows(other)) == 1 and not sqlite_db.exists()
 
 
+def test_a_batch_says_which_panes_wait_in_the_spool_and_the_history_command_writes_them(tmp_path, own_data, capsys):
+    manifest = _tiny_panes(tmp_path / "in", 2, "L6")
+    db = tmp_path / "later" / "history.sqlite"  # its folder does not exist yet
+    assert main(["batch", str(manifest), "--out", str(tmp_path / "b"), "--no-progress", "--db", str(db)]) == 0
+    out = capsys.readouterr().out
+    assert sum("this run was not recorded in the history" in line and "kept in" in line
+               for line in out.splitlines()) == 2, out
+    assert len(_spooled(tmp_path)) == 2
+    pane = json.loads((tmp_path / "b" / "panes" / "L6-0" / "pane.json").read_text())
+    assert pane["history"].startswith("warning: this run was not recorded")
+    db.parent.mkdir()
+    assert main(["history", "--db", str(db), "--format", "json"]) == 0
+    runs = json.loads(capsys.readouterr().out)
+    assert sorted(r["pane_id"] for r in runs) == ["L6-0", "L6-1"] and {r["source"] for r in runs} == {"batch"}
+    assert {Path(r["out_dir"]) for r in runs} == {tmp_path / "b" / "panes" / "L6-0", tmp_path / "b" / "panes" / "L6-1"}
+    assert _spooled(tmp_path) == []
+
+
 # ---------------------------------------------------------------- concurrent writers
 
 

@@ -365,6 +365,7 @@ def _record_pane(pane, out, tmp, outcome, seconds, report, export):
         "fingerprint": pane.fingerprint(report=report, export=export), "seconds": round(seconds, 2),
         "finished_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "pane": {k: (str(v) if v is not None else None) for k, v in asdict(pane).items()},
+        "history": _history_line(outcome.log),
     }
     (tmp / "analyze.log").write_text(outcome.log, encoding="utf-8")
     (tmp / "pane.json").write_text(json.dumps(record, indent=2) + "\n", encoding="utf-8")
@@ -372,6 +373,15 @@ def _record_pane(pane, out, tmp, outcome, seconds, report, export):
     failed_json.unlink(missing_ok=True)
     failed_log.unlink(missing_ok=True)
     return record
+
+
+_HISTORY_LINES = ("history: ", "warning: this run was not recorded in the history")
+
+
+def _history_line(log: str) -> str | None:
+    """Where the pane's record went, as its ``glassdist analyze`` said (the database, or the spool file keeping it)."""
+    found = [line for line in log.splitlines() if line.startswith(_HISTORY_LINES)]
+    return found[-1] if found else None
 
 
 def _done_record(pane, out, report, export):
@@ -470,6 +480,8 @@ def _run_panes(panes, todo, out, records, runner, report, export, executor, cwd,
             label = rec.get("verdict") or ("analysed" if rec["status"] == "done" else "ERROR")
             tail = f": {safe_text(rec['error'])}" if rec["status"] == "error" else ""
             echo(f"[{len(records)}/{len(panes)}] {pane.id}  {label}  ({rec['seconds']:.1f} s){tail}")
+            if (rec.get("history") or "").startswith("warning:"):  # its record waits in the spool: say so here too
+                echo(f"  {pane.id}: {rec['history']}")
             write_index(panes, out, figures=False)
             bar.advance(task)
 
