@@ -368,7 +368,7 @@ def _plot_lot(ax, t: Trend, label: str) -> None:
     if math.isfinite(t.sigma):
         for y, name, raw in ((t.upper, "+3σ", t.mean + 3 * t.sigma), (t.lower, "−3σ", t.mean - 3 * t.sigma)):
             ax.axhline(y, color="#d62728", ls="--", lw=1)
-            text = f" {name}" if y == raw else f" {name} (at {y:g} {unit}, the statistic's bound)"
+            text = f" {name}" if y == raw else f" {name}: {y:g} {unit}\n (bound)"
             ax.text(1.0, y, text, va="center", ha="left", fontsize=8, transform=ax.get_yaxis_transform())
     step = max(1, math.ceil(x.size / _MAX_TICKS))
     ticks = x[::step]
@@ -382,4 +382,6 @@ def _plot_lot(ax, t: Trend, label: str) -> None:
                  f"({t.times[0][:10]} … {t.times[-1][:10]})", fontsize=9, loc="left")
     ax.set_ylabel(f"{label} [{unit}]", fontsize=8)
     ax.grid(alpha=0.3)
+    lo, hi = ax.get_ylim()
+    ax.set_ylim(lo, hi + 0.22 * (hi - lo))  # headroom for the legend above the runs
     ax.legend(fontsize=7, loc="upper left", ncols=3)
