@@ -48,7 +48,8 @@ from pathlib import Path
 from ..errors import InputError
 
 __all__ = ["HistoryUnavailable", "Location", "Recording", "Recorded", "SpoolFlush", "data_dir", "spool_dir", "locate",
-           "open_store", "record", "record_run", "flush_spool", "run_rows", "insert_runs", "describe_failure", "Store"]
+           "open_store", "record", "record_run", "flush_spool", "run_rows", "record_id", "insert_runs", "describe_failure",
+           "Store"]
 
 #: values of ``GLASSDIST_DB`` / ``--db`` that turn the history off
 OFF = ("off", "none", "0", "false", "no")
