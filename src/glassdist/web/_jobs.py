@@ -18,7 +18,7 @@ from pathlib import Path
 from ..errors import InputError
 from ..history.options import record_as_args
 
-__all__ = ["Job", "JobStore", "ROLES", "FIELDS", "FLAGS", "LABELS", "form_language"]
+__all__ = ["FIELDS", "FLAGS", "LABELS", "ROLES", "Job", "JobStore", "form_language"]
 
 logger = logging.getLogger(__name__)
 
@@ -69,16 +69,19 @@ def form_language(line: str, names: dict | None = None, display: dict | None = N
         line = line.replace(f"'{name}'", f"'{(display or {}).get(role, name)}'")
     line = re.sub(r"^\s*glassdist(?: [a-z]+)?: (?:error|warning): ", "", line)
     line = re.sub(r"\s*\(see glassdist [a-z]+ --help\)", "", line)
-    required = re.match(r"the following arguments are required: (.*)$", line)
+    # a required option (argparse's words, or the protocol's when a specification was given): the fields to fill in
+    required = (re.fullmatch(r"the following arguments are required: (.*)", line)
+                or re.fullmatch(r"(--[a-z-]+) is required \(.*\), or a --spec whose protocol pins [a-z_]+", line))
     if required:
         options = [o.strip() for o in required.group(1).split(",")]
         if all(o in _OPTION_LABELS for o in options):
             fields = [_field(o) for o in options]
             return ("fill in " + (", ".join(fields[:-1]) + " and " if len(fields) > 1 else "") + fields[-1]
-                    + " (or choose an acceptance specification whose protocol pins them)")
+                    + f" (or choose an acceptance specification whose protocol pins {'them' if len(fields) > 1 else 'it'})")
     # quoted text (a file name, a value as typed) is left as it is: split it off, translate the rest
     parts = re.split(r"((?<!\w)'[^']*'(?!\w))", line)
-    return "".join(part if k % 2 else _options_in_words(part) for k, part in enumerate(parts))
+    line = "".join(part if k % 2 else _options_in_words(part) for k, part in enumerate(parts))
+    return re.sub(r"\b([Aa]) (?=\u201c[aeiou])", r"\1n ", line)  # "a --spec": "an “acceptance specification”"
 
 
 _KNOWN = re.compile(f"(?P<option>{'|'.join(map(re.escape, sorted(_OPTION_LABELS, key=len, reverse=True)))})"
