@@ -101,7 +101,7 @@ def test_errors_speak_the_form_s_language(server, pair):
     import httpx
 
     url, app = server
-    pitch, distance = f"\u201c{LABELS['pitch_mm']}\u201d", f"\u201c{LABELS['distance_m']}\u201d"
+    pitch = f"\u201c{LABELS['pitch_mm']}\u201d"
     with httpx.Client(timeout=60) as client:
         page = client.get(url).text
         assert f'<label for="pitch_mm">{LABELS["pitch_mm"]}</label>' in page
@@ -123,27 +123,30 @@ def test_errors_speak_the_form_s_language(server, pair):
 
 
 @pytest.mark.parametrize("line, expected", [
-    ("glassdist analyze: error: the following arguments are required: --pitch-mm, --distance-m "
-     "(see glassdist analyze --help)",
-     "fill in \u201cgrid pitch, mm\u201d and \u201cglass-to-grid distance L, m\u201d (or choose an acceptance "
-     "specification whose protocol pins them)"),
-    ("glassdist analyze: error: --distance-m 3 contradicts the protocol of the specification 'spec.json' "
-     "(distance_m = 1 m); leave --distance-m out to use the specification's value",
-     "\u201cglass-to-grid distance L, m\u201d = 3 contradicts the protocol of the specification 'site.json' "
-     "(distance_m = 1 m); leave \u201cglass-to-grid distance L, m\u201d out to use the specification's value"),
-    ("glassdist analyze: error: argument --distance-m: must be a number, got 'one' (see glassdist analyze --help)",
+    (("glassdist analyze: error: the following arguments are required: --pitch-mm, --distance-m "
+      "(see glassdist analyze --help)"),
+     ("fill in \u201cgrid pitch, mm\u201d and \u201cglass-to-grid distance L, m\u201d (or choose an acceptance "
+      "specification whose protocol pins them)")),
+    (("glassdist analyze: error: --distance-m 3 contradicts the protocol of the specification "
+      "'spec.json' (distance_m = 1 m); leave --distance-m out to use the specification's value"),
+     ("\u201cglass-to-grid distance L, m\u201d = 3 contradicts the protocol of the specification 'site.json' "
+      "(distance_m = 1 m); leave \u201cglass-to-grid distance L, m\u201d out to use the specification's value")),
+    (("glassdist analyze: error: argument --distance-m: must be a number, got 'one' (see glassdist "
+      "analyze --help)"),
      "\u201cglass-to-grid distance L, m\u201d: must be a number, got 'one'"),
-    ("glassdist analyze: error: the reference 'reference.png' is the same photo as the image (identical pixels); "
-     "give a photo of the grid taken without the glass, or leave out --reference (Direct Method)",
-     "the reference 'my flat.png' is the same photo as the image (identical pixels); give a photo of the grid taken "
-     "without the glass, or leave out \u201cglass-less reference\u201d (Direct Method)"),
-    ("Direct Method with detrend degree 2: p95 |phi_eff| moves by -32% with --detrend-degree 3: calibrate the lens "
-     "(--lens-photo, --camera-file) or use the Comparative Method",
-     "Direct Method with detrend degree 2: p95 |phi_eff| moves by -32% with \u201cdetrend degree N\u201d = 3: "
-     "calibrate the lens (--lens-photo, --camera-file on the command line) or use the Comparative Method"),
+    (("glassdist analyze: error: the reference 'reference.png' is the same photo as the image "
+      "(identical pixels); give a photo of the grid taken without the glass, or leave out "
+      "--reference (Direct Method)"),
+     ("the reference 'my flat.png' is the same photo as the image (identical pixels); give a photo "
+      "of the grid taken without the glass, or leave out \u201cglass-less reference\u201d (Direct Method)")),
+    (("Direct Method with detrend degree 2: p95 |phi_eff| moves by -32% with --detrend-degree 3: "
+      "calibrate the lens (--lens-photo, --camera-file) or use the Comparative Method"),
+     ("Direct Method with detrend degree 2: p95 |phi_eff| moves by -32% with \u201cdetrend degree N\u201d = "
+      "3: calibrate the lens (--lens-photo, --camera-file on the command line) or use the "
+      "Comparative Method")),
     ("--camera-distance-m without --optics reflection; add --pattern=lines, or --sigma-mm 2.5.",
-     "\u201ccamera-to-pane distance C, m\u201d without \u201coptics\u201d = reflection; add \u201cpattern\u201d = lines, "
-     "or \u201csmoothing sigma, mm\u201d = 2.5."),
+     ("\u201ccamera-to-pane distance C, m\u201d without \u201coptics\u201d = reflection; add \u201cpattern\u201d = lines, or "
+      "\u201csmoothing sigma, mm\u201d = 2.5.")),
 ])
 def test_form_language_of_analyze_lines(line, expected):
     names, display = {"reference": "reference.png", "spec": "spec.json"}, {"reference": "my flat.png", "spec": "site.json"}

@@ -243,7 +243,7 @@ def _add_history_routes(app: FastAPI, store: JobStore, pages: _Pages) -> None:
         def draw():
             rows = records(filters)
             label = f"{rows[0]['statistic']} ({rows[0]['zone']})" if rows else "value"
-            return figure_png(plot_trends(trends(rows), label=label), dpi=80)
+            return figure_png(plot_trends(trends(rows), label=label), dpi=110)  # 9 in: 990 px, shown whole
 
         try:
             png = await run_in_threadpool(draw)
