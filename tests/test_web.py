@@ -269,6 +269,9 @@ def test_form_controls_are_readable_in_headless_chromium(server):
         assert page.locator("#pattern option").first.inner_text() == "auto (from the photo)"
         assert _assert_controls_readable(page) >= 2 + 4  # pattern, optics; the hints of four fields
         _assert_no_dead_link(page)
+        page.set_viewport_size({"width": 700, "height": 900})
+        assert _assert_controls_readable(page) >= 2 + 4
+        assert page.evaluate("document.documentElement.scrollWidth <= document.documentElement.clientWidth")
         page.goto(url + "/history")
         assert _assert_controls_readable(page) >= 1 + 8  # verdict; the filters' hints
         _assert_no_dead_link(page)
@@ -344,6 +347,9 @@ def test_direct_method_without_report_in_headless_chromium(server, pair):
         assert any("--detrend-degree" in w for w in written)  # what the command line says ...
         assert not any("--detrend-degree" in w for w in shown)  # ... the page says in its own words
         assert any(f"\u201c{LABELS['detrend_degree']}\u201d = 3" in w for w in shown)
+        page.set_viewport_size({"width": 700, "height": 900})  # a narrow window: the maps shrink, whole, no side-scroll
+        assert _assert_whole(page, ".zoom img") >= 7
+        assert page.evaluate("document.documentElement.scrollWidth <= document.documentElement.clientWidth")
 
 
 def test_errors_in_headless_chromium(server, pair):

@@ -24,6 +24,7 @@ __all__ = ["create_app", "serve"]
 logger = logging.getLogger(__name__)
 
 _TEMPLATES = Jinja2Templates(directory=str(Path(__file__).with_name("templates")))
+_TEMPLATES.env.globals["labels"] = LABELS  # the form's words, on every page that names a field
 #: Figures shown on the result page, in this order, when the analysis wrote them.
 _FIGURES = (("phi_eff.png", "phi_eff (mD)"), ("phi_shear.png", "phi_shear (mD)"), ("axis.png", "astigmatism axis"),
             ("uncertainty.png", "standard uncertainty of phi_eff (mD)"),
@@ -84,7 +85,7 @@ class _Pages:
         self.store, self.public_host = store, public_host
 
     def page(self, request, name, status_code=200, **context):
-        context.update(version=__version__, public_host=self.public_host, labels=LABELS,
+        context.update(version=__version__, public_host=self.public_host,
                        max_upload_mb=self.store.max_upload_bytes / 2**20, max_jobs=self.store.max_jobs,
                        max_disk_mb=self.store.max_disk_bytes / 2**20)
         return _TEMPLATES.TemplateResponse(request, name, context, status_code=status_code)
