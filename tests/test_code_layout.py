@@ -197,6 +197,7 @@ OUTPUT_FLOOR = (
     ("leaves", ("glassdist.fs", "glassdist.io", "glassdist.errors", "glassdist.validation")),
     ("acceptance", ("glassdist.acceptance", "glassdist.measures")),
     ("rendering", ("glassdist.report",)),
+    ("history", ("glassdist.history",)),
     ("storage", ("glassdist.storage",)),
     ("jobs", ("glassdist.jobs",)),
     ("entry points", ("glassdist.cli", "glassdist._api", "glassdist.web", "glassdist.virtual.sweep",
@@ -225,8 +226,60 @@ def _layering_violations(graph):
 
 
 def test_output_floor_is_layered():
-    """Leaves < acceptance and measures < rendering < storage < jobs < entry points, deferred imports included."""
+    """Leaves < acceptance and measures < rendering < history < storage < jobs < entry points, deferred imports included."""
     assert _layering_violations(_import_graph(deferred=True)) == []
+
+
+def _folder(module: str) -> str:
+    """The folder node of a module: its subpackage (``glassdist.history``), or the top-level module itself."""
+    parts = module.split(".")
+    return ".".join(parts[:2]) if len(parts) > 1 and (SRC / parts[1]).is_dir() else module
+
+
+def _folder_graph(graph) -> dict[str, set[str]]:
+    """``{folder: folders it imports}`` from the module graph: a subpackage is one node, each top-level module one."""
+    out: dict[str, set[str]] = {}
+    for module, deps in graph.items():
+        here = _folder(module)
+        out.setdefault(here, set()).update(d for d in map(_folder, deps) if d != here)
+    for deps in list(out.values()):
+        for d in deps:
+            out.setdefault(d, set())
+    return out
+
+
+def test_no_import_cycle_between_folders():
+    """No two subpackages (or top-level modules) import each other, directly or through others, deferred imports
+    included: each shared helper has one home in the lower folder."""
+    assert _cycles(_folder_graph(_import_graph(deferred=True))) == []
+
+
+def test_folder_graph_finds_a_loop_through_three_folders():
+    graph = {"glassdist.history._cli": {"glassdist.jobs.batch"}, "glassdist.jobs.batch": {"glassdist.storage"},
+             "glassdist.storage": set(), "glassdist.storage.writer": {"glassdist.history"}, "glassdist.history": set(),
+             "glassdist.jobs.runner": {"glassdist.storage.writer"}}
+    assert _cycles(_folder_graph(graph)) == [["glassdist.history", "glassdist.jobs", "glassdist.storage"]]
+    del graph["glassdist.history._cli"]
+    assert _cycles(_folder_graph(graph)) == []
+
+
+def test_importing_glassdist_loads_no_subpackage_and_history_is_one_callable_object():
+    """``import glassdist`` loads none of its subpackages; ``glassdist.history`` is the subpackage whichever way it is
+    reached, and calling it reads the runs."""
+    import subprocess
+    import sys
+
+    code = ("import sys, glassdist\n"
+            "loaded = sorted(m for m in sys.modules if m.startswith('glassdist.') and m.count('.') == 1 "
+            "and m not in ('glassdist._lazy', 'glassdist._version'))\n"
+            "assert loaded == [], loaded\n"
+            "h = glassdist.history\n"
+            "import glassdist.history.store as store\n"
+            "from glassdist import history\n"
+            "assert h is history is glassdist.history and callable(h) and store.__name__ == 'glassdist.history.store'\n"
+            "assert glassdist.history(db='off-by-path-none.sqlite', as_frame=False) == []\n")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=SRC.parent)
+    assert proc.returncode == 0, proc.stderr
 
 
 def test_layering_check_finds_an_upward_import():

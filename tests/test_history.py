@@ -86,9 +86,10 @@ def db(request, tmp_path, monkeypatch):
     return url
 
 
-def _analyze(pane, out, *extra, spec="fail.json"):
+def _analyze(pane, out, *extra, spec="fail.json", quiet=True):
     return main(["analyze", str(pane / "pane.png"), "--reference", str(pane / "reference.png"), "--pitch-mm", "2",
-                 "--distance-m", "1", "--spec", str(pane / spec), "--out", str(out), "-q", *extra])
+                 "--distance-m", "1", "--spec", str(pane / spec), "--out", str(out), *(["-q"] if quiet else []),
+                 *extra])
 
 
 def _engine(db):
@@ -226,9 +227,10 @@ def test_a_broken_database_costs_the_run_nothing_but_one_warning_line(pane, summ
     assert summary["statistics"] == base_summary["statistics"] and summary["verdict"] == base_summary["verdict"]
     if fault in ("corrupted", "read-only"):
         assert db.read_bytes() == before
-    if fault == "locked":  # the lock gone, the next run is recorded
+    assert "its record is kept in" in err[0]  # the record waits in the spool
+    if fault == "locked":  # the lock gone, the next run is recorded, and the one that waited with it
         assert _analyze(pane, tmp_path / "next") == 3
-        assert [Path(r["out_dir"]).name for r in _rows(db)] == ["first", "next"]
+        assert [Path(r["out_dir"]).name for r in _rows(db)] == ["first", "next", "out"]
 
 
 _KILLED_WRITER = """
@@ -297,9 +299,10 @@ def test_a_database_of_a_newer_schema_is_refused_and_left_alone(db, summary, tmp
     before = _rows(db)
     warnings = []
     assert record_run(summary, exit_code=3, out_dir=tmp_path, warn=warnings.append) is None
-    assert len(warnings) == 1 and "newer than this glassdist" in warnings[0]
+    assert len(warnings) == 1 and "newer than this glassdist" in warnings[0] and "kept in" in warnings[0]
     assert _rows(db) == before
     assert main(["history"]) == 2  # nor read
+    assert _rows(db) == before  # nor written by the reader's attempt to write what waits in the spool
 
 
 def test_history_command_on_a_corrupted_database_is_one_line_exit_2(sqlite_db, capsys):
@@ -423,6 +426,24 @@ def test_batch_records_each_pane_with_its_manifest_lot_into_db_and_not_with_no_h
     assert len(_rows(other)) == 1 and not sqlite_db.exists()
 
 
+def test_a_batch_says_which_panes_wait_in_the_spool_and_the_history_command_writes_them(tmp_path, own_data, capsys):
+    manifest = _tiny_panes(tmp_path / "in", 2, "L6")
+    db = tmp_path / "later" / "history.sqlite"  # its folder does not exist yet
+    assert main(["batch", str(manifest), "--out", str(tmp_path / "b"), "--no-progress", "--db", str(db)]) == 0
+    out = capsys.readouterr().out
+    assert sum("this run was not recorded in the history" in line and "kept in" in line
+               for line in out.splitlines()) == 2, out
+    assert len(_spooled(tmp_path)) == 2
+    pane = json.loads((tmp_path / "b" / "panes" / "L6-0" / "pane.json").read_text())
+    assert pane["history"].startswith("warning: this run was not recorded")
+    db.parent.mkdir()
+    assert main(["history", "--db", str(db), "--format", "json"]) == 0
+    runs = json.loads(capsys.readouterr().out)
+    assert sorted(r["pane_id"] for r in runs) == ["L6-0", "L6-1"] and {r["source"] for r in runs} == {"batch"}
+    assert {Path(r["out_dir"]) for r in runs} == {tmp_path / "b" / "panes" / "L6-0", tmp_path / "b" / "panes" / "L6-1"}
+    assert _spooled(tmp_path) == []
+
+
 # ---------------------------------------------------------------- concurrent writers
 
 
@@ -471,3 +492,261 @@ def test_concurrent_batches_and_dask_workers_record_every_pane_exactly_once(db, 
             summary = json.loads(Path(r["out_dir"], "summary.json").read_text())
             assert r["image_sha256"] == summary["inputs"]["image_sha256"]
     assert len(rows) == sum(n for n, _ in jobs.values())
+
+
+# ---------------------------------------------------------------- the spool: a record never lost
+
+
+def _spooled(tmp_path):
+    """The spool files of the test's data folder (``XDG_DATA_HOME=tmp_path/data``)."""
+    return sorted((tmp_path / "data" / "glassdist" / "spool").glob("*/*.json"))
+
+
+@pytest.fixture()
+def own_data(tmp_path, monkeypatch):
+    """The user's data folder (and so the spool) of the test's own."""
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "data"))
+    return tmp_path / "data"
+
+
+@pytest.mark.parametrize("fault", ["missing folder", "read-only"])
+def test_an_unreachable_sqlite_history_keeps_the_record_and_the_next_run_writes_it_once(
+        pane, own_data, tmp_path, monkeypatch, capsys, fault):
+    db = tmp_path / "hist" / "history.sqlite"
+    monkeypatch.setenv("GLASSDIST_DB", str(db))
+    if fault == "read-only":
+        db.parent.mkdir()
+        assert record_run(_summary_of(pane, tmp_path), exit_code=3, out_dir=tmp_path / "first") == 1
+        _read_only(db, monkeypatch)
+    assert _analyze(pane, tmp_path / "lost?", "--pane-id", "P-S") == 3  # the run succeeds (its FAIL verdict)
+    err = capsys.readouterr().err.strip().splitlines()
+    (kept,) = _spooled(tmp_path)
+    assert len(err) == 1 and err[0].startswith("warning: this run was not recorded") and str(kept) in err[0], err
+    assert json.loads(kept.read_text())["target"] == str(db)
+    # the database reachable again: the next run writes its record and the one that waited, which leaves the spool
+    if fault == "missing folder":
+        db.parent.mkdir()
+    else:
+        monkeypatch.undo()
+        monkeypatch.setenv("XDG_DATA_HOME", str(own_data))
+        monkeypatch.setenv("GLASSDIST_DB", str(db))
+        db.parent.chmod(0o755)
+        db.chmod(0o644)
+    assert _analyze(pane, tmp_path / "next", "--pane-id", "P-N", spec="pass.json", quiet=False) == 0
+    out = capsys.readouterr().out
+    assert "history: recorded as run" in out and "1 record(s) that waited in the spool" in out and str(db) in out
+    rows = _rows(db)
+    assert sorted(r["pane_id"] for r in rows if r["pane_id"] != "S-1") == ["P-N", "P-S"] and _spooled(tmp_path) == []
+    assert len({r["record_id"] for r in rows}) == len(rows)
+    waited = next(r for r in rows if r["pane_id"] == "P-S")
+    assert Path(waited["out_dir"]).name == "lost?" and waited["verdict"] == "FAIL"
+
+
+def _summary_of(pane, tmp_path):
+    out = tmp_path / "base"
+    assert _analyze(pane, out, "--no-history", "--pane-id", "S-1") == 3
+    return json.loads((out / "summary.json").read_text())
+
+
+def test_a_writer_stopped_between_its_commit_and_the_spool_cleanup_writes_nothing_twice(pane, own_data, tmp_path,
+                                                                                      monkeypatch, capsys):
+    from glassdist.history import spool
+
+    db = tmp_path / "hist" / "history.sqlite"
+    monkeypatch.setenv("GLASSDIST_DB", str(db))
+    summary = _summary_of(pane, tmp_path)
+    warnings = []
+    assert record_run(summary, exit_code=3, out_dir=tmp_path / "a", warn=warnings.append) is None  # no folder yet
+    assert record_run(summary, exit_code=3, out_dir=tmp_path / "b", warn=warnings.append) is None
+    assert len(warnings) == 2 and len(_spooled(tmp_path)) == 2
+    db.parent.mkdir()
+    with monkeypatch.context() as m:  # the records are committed, the process "dies" before removing their files
+        m.setattr(spool, "discard", lambda paths: None)
+        assert main(["history", "--format", "json"]) == 0
+    assert [Path(r["out_dir"]).name for r in json.loads(capsys.readouterr().out)] == ["a", "b"]
+    assert len(_spooled(tmp_path)) == 2  # still there
+    assert record_run(summary, exit_code=3, out_dir=tmp_path / "c") == 3  # written again: skipped, files removed
+    assert [Path(r["out_dir"]).name for r in _rows(db)] == ["a", "b", "c"] and _spooled(tmp_path) == []
+    assert main(["history", "--format", "json"]) == 0
+    assert len(json.loads(capsys.readouterr().out)) == 3
+
+
+def test_a_record_written_twice_is_one_row(db, summary, tmp_path):
+    entry = run_rows(summary, exit_code=3, out_dir=tmp_path)
+    with open_store(write=True) as store:
+        first = insert_runs(store, [entry, entry])
+    with open_store(write=True) as store:
+        again = insert_runs(store, [entry])
+    assert first == [first[0], first[0]] and again == first[:1] and len(_rows(db)) == 1
+
+
+def test_a_missing_database_driver_keeps_the_record_until_it_is_installed(request, summary, own_data, tmp_path,
+                                                                         monkeypatch):
+    db = _postgresql_database(request)  # a SQLite history needs no driver of its own
+    monkeypatch.setenv("GLASSDIST_DB", db)
+    warnings = []
+    with monkeypatch.context() as m:
+        m.setitem(sys.modules, "psycopg", None)  # as where glassdist[postgresql] is not installed
+        assert record_run(summary, exit_code=3, out_dir=tmp_path / "a", warn=warnings.append) is None
+    assert len(warnings) == 1 and "driver is not installed" in warnings[0] and len(_spooled(tmp_path)) == 1
+    assert "://" in warnings[0] and "glassdist@" in warnings[0]  # the URL it is for (a password would be masked)
+    assert record_run(summary, exit_code=3, out_dir=tmp_path / "b") is not None
+    assert sorted(Path(r["out_dir"]).name for r in _rows(db)) == ["a", "b"] and _spooled(tmp_path) == []
+
+
+@pytest.fixture()
+def stoppable_pg(tmp_path):
+    """A PostgreSQL server of the test's own (scripts/test_postgres.sh), to stop and start again; ``(url, stop, resume)``.
+
+    Runs where ``GLASSDIST_TEST_PG_URL`` says PostgreSQL is there (the CI's server is shared, never stopped)."""
+    import tempfile
+
+    if not os.environ.get("GLASSDIST_TEST_PG_URL"):
+        pytest.skip("no PostgreSQL server: set GLASSDIST_TEST_PG_URL (scripts/test_postgres.sh starts one)")
+    pytest.importorskip("psycopg", reason="the PostgreSQL history needs glassdist[postgresql]")
+    script = Path(__file__).parents[1] / "scripts" / "test_postgres.sh"
+    root = Path(tempfile.mkdtemp(prefix="gd-pg-"))  # short: a Unix socket's path is at most 107 bytes
+    root.chmod(0o755)  # the server's own user must reach its folder
+    folder = root / "pg"
+
+    def call(cmd):
+        return subprocess.run(["bash", str(script), cmd, str(folder)], capture_output=True, text=True, timeout=120,
+                              check=True).stdout.strip()
+
+    url = call("start")
+    state = {"up": True}
+
+    def stop():
+        call("stop")
+        state["up"] = False
+
+    def resume():
+        call("resume")
+        state["up"] = True
+
+    yield url, stop, resume
+    if state["up"]:
+        call("stop")
+    subprocess.run(["rm", "-rf", str(root)], check=False)
+
+
+def test_a_stopped_postgresql_server_keeps_the_record_and_writes_it_once_when_back(pane, stoppable_pg, own_data,
+                                                                                  tmp_path, monkeypatch, capsys):
+    url, stop, resume = stoppable_pg
+    monkeypatch.setenv("GLASSDIST_DB", url)
+    monkeypatch.setenv("GLASSDIST_DB_TIMEOUT_S", "2")
+    assert _analyze(pane, tmp_path / "before", "--pane-id", "P-1", quiet=False) == 3
+    assert "history: recorded as run 1" in capsys.readouterr().out
+    stop()
+    assert _analyze(pane, tmp_path / "down", "--pane-id", "P-2") == 3  # the run succeeds without its server
+    err = capsys.readouterr().err.strip().splitlines()
+    (kept,) = _spooled(tmp_path)
+    assert len(err) == 1 and "not recorded in the history 'postgresql+psycopg://glassdist@" in err[0], err
+    assert str(kept) in err[0] and (tmp_path / "down" / "summary.json").is_file()
+    resume()
+    assert main(["history", "--format", "json"]) == 0  # the reader that reaches it writes what waited
+    io_ = capsys.readouterr()
+    assert "1 record(s) that waited in the spool written" in io_.err
+    assert [r["pane_id"] for r in json.loads(io_.out)] == ["P-1", "P-2"] and _spooled(tmp_path) == []
+    assert _analyze(pane, tmp_path / "after", "--pane-id", "P-3") == 3
+    rows = _rows(url)
+    assert sorted(r["pane_id"] for r in rows) == ["P-1", "P-2", "P-3"]  # each once
+    assert Path(next(r for r in rows if r["pane_id"] == "P-2")["out_dir"]) == (tmp_path / "down").absolute()
+
+
+def test_an_old_database_is_upgraded_in_place_and_keeps_its_runs(summary, sqlite_db, tmp_path):
+    """A history of schema 0001 (before record ids) gets the new columns; its runs stay as they were."""
+    from alembic import command
+    from alembic.config import Config
+
+    from glassdist.history import store as store_module
+
+    engine = _engine(sqlite_db)
+    with engine.begin() as conn:
+        cfg = Config()
+        cfg.set_main_option("script_location", str(Path(store_module.__file__).with_name("migrations")))
+        cfg.attributes["connection"] = conn
+        command.upgrade(cfg, "0001")
+        conn.exec_driver_sql("INSERT INTO runs (recorded_utc, source, exit_code, pane_id) "
+                             "VALUES ('2025-01-01 00:00:00', 'cli', 0, 'old')")
+    engine.dispose()
+    assert record_run(summary, exit_code=3, out_dir=tmp_path) == 2
+    rows = _rows(sqlite_db)
+    assert [(r["pane_id"], r["record_id"] is None) for r in rows] == [("old", True), ("S-1", False)]
+    assert rows[1]["trusted_percent"] == pytest.approx(summary["trusted_percent"])
+
+
+# ---------------------------------------------------------------- the export's columns and the control chart
+
+
+def _documented_columns() -> list[str]:
+    """The column names of the table "What a run records" in docs/history.md."""
+    import re
+
+    text = (Path(__file__).parents[1] / "docs" / "history.md").read_text()
+    table = text.split("## What a run records", 1)[1].split("\n\n", 2)[1]
+    names = []
+    for line in table.splitlines()[2:]:
+        names += re.findall(r"`([a-z_0-9]+)`", line.split("|")[1])
+    return names
+
+
+def test_the_export_carries_every_documented_column_and_the_trusted_share(pane, db, tmp_path, capsys):
+    from glassdist.history import COLUMNS
+
+    documented = _documented_columns()
+    assert {"reference", "reference_sha256", "protocol", "measures", "spec_sha256", "valid_percent"} <= set(documented)
+    assert _analyze(pane, tmp_path / "out", "--pane-id", "P-E") == 3
+    s = json.loads((tmp_path / "out" / "summary.json").read_text())
+    capsys.readouterr()
+    assert main(["history", "--format", "csv"]) == 0
+    (row,) = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
+    assert main(["history", "--format", "json"]) == 0
+    (rec,) = json.loads(capsys.readouterr().out)
+    assert list(row) == list(rec) == list(COLUMNS)
+    missing = [c for c in documented + ["trusted_percent"] if c not in COLUMNS]
+    assert missing == []
+    assert rec["reference"] == str((pane / "reference.png").absolute())
+    assert rec["reference_sha256"] == hashlib.sha256((pane / "reference.png").read_bytes()).hexdigest()
+    assert rec["spec_sha256"] == s["verdict"]["spec_sha256"] and rec["protocol"] == s["protocol"]
+    assert rec["measures"] == s["measures"] and json.loads(row["measures"]) == s["measures"]
+    # the trusted share (that the verdict judges) beside the measured share; they differ on this pane
+    assert rec["trusted_percent"] == pytest.approx(s["trusted_percent"]) and float(row["trusted_percent"]) == \
+        pytest.approx(s["trusted_percent"])
+    assert rec["valid_percent"] == pytest.approx(s["measured_percent"])
+    assert rec["trusted_percent"] < rec["valid_percent"]
+
+
+def _chart_records(values, statistic="phi_eff.p95_abs", lot="L"):
+    return [{"run": i + 1, "recorded_utc": f"2026-03-02T08:{i:02d}:00", "lot": lot, "pane_id": f"P-{i + 1:03d}",
+             "statistic": statistic, "value": v} for i, v in enumerate(values)]
+
+
+def test_control_limits_stay_inside_the_statistics_range():
+    # a non-negative statistic spread widely near zero: mean - 3 s is below 0 mD
+    (t,) = trends(_chart_records([1.0, 2.0, 40.0, 3.0, 1.0, 2.0]))
+    assert t.mean - 3 * t.sigma < 0 and t.lower == 0.0 and t.upper == pytest.approx(t.mean + 3 * t.sigma)
+    assert (t.unit, t.statistic, t.pane_ids[0]) == ("mD", "phi_eff.p95_abs", "P-001")
+    (c,) = trends(_chart_records([99.0, 99.5, 100.0, 60.0, 99.9], statistic="region.coverage_percent"))
+    assert c.upper == 100.0 and c.unit == "%" and c.lower == pytest.approx(c.mean - 3 * c.sigma)
+    (m,) = trends(_chart_records([1.0, -2.0, 30.0, -3.0], statistic="phi_eff.mean"))  # signed: not clipped
+    assert m.lower == pytest.approx(m.mean - 3 * m.sigma) and m.lower < 0
+
+
+def test_the_control_chart_numbers_runs_in_integers_labelled_by_pane_with_units():
+    from glassdist.history import plot_trends
+
+    few = trends(_chart_records([1.0, 2.0, 40.0, 3.0, 1.0, 2.0]))
+    fig = plot_trends(few, label="phi_eff.p95_abs (all)")
+    ax = fig.axes[0]
+    ticks = ax.get_xticks()
+    assert list(ticks) == [1, 2, 3, 4, 5, 6] and [x.get_text() for x in ax.get_xticklabels()] == \
+        [f"P-{i:03d}" for i in range(1, 7)]
+    assert ax.get_ylabel() == "phi_eff.p95_abs (all) [mD]" and "σ = 15.6 mD" in ax.get_title(loc="left")
+    dashed = [line.get_ydata()[0] for line in ax.get_lines() if line.get_linestyle() == "--"]
+    assert min(dashed) == 0.0  # the lower limit drawn at the statistic's bound, not at mean - 3 s < 0
+    many = trends(_chart_records(list(np.linspace(10, 20, 200))))
+    ax = plot_trends(many, label="v").axes[0]
+    ticks = ax.get_xticks()
+    assert len(ticks) <= 30 and all(float(x).is_integer() for x in ticks)
+    assert [x.get_text() for x in ax.get_xticklabels()][:2] == ["P-001", f"P-{int(ticks[1]):03d}"]

@@ -45,11 +45,22 @@ _HOMES = {
 }
 
 
-__getattr__, __dir__ = lazy_exports(__name__, _HOMES)
+_lazy_getattr, _lazy_dir = lazy_exports(__name__, _HOMES)
 
-# eager: the function must win over the subpackage of the same name, which any import of
-# glassdist.history.* would otherwise bind here (it loads no database driver)
-from .history import history  # noqa: E402
+
+def __getattr__(name):
+    # ``glassdist.history`` is the subpackage, itself callable as the function that reads the runs
+    # (``glassdist.history(lot="42")``): one object whether it is reached by attribute or by
+    # ``import glassdist.history.store``, loaded on first use like every other public name
+    if name == "history":
+        import importlib
+
+        return importlib.import_module(".history", __name__)
+    return _lazy_getattr(name)
+
+
+def __dir__():
+    return sorted({*_lazy_dir(), "history"})
 
 __all__ = [
     "history",

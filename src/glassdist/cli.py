@@ -368,9 +368,14 @@ def _run_analyze(args) -> int:
             summary = write_run(record, folder)
     for line in warning_lines(record, folder.problems):
         print(line, file=sys.stderr)
+    recorded = folder.recorded  # where the record went: the database, or the spool (a warning)
+    if recorded is not None and recorded.warning:
+        print(recorded.line(), file=sys.stderr)
     if not args.quiet:
         for line in run_lines(record, summary, folder.path, folder.removed):
             print(line)
+        if recorded is not None and not recorded.warning:
+            print(recorded.line())
     return record.exit_code
 
 

@@ -7,7 +7,9 @@ A leaf module (it imports nothing of glassdist but its errors):
 * :func:`lock_folder`: an exclusive, non-blocking lock on a folder;
 * :func:`pid_alive`, :data:`TEMP_NAME`: what tells a killed writer's temporary file;
 * :func:`first_missing`, :func:`remove_empty_tree`, :func:`check_writable`,
-  :func:`same_file`, :func:`file_sha256`.
+  :func:`same_file`, :func:`file_sha256`;
+* :func:`csv_cell`, :func:`csv_text`, :func:`write_csv`: CSV exports whose text cells a
+  spreadsheet cannot run as formulas (the batch index, the sweep index, the history export).
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from .errors import InputError
 
 __all__ = [
     "PATCH_WINDOW_BYTES", "TEMP_NAME", "atomic_write", "atomic_write_bytes", "atomic_write_text", "check_writable", "file_sha256",
-    "first_missing", "lock_folder", "pid_alive", "remove_empty_tree", "same_file",
+    "first_missing", "lock_folder", "pid_alive", "remove_empty_tree", "same_file", "csv_cell", "csv_text", "write_csv",
 ]
 
 # atomic_write's temporary names: .NAME.PID.TOKEN.tmp
@@ -223,3 +225,34 @@ def atomic_write_bytes(path, data, *, digests=None):
 def atomic_write_text(path, text, *, digests=None):
     """:func:`atomic_write_bytes` for UTF-8 text."""
     return atomic_write_bytes(path, text.encode("utf-8"), digests=digests)
+
+
+_FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
+
+
+def csv_cell(value):
+    """A text cell that a spreadsheet would run as a formula (``=``, ``+``, ``-``, ``@``, tab, CR) gets a ``'``."""
+    if isinstance(value, str) and value.startswith(_FORMULA_START):
+        try:
+            float(value)
+        except ValueError:
+            return "'" + value
+    return value
+
+
+def csv_text(rows, columns=None) -> str:
+    """CSV text of ``rows`` (dicts; header ``columns``, default the first row's keys), formula-like cells neutralised."""
+    import csv
+    import io
+
+    rows = list(rows)
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=list(columns if columns is not None else rows[0]), lineterminator="\n")
+    writer.writeheader()
+    writer.writerows({k: csv_cell(v) for k, v in row.items()} for row in rows)
+    return buf.getvalue()
+
+
+def write_csv(path, rows):
+    """Write rows (dicts with the same keys) as a CSV file, atomically (:func:`csv_text`); the path."""
+    return atomic_write_text(path, csv_text(rows))

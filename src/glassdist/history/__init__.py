@@ -5,26 +5,35 @@ Every ``glassdist analyze``, batch pane, web job and Python-API run (all write t
 operator, camera, input hashes, the resolved protocol, the verdict with each check, the
 statistics per zone, the standard measures, warnings and the output folder. A re-run is a
 new row; rows are never changed. ``glassdist history`` lists, filters, exports and charts
-them; :func:`history` returns them to Python. See ``docs/history.md``.
+them; :func:`history` returns them to Python, and the subpackage itself is callable as it
+(``glassdist.history(lot="42")``). See ``docs/history.md``.
+
+A record that cannot reach its database (server down, driver missing, folder unwritable)
+waits in a local spool and is written, once, by the next run or read that reaches it.
 
 Modules: :mod:`~glassdist.history.models` (the tables), :mod:`~glassdist.history.store`
-(where the database is, opening, upgrading, writing), :mod:`~glassdist.history.query`
-(filters, records, control charts).
+(where the database is, opening, upgrading, writing), :mod:`~glassdist.history.spool`
+(records waiting for their database), :mod:`~glassdist.history.query` (filters, records,
+control charts).
 """
 
 from __future__ import annotations
 
 import contextlib
+import sys
+import types
 
 from .._lazy import lazy_exports
-from .store import HistoryUnavailable, Location, Recording, data_dir, locate, open_store, record_run
+from .store import (HistoryUnavailable, Location, Recorded, Recording, SpoolFlush, data_dir, flush_spool, locate,
+                    open_store, record, record_run, spool_dir)
 
 # the query side (SQLAlchemy, numpy) is imported when first used
 __getattr__, __dir__ = lazy_exports(__name__, dict.fromkeys(
     ("COLUMNS", "HistoryFilter", "Trend", "plot_trends", "query_runs", "trends"), ".query"))
 
-__all__ = ["history", "COLUMNS", "HistoryFilter", "HistoryUnavailable", "Location", "Recording", "Trend", "data_dir",
-           "locate", "open_store", "plot_trends", "query_runs", "record_run", "trends"]
+__all__ = ["history", "COLUMNS", "HistoryFilter", "HistoryUnavailable", "Location", "Recorded", "Recording", "SpoolFlush",
+           "Trend", "data_dir", "flush_spool", "locate", "open_store", "plot_trends", "query_runs", "record", "record_run",
+           "spool_dir", "trends"]
 
 
 def history(db=None, *, as_frame=None, **filters):
@@ -47,7 +56,8 @@ def history(db=None, *, as_frame=None, **filters):
     -------
     pandas.DataFrame or list of dict
         One row per run, oldest first, columns :data:`COLUMNS` (``value``: the selected
-        statistic, mD).
+        statistic, mD). Records that waited in the spool for this database
+        (:func:`flush_spool`) are written to it first, where it can be written.
 
     Raises
     ------
@@ -64,6 +74,7 @@ def history(db=None, *, as_frame=None, **filters):
     from .query import COLUMNS, HistoryFilter, query_runs
 
     flt = HistoryFilter.of(**filters)
+    flush_spool(db)  # a record kept while the database was unreachable is read with the others
     try:
         store = open_store(db)
         with store if store is not None else contextlib.nullcontext():
@@ -83,3 +94,13 @@ def history(db=None, *, as_frame=None, **filters):
             raise
         return records
     return pd.DataFrame.from_records(records, columns=list(COLUMNS))
+
+
+class _CallableModule(types.ModuleType):
+    """This subpackage, callable as :func:`history`: ``glassdist.history(lot="42")`` reads the runs."""
+
+    def __call__(self, db=None, *, as_frame=None, **filters):
+        return history(db, as_frame=as_frame, **filters)
+
+
+sys.modules[__name__].__class__ = _CallableModule

@@ -61,18 +61,16 @@ def _new_file(path: Path, what: str) -> Path:
 
 
 def _csv_text(records, columns) -> str:
-    import csv
-    import io
+    from ..fs import csv_text
 
-    from ..jobs.batch import csv_cell
+    def cell(v):  # warnings: one cell, ';'-separated; protocol, measures: their JSON
+        if isinstance(v, list) and all(isinstance(x, str) for x in v):
+            return ";".join(v)
+        if isinstance(v, (dict, list)):
+            return json.dumps(v, sort_keys=True, allow_nan=False)
+        return "" if v is None else v
 
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=list(columns), lineterminator="\n")
-    w.writeheader()
-    for r in records:
-        w.writerow({k: csv_cell(";".join(v) if isinstance(v, list) else ("" if v is None else v))
-                    for k, v in r.items()})
-    return buf.getvalue()
+    return csv_text(({k: cell(v) for k, v in r.items()} for r in records), columns)
 
 
 def _table(records) -> str:
@@ -93,7 +91,7 @@ def run(args) -> int:
     """List / export / chart; exit 0, or 2 with one line (bad filter, unreadable database, existing file)."""
     from ..errors import InputError
     from ..fs import atomic_write_bytes, atomic_write_text
-    from . import COLUMNS, HistoryFilter, locate
+    from . import COLUMNS, HistoryFilter, flush_spool, locate
     from . import history as read_history
 
     flt = {k: getattr(args, k) for k in ("pane_id", "lot", "site", "operator", "source", "verdict", "since", "until",
@@ -110,7 +108,13 @@ def run(args) -> int:
     loc = locate(args.db)
     if loc is None:
         raise InputError("the history is off (GLASSDIST_DB=off); give --db PATH to read one")
+    flushed = flush_spool(args.db)  # records kept while the database could not be reached: written first
+    if flushed.line():
+        print(flushed.line(), file=sys.stderr)
     records = read_history(args.db, as_frame=False, **{k: v for k, v in flt.items() if v is not None})
+    print(f"history: {len(records)} run(s) from '{loc}'" + (
+        " (the default history file; --db PATH|URL or GLASSDIST_DB chooses another)" if loc.default else ""),
+        file=sys.stderr)
     if args.format == "csv":
         text = _csv_text(records, COLUMNS)
     elif args.format == "json":

@@ -21,7 +21,7 @@ from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 __all__ = ["Base", "Run", "CheckRow", "StatisticRow", "SCHEMA_REVISION", "REGION"]
 
 #: Alembic revision of the schema these models describe (the newest in ``migrations/versions``)
-SCHEMA_REVISION = "0001"
+SCHEMA_REVISION = "0002"
 
 #: zone name of the statistics over the whole analysed region (a specification's zones keep their names)
 REGION = "all"
@@ -40,6 +40,8 @@ class Run(Base):
     __tablename__ = "runs"
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    # SHA-256 of the record's content: a record written again (from the spool) is recognised, never duplicated
+    record_id: Mapped[str | None] = mapped_column(String(64), unique=True, index=True)
     recorded_utc: Mapped[datetime] = mapped_column(DateTime, index=True)
     source: Mapped[str] = mapped_column(String(16))  # cli, batch, web, api
     job: Mapped[str | None] = mapped_column(String(400))  # web job id, or the batch's folder
@@ -63,7 +65,8 @@ class Run(Base):
     spec_name: Mapped[str | None] = mapped_column(String(400))
     spec_sha256: Mapped[str | None] = mapped_column(String(64))
     exit_code: Mapped[int] = mapped_column(Integer)
-    valid_percent: Mapped[float | None] = mapped_column(Float)
+    valid_percent: Mapped[float | None] = mapped_column(Float)  # the measured share (summary's measured_percent)
+    trusted_percent: Mapped[float | None] = mapped_column(Float)  # the trusted share, that specifications judge
     measures: Mapped[dict | None] = mapped_column(JSON)
     warnings: Mapped[list | None] = mapped_column(JSON)
     out_dir: Mapped[str | None] = mapped_column(Text)

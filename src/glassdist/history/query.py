@@ -24,14 +24,38 @@ from ..errors import InputError
 from .models import REGION
 
 __all__ = ["HistoryFilter", "Trend", "COLUMNS", "query_runs", "trends", "plot_trends", "parse_date",
-           "parse_statistic"]
+           "parse_statistic", "statistic_unit", "statistic_range"]
 
 _STAT_RE = re.compile(r"^([a-z_]+)\.([A-Za-z0-9_]+)$")
-#: columns of a history record, in order (``value``: the selected statistic)
-COLUMNS = ("run", "recorded_utc", "source", "pane_id", "lot", "site", "operator", "verdict", "spec_name", "zone",
-           "statistic", "value", "phi_eff_p95_abs_mD", "phi_shear_p95_abs_mD", "valid_percent", "method",
-           "pitch_mm", "distance_m", "sigma_mm", "detrend_degree", "camera", "image", "image_sha256", "exit_code",
-           "warnings", "out_dir", "job")
+#: columns of a history record, in order (``value``: the selected statistic; ``valid_percent``: the measured share,
+#: ``trusted_percent``: the trusted share a specification judges; ``protocol``, ``measures``: as ``summary.json``)
+COLUMNS = ("run", "record_id", "recorded_utc", "source", "job", "pane_id", "lot", "site", "operator", "camera",
+           "verdict", "spec_name", "spec_sha256", "exit_code", "zone", "statistic", "value", "phi_eff_p95_abs_mD",
+           "phi_shear_p95_abs_mD", "valid_percent", "trusted_percent", "method", "pattern", "pitch_mm", "distance_m",
+           "sigma_mm", "detrend_degree", "protocol", "measures", "image", "image_sha256", "reference",
+           "reference_sha256", "warnings", "out_dir", "glassdist_version")
+
+#: the statistics that cannot be negative, and their range (a control limit beyond it is drawn at its edge)
+_RANGES = {"mean_abs": (0.0, math.inf), "std": (0.0, math.inf), "p95_abs": (0.0, math.inf),
+           "max_abs": (0.0, math.inf), "n_valid": (0.0, math.inf), "coverage_percent": (0.0, 100.0)}
+
+
+def statistic_unit(statistic: str) -> str:
+    """The unit of ``CHANNEL.STATISTIC`` as recorded: mD, % (coverage, area over a threshold) or samples."""
+    channel, stat = parse_statistic(statistic)
+    if channel == "region" or stat.startswith("area_over") or stat.endswith("_percent"):
+        return "%"
+    return "samples" if stat == "n_valid" else "mD"
+
+
+def statistic_range(statistic: str) -> tuple[float, float]:
+    """The values ``CHANNEL.STATISTIC`` can take: ``(0, inf)`` for the non-negative ones, ``(0, 100)`` for a share."""
+    channel, stat = parse_statistic(statistic)
+    if stat.startswith("area_over") or stat.endswith("_percent"):
+        return (0.0, 100.0)
+    if channel in ("phi_shear", "phi_total") or channel.endswith("_sigma"):  # non-negative channels: every statistic
+        return (0.0, math.inf)
+    return _RANGES.get(stat, (-math.inf, math.inf))
 
 
 def parse_statistic(text: str) -> tuple[str, str]:
@@ -181,10 +205,12 @@ def query_runs(store, flt: HistoryFilter = HistoryFilter()) -> list[dict]:
     zone, channel, stat = flt.key
     keys = {(zone, channel, stat), (REGION, "phi_eff", "p95_abs"), (REGION, "phi_shear", "p95_abs")}
     # time and warnings as stored (text on SQLite): turned into ISO text and a list below, without a parse per row
-    cols = [Run.id, type_coerce(Run.recorded_utc, String).label("recorded_utc"), Run.source, Run.pane_id, Run.lot, Run.site, Run.operator, Run.verdict,
-            Run.spec_name, Run.valid_percent, Run.method, Run.pitch_mm, Run.distance_m, Run.sigma_mm,
-            Run.detrend_degree, Run.camera, Run.image, Run.image_sha256, Run.exit_code, type_coerce(Run.warnings, String).label("warnings"), Run.out_dir,
-            Run.job]
+    cols = [Run.id, Run.record_id, type_coerce(Run.recorded_utc, String).label("recorded_utc"), Run.source, Run.job,
+            Run.pane_id, Run.lot, Run.site, Run.operator, Run.camera, Run.verdict, Run.spec_name, Run.spec_sha256,
+            Run.exit_code, Run.valid_percent, Run.trusted_percent, Run.method, Run.pattern, Run.pitch_mm,
+            Run.distance_m, Run.sigma_mm, Run.detrend_degree, Run.protocol, Run.measures, Run.image,
+            Run.image_sha256, Run.reference, Run.reference_sha256,
+            type_coerce(Run.warnings, String).label("warnings"), Run.out_dir, Run.glassdist_version]
     with store.engine.connect() as conn:
         runs = conn.execute(select(*cols).where(Run.id.in_(select(ids.c.id))).order_by(Run.recorded_utc, Run.id)).all()
         stats = conn.execute(
@@ -233,13 +259,20 @@ class Trend:
     times : tuple of str
         Recording times (ISO, UTC).
     values : ndarray
-        The statistic of each run.
+        The statistic of each run (in ``unit``).
     mean, sigma : float
         Centre line and sample standard deviation (``nan`` for fewer than two runs).
     lower, upper : float
-        ``mean - 3 sigma``, ``mean + 3 sigma``.
+        ``mean - 3 sigma``, ``mean + 3 sigma``, each clipped to the range the statistic
+        can take (:func:`statistic_range`: a p95 of ``|phi|`` has no limit below 0 mD).
     out : ndarray of bool
         Runs beyond a control limit.
+    pane_ids : tuple of str
+        Each run's pane id (``''`` where none was given).
+    statistic : str
+        ``CHANNEL.STATISTIC`` of the values.
+    unit : str
+        Their unit (:func:`statistic_unit`).
     """
 
     lot: str
@@ -251,14 +284,23 @@ class Trend:
     lower: float
     upper: float
     out: np.ndarray
+    pane_ids: tuple = ()
+    statistic: str = "phi_eff.p95_abs"
+    unit: str = "mD"
 
     def to_dict(self) -> dict:
-        return {"lot": self.lot, "mean": self.mean, "sigma": self.sigma, "lower": self.lower, "upper": self.upper,
-                "runs": list(self.runs), "out_of_control": [r for r, o in zip(self.runs, self.out) if o]}
+        return {"lot": self.lot, "statistic": self.statistic, "unit": self.unit, "mean": self.mean,
+                "sigma": self.sigma, "lower": self.lower, "upper": self.upper, "runs": list(self.runs),
+                "pane_ids": list(self.pane_ids),
+                "out_of_control": [r for r, o in zip(self.runs, self.out) if o]}
 
 
 def trends(records: list[dict]) -> list[Trend]:
-    """One :class:`Trend` per lot of the records (runs without a value or a lot are left out), by lot name."""
+    """One :class:`Trend` per lot of the records (runs without a value or a lot are left out), by lot name.
+
+    The limits :math:`\\bar x \\pm 3 s` are clipped to the statistic's range
+    (:func:`statistic_range`); a run is out of control beyond them.
+    """
     by_lot: dict[str, list[dict]] = {}
     for r in records:
         if r.get("value") is not None and r.get("lot"):
@@ -266,53 +308,80 @@ def trends(records: list[dict]) -> list[Trend]:
     out = []
     for lot in sorted(by_lot):
         rs = by_lot[lot]
+        statistic = str(rs[0].get("statistic") or "phi_eff.p95_abs")
+        lo, hi = statistic_range(statistic)
         v = np.array([r["value"] for r in rs], dtype=float)
         mean = float(v.mean())
         sigma = float(v.std(ddof=1)) if v.size > 1 else math.nan
         lower, upper = mean - 3 * sigma, mean + 3 * sigma
+        if math.isfinite(sigma):
+            lower, upper = max(lower, lo), min(upper, hi)
         outside = (v > upper) | (v < lower) if v.size > 1 else np.zeros(v.size, bool)
         out.append(Trend(lot, tuple(r["run"] for r in rs), tuple(r["recorded_utc"] for r in rs), v, mean, sigma,
-                         lower, upper, outside))
+                         lower, upper, outside, pane_ids=tuple(str(r.get("pane_id") or "") for r in rs),
+                         statistic=statistic, unit=statistic_unit(statistic)))
     return out
+
+
+#: most run ticks labelled on one panel (every k-th run beyond it)
+_MAX_TICKS = 30
 
 
 def plot_trends(found: list[Trend], *, label: str, max_lots: int = 12):
     """The control charts as one matplotlib Figure: a panel per lot (at most ``max_lots``), runs in order.
 
-    Each panel: the values (line and dots), the mean (solid), the ±3σ limits (dashed) and
-    the runs beyond them (red, ringed). The x axis is the run's order within the lot, its
-    recording date under the first and last tick.
+    Each panel: the values (line and dots), the mean (solid), the ±3σ limits (dashed, at
+    the edge of the statistic's range where they pass it) and the runs beyond them (red,
+    ringed). The x axis is the run's order within the lot (integers), each tick labelled
+    with the run's pane id (every k-th run when there are more than 30); the y axis
+    carries ``label`` and the statistic's unit.
     """
     from matplotlib.figure import Figure
 
     shown = found[:max_lots]
     n = max(1, len(shown))
-    fig = Figure(figsize=(9, 1.2 + 2.2 * n))
+    fig = Figure(figsize=(9, 1.6 + 2.6 * n))
     axes = fig.subplots(n, 1, squeeze=False)[:, 0]
     if not shown:
         axes[0].text(0.5, 0.5, "no run with a lot and this statistic", ha="center", va="center",
                      transform=axes[0].transAxes)
         axes[0].set_axis_off()
     for ax, t in zip(axes, shown):
-        x = np.arange(1, t.values.size + 1)
-        ax.plot(x, t.values, "-", color="#7a8a99", lw=0.8)
-        ax.plot(x[~t.out], t.values[~t.out], "o", ms=3.5, color="#24384f", label="run")
-        if t.out.any():
-            ax.plot(x[t.out], t.values[t.out], "o", ms=7, mfc="#d62728", mec="#7f0000", label="beyond ±3σ")
-        ax.axhline(t.mean, color="#2ca02c", lw=1.2, label=f"mean {t.mean:.4g}")
-        if math.isfinite(t.sigma):
-            for y in (t.lower, t.upper):
-                ax.axhline(y, color="#d62728", ls="--", lw=1)
-            ax.text(1.0, t.upper, " +3σ", va="center", ha="left", fontsize=8, transform=ax.get_yaxis_transform())
-            ax.text(1.0, t.lower, " −3σ", va="center", ha="left", fontsize=8, transform=ax.get_yaxis_transform())
-        n_out = int(t.out.sum())
-        ax.set_title(f"lot {t.lot}: {t.values.size} runs, σ = {t.sigma:.3g}, {n_out} beyond the limits  "
-                     f"({t.times[0][:10]} … {t.times[-1][:10]})", fontsize=9, loc="left")
-        ax.set_ylabel(label, fontsize=8)
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, loc="upper left", ncols=3)
-    axes[-1].set_xlabel("run within the lot (recording order)")
+        _plot_lot(ax, t, label)
+    if shown:
+        axes[-1].set_xlabel("run within the lot, in recording order (tick: pane id)")
     if len(found) > max_lots:
         fig.suptitle(f"first {max_lots} of {len(found)} lots; filter by --lot for the others", fontsize=9)
     fig.tight_layout()
     return fig
+
+
+def _plot_lot(ax, t: Trend, label: str) -> None:
+    """One lot's control chart on ``ax``."""
+    x = np.arange(1, t.values.size + 1)
+    unit = t.unit
+    ax.plot(x, t.values, "-", color="#7a8a99", lw=0.8)
+    ax.plot(x[~t.out], t.values[~t.out], "o", ms=3.5, color="#24384f", label="run")
+    if t.out.any():
+        ax.plot(x[t.out], t.values[t.out], "o", ms=7, mfc="#d62728", mec="#7f0000", label="beyond ±3σ")
+    ax.axhline(t.mean, color="#2ca02c", lw=1.2, label=f"mean {t.mean:.4g} {unit}")
+    if math.isfinite(t.sigma):
+        for y, name, raw in ((t.upper, "+3σ", t.mean + 3 * t.sigma), (t.lower, "−3σ", t.mean - 3 * t.sigma)):
+            ax.axhline(y, color="#d62728", ls="--", lw=1)
+            text = f" {name}" if y == raw else f" {name}: {y:g} {unit}\n (bound)"
+            ax.text(1.0, y, text, va="center", ha="left", fontsize=8, transform=ax.get_yaxis_transform())
+    step = max(1, math.ceil(x.size / _MAX_TICKS))
+    ticks = x[::step]
+    names = [t.pane_ids[i - 1] if i - 1 < len(t.pane_ids) and t.pane_ids[i - 1] else f"run {t.runs[i - 1]}"
+             for i in ticks]
+    ax.set_xticks(ticks, names, rotation=60 if max(map(len, names)) > 4 or ticks.size > 12 else 0,
+                  ha="right" if ticks.size > 12 or max(map(len, names)) > 4 else "center", fontsize=7)
+    ax.set_xlim(0.5, x.size + 0.5)
+    n_out = int(t.out.sum())
+    ax.set_title(f"lot {t.lot}: {t.values.size} runs, σ = {t.sigma:.3g} {unit}, {n_out} beyond the limits  "
+                 f"({t.times[0][:10]} … {t.times[-1][:10]})", fontsize=9, loc="left")
+    ax.set_ylabel(f"{label} [{unit}]", fontsize=8)
+    ax.grid(alpha=0.3)
+    lo, hi = ax.get_ylim()
+    ax.set_ylim(lo, hi + 0.22 * (hi - lo))  # headroom for the legend above the runs
+    ax.legend(fontsize=7, loc="upper left", ncols=3)

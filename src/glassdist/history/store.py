@@ -25,6 +25,14 @@ by the server.
 The schema is versioned by Alembic (``migrations/versions``): every write checks the
 database's revision in the same transaction and upgrades an older one first; a database of
 a newer glassdist is refused, never altered.
+
+A record that cannot be written
+-------------------------------
+:func:`record` never loses a run's record: when the database cannot be reached or written
+it keeps the record in the spool (:mod:`~glassdist.history.spool`, under :func:`spool_dir`)
+and says where; the next run or read that reaches the database writes it, once (each
+record's ``record_id``, the SHA-256 of its content, is unique in the database and checked
+in the writer's transaction).
 """
 
 from __future__ import annotations
@@ -39,13 +47,14 @@ from pathlib import Path
 
 from ..errors import InputError
 
-__all__ = ["HistoryUnavailable", "Location", "Recording", "data_dir", "locate", "open_store", "record_run",
-           "run_rows", "insert_runs", "describe_failure", "Store"]
+__all__ = ["HistoryUnavailable", "Location", "Recording", "Recorded", "SpoolFlush", "data_dir", "spool_dir", "locate",
+           "open_store", "record", "record_run", "flush_spool", "run_rows", "record_id", "insert_runs", "describe_failure",
+           "Store"]
 
 #: values of ``GLASSDIST_DB`` / ``--db`` that turn the history off
 OFF = ("off", "none", "0", "false", "no")
 #: schema revisions this glassdist can read and upgrade from, oldest first
-KNOWN_REVISIONS = ("0001",)
+KNOWN_REVISIONS = ("0001", "0002")
 _PG_LOCK_KEY = 0x6C617373  # advisory lock held while a PostgreSQL schema is created or upgraded
 _ZONE_IN_CRITERION = re.compile(r"zone '([^']+)'")
 
@@ -102,6 +111,11 @@ def data_dir() -> Path:
         xdg = os.environ.get("XDG_DATA_HOME", "")
         base = Path(xdg) if os.path.isabs(xdg) else Path.home() / ".local" / "share"
     return base / "glassdist"
+
+
+def spool_dir() -> Path:
+    """Where records wait while their database cannot be reached: ``data_dir() / 'spool'``."""
+    return data_dir() / "spool"
 
 
 def locate(db=None) -> Location | None:
@@ -337,7 +351,8 @@ def run_rows(summary: dict, *, exit_code: int, out_dir, recording: Recording = R
         :class:`~glassdist.history.models.StatisticRow` (without ``run_id``); statistics of
         the whole analysed region under zone :data:`~glassdist.history.models.REGION`, a
         zone's ``trusted_percent`` as channel ``region``, statistic ``coverage_percent`` (the
-        database's names are kept: ``valid_percent`` holds the summary's ``measured_percent``).
+        database's names are kept: ``valid_percent`` holds the summary's ``measured_percent``,
+        ``trusted_percent`` its ``trusted_percent``); ``run['record_id']`` is :func:`record_id`.
     """
     from .. import __version__
     from .models import REGION
@@ -364,7 +379,8 @@ def run_rows(summary: dict, *, exit_code: int, out_dir, recording: Recording = R
         "sigma_mm": _finite(summary.get("sigma_mm")), "detrend_degree": summary.get("detrend_degree"),
         "protocol": summary.get("protocol"), "verdict": verdict.get("result"), "spec_name": verdict.get("spec_name"),
         "spec_sha256": verdict.get("spec_sha256") or None, "exit_code": int(exit_code),
-        "valid_percent": _finite(summary.get("measured_percent")), "measures": summary.get("measures"),
+        "valid_percent": _finite(summary.get("measured_percent")),
+        "trusted_percent": _finite(summary.get("trusted_percent")), "measures": summary.get("measures"),
         "warnings": warnings, "out_dir": recording.out_dir or _path(out_dir, cwd),
         "glassdist_version": summary.get("glassdist_version") or __version__,
     }
@@ -380,30 +396,66 @@ def run_rows(summary: dict, *, exit_code: int, out_dir, recording: Recording = R
         cov = _finite(z.get("trusted_percent"))
         if cov is not None:
             stats.append({"zone": str(name), "channel": "region", "statistic": "coverage_percent", "value": cov})
+    run["record_id"] = record_id(run, checks, stats)
     return run, checks, stats
 
 
+def record_id(run: dict, checks: list, stats: list) -> str:
+    """The record's id: SHA-256 of its content (recording time and output folder included), as canonical JSON."""
+    import hashlib
+    import json
+
+    content = [{k: v for k, v in run.items() if k != "record_id"}, checks, stats]
+    text = json.dumps(content, sort_keys=True, default=str, separators=(",", ":"))
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
 def insert_runs(store: Store, entries) -> list[int]:
-    """Insert ``(run, checks, statistics)`` row sets (:func:`run_rows`) in one transaction; their new ids.
+    """Insert ``(run, checks, statistics)`` row sets (:func:`run_rows`) in one transaction; their ids.
 
     The schema is checked (created, upgraded) in the same transaction, so a writer never
     sees a half-made database; the rows go in as bulk inserts (one statement per table).
+    A record whose ``record_id`` is already in the database (or earlier in ``entries``) is
+    not inserted again: its id is the one recorded. Writers are serialised (SQLite's
+    ``BEGIN IMMEDIATE``, PostgreSQL's advisory lock), so the check cannot race another
+    writer; the unique index on ``record_id`` stands behind it.
     """
-    from sqlalchemy import insert
+    from sqlalchemy import insert, select
     from sqlalchemy.orm import Session
 
     from .models import CheckRow, Run, StatisticRow
 
     entries = list(entries)
+    keys = [run.get("record_id") for run, _, _ in entries]
     with Session(store.engine) as session, session.begin():
         _ensure_schema(session.connection(), store.location)
-        ids = list(session.scalars(insert(Run).returning(Run.id, sort_by_parameter_order=True),
-                                   [run for run, _, _ in entries]))
+        known: dict[str, int] = {}
+        wanted = sorted({k for k in keys if k})
+        for i in range(0, len(wanted), 500):
+            known.update(session.execute(select(Run.record_id, Run.id).where(Run.record_id.in_(wanted[i:i + 500]))).all())
+        new, seen = [], set(known)
+        for k, entry in zip(keys, entries):
+            if k is None or k not in seen:
+                new.append(entry)
+                if k is not None:
+                    seen.add(k)
+        new_ids = list(session.scalars(insert(Run).returning(Run.id, sort_by_parameter_order=True),
+                                       [run for run, _, _ in new])) if new else []
         for model, k in ((CheckRow, 1), (StatisticRow, 2)):
-            rows = [{**row, "run_id": rid} for rid, entry in zip(ids, entries) for row in entry[k]]
+            rows = [{**row, "run_id": rid} for rid, entry in zip(new_ids, new) for row in entry[k]]
             if rows:
                 session.execute(insert(model), rows)
-        return ids
+    fresh = iter(new_ids)
+    ids, given = [], dict(known)
+    for k in keys:
+        if k is not None and k in given:
+            ids.append(given[k])
+        else:
+            rid = next(fresh)
+            ids.append(rid)
+            if k is not None:
+                given[k] = rid
+    return ids
 
 
 def describe_failure(exc: BaseException) -> str:
@@ -412,6 +464,8 @@ def describe_failure(exc: BaseException) -> str:
         return str(exc)
     orig = getattr(exc, "orig", None) or exc
     text = str(orig).splitlines()[0] if str(orig) else type(orig).__name__
+    if isinstance(orig, ImportError):
+        return f"its database driver is not installed ({text}; for PostgreSQL: pip install 'glassdist[postgresql]')"
     if "locked" in text or "busy" in text:
         return f"the database stayed locked by another writer for {_timeout_s():g} s ({text})"
     if "not a database" in text or "malformed" in text:
@@ -421,12 +475,78 @@ def describe_failure(exc: BaseException) -> str:
     return f"{type(orig).__name__}: {text}"
 
 
-def record_run(summary: dict, *, exit_code: int, out_dir, recording: Recording = Recording(), warn=None) -> int | None:
-    """Record one run in the history; never raises: a failure is one warning line.
+@dataclass(frozen=True)
+class Recorded:
+    """Where one run's record went (:func:`record`).
+
+    Attributes
+    ----------
+    location : Location or None
+        The database it is for; None when nothing is recorded (``off``).
+    run_id : int, optional
+        Its id in the database, when written there.
+    spooled : Path, optional
+        The spool file keeping it, when the database could not be written.
+    reason : str, optional
+        Why the database could not be written (or, with ``location`` None, why nothing
+        is recorded).
+    flushed : int
+        Records that waited in the spool for this database, written with this one.
+    """
+
+    location: Location | None
+    run_id: int | None = None
+    spooled: Path | None = None
+    reason: str | None = None
+    flushed: int = 0
+
+    @property
+    def warning(self) -> bool:
+        """The record did not reach its database (kept in the spool, or lost)."""
+        return self.location is not None and self.run_id is None
+
+    def line(self) -> str:
+        """The console line naming where the record went (``warning: ...`` when it did not reach the database)."""
+        if self.location is None:
+            return f"history: this run is not recorded ({self.reason})"
+        where = f"'{self.location}'"
+        if self.run_id is not None:
+            line = f"history: recorded as run {self.run_id} in {where}"
+            if self.location.default:
+                line += " (the default history file; --db PATH|URL or GLASSDIST_DB chooses another)"
+            if self.flushed:
+                line += f"; with it {self.flushed} record(s) that waited in the spool"
+            return line
+        if self.spooled is not None:
+            return (f"warning: this run was not recorded in the history {where}: {self.reason}; its record is kept in "
+                    f"'{self.spooled}' and is written there by the next run or 'glassdist history' that reaches it "
+                    "(its outputs are complete; see docs/history.md)")
+        return (f"warning: this run was not recorded in the history {where}: {self.reason} (its outputs are complete; "
+                "see docs/history.md, or --no-history)")
+
+
+def _write_waiting(loc: Location, db) -> tuple[int, int]:
+    """Write the records waiting in the spool for ``loc``, then remove their files; ``(written, still waiting)``."""
+    from . import spool
+
+    pending, unreadable = spool.waiting(spool_dir(), loc)
+    if pending:
+        with open_store(db, write=True) as store:
+            insert_runs(store, [entry for _, entry in pending])
+        spool.discard(path for path, _ in pending)
+    return len(pending), len(unreadable)
+
+
+def record(summary: dict, *, exit_code: int, out_dir, recording: Recording | bool | None = None) -> Recorded:
+    """Record one run in the history, or keep it in the spool; never raises.
 
     Called by the output stage once the run's files are written, so that a history that
-    cannot be written (locked past the timeout, read-only, corrupted, missing folder)
-    costs the run nothing but the warning: its folder and exit status stay its own.
+    cannot be written (unreachable server, missing driver, missing or read-only folder,
+    locked past the timeout, corrupted, of a newer schema) costs the run nothing: its
+    record is kept in the spool (:mod:`~glassdist.history.spool`) and the returned
+    :meth:`Recorded.line` says where. Records that waited in the spool for this database
+    are written after this run's (in a transaction of their own, so that one that cannot
+    be written never holds back the others' runs), each exactly once.
 
     Parameters
     ----------
@@ -434,29 +554,90 @@ def record_run(summary: dict, *, exit_code: int, out_dir, recording: Recording =
         The run's ``summary.json`` content, as written.
     exit_code : int
     out_dir : path
-    recording : Recording
-    warn : callable, optional
-        Receives the warning line (default: printed on stderr).
+    recording : Recording or False, optional
+        False (or ``enabled=False``): nothing recorded; None: ``Recording()``.
 
     Returns
     -------
-    int or None
-        The new run's id; None when the history is off or could not be written.
+    Recorded
     """
-    if not recording.enabled:
-        return None
-    warn = warn or (lambda line: print(line, file=sys.stderr))
+    if recording is None or recording is True:
+        recording = Recording()
+    if recording is False or not recording.enabled:
+        return Recorded(None, reason="--no-history")
     where = recording.db if recording.db is not None else os.environ.get("GLASSDIST_DB", "")
     try:
         loc = locate(recording.db)
         if loc is None:
-            return None
-        where = str(loc)
+            return Recorded(None, reason=f"the history is off: {'--db' if recording.db is not None else 'GLASSDIST_DB'}"
+                            f"={where}")
         entry = run_rows(summary, exit_code=exit_code, out_dir=out_dir, recording=recording)
-        store = open_store(recording.db, write=True)
-        with store:
-            return insert_runs(store, [entry])[0]
     except Exception as exc:  # noqa: BLE001 - the history never costs a run its outputs or exit status
-        warn(f"warning: this run was not recorded in the history '{where}': {describe_failure(exc)} "
-             "(its outputs are complete; see docs/history.md, or --no-history)")
+        return Recorded(Location(str(where), None), reason=describe_failure(exc))
+    try:
+        with open_store(recording.db, write=True) as store:
+            run_id = insert_runs(store, [entry])[0]
+    except Exception as exc:  # noqa: BLE001
+        reason = describe_failure(exc)
+        try:
+            from . import spool
+
+            return Recorded(loc, spooled=spool.keep(spool_dir(), loc, entry), reason=reason)
+        except OSError as err:
+            return Recorded(loc, reason=f"{reason}; nor could it be kept in the spool '{spool_dir()}' "
+                            f"({err.strerror or err}), so it is lost")
+    try:
+        flushed, _ = _write_waiting(loc, recording.db)
+    except Exception:  # noqa: BLE001 - they wait for the next run
+        flushed = 0
+    return Recorded(loc, run_id=run_id, flushed=flushed)
+
+
+def record_run(summary: dict, *, exit_code: int, out_dir, recording: Recording = Recording(), warn=None) -> int | None:
+    """Record one run in the history (:func:`record`); the new run's id, None when it is not in the database.
+
+    A record that could not be written is kept in the spool, and ``warn`` receives the
+    line saying where (default: printed on stderr).
+    """
+    outcome = record(summary, exit_code=exit_code, out_dir=out_dir, recording=recording)
+    if outcome.warning:
+        (warn or (lambda line: print(line, file=sys.stderr)))(outcome.line())
+    return outcome.run_id
+
+
+@dataclass(frozen=True)
+class SpoolFlush:
+    """The records waiting in the spool for one database: ``written`` now, ``waiting`` still (and why)."""
+
+    location: Location | None
+    written: int = 0
+    waiting: int = 0
+    reason: str | None = None
+
+    def line(self) -> str | None:
+        """A console line when there was anything to write, else None."""
+        if self.written and not self.waiting:
+            return f"history: {self.written} record(s) that waited in the spool written to '{self.location}'"
+        if self.waiting:
+            why = f": {self.reason}" if self.reason else " (unreadable spool files, left alone)"
+            return (f"warning: {self.waiting} record(s) wait in the spool '{spool_dir()}' for '{self.location}'{why}; "
+                    f"{self.written} written")
         return None
+
+
+def flush_spool(db=None) -> SpoolFlush:
+    """Write the records waiting in the spool for the database ``db`` (:func:`locate`); never raises."""
+    from . import spool
+
+    try:
+        loc = locate(db)
+    except Exception:  # noqa: BLE001
+        return SpoolFlush(None)
+    if loc is None:
+        return SpoolFlush(None)
+    try:
+        written, unreadable = _write_waiting(loc, db)
+    except Exception as exc:  # noqa: BLE001 - the records stay where they are
+        pending, unreadable = spool.waiting(spool_dir(), loc)
+        return SpoolFlush(loc, 0, len(pending) + len(unreadable), describe_failure(exc))
+    return SpoolFlush(loc, written, unreadable)

@@ -42,7 +42,6 @@ are comments.
 
 from __future__ import annotations
 
-import csv
 import hashlib
 import json
 import logging
@@ -59,7 +58,7 @@ from pathlib import Path
 from ..errors import InputError
 from ..history.options import record_as_args
 from ..validation import DISTANCE_M, PITCH_MM, SIGMA_MM, check_number, read_csv_rows, safe_text
-from ..fs import atomic_write_text
+from ..fs import atomic_write_text, write_csv
 from ..storage import EXIT_SPEC_FAIL
 from .runner import PaneOutcome, lock_job_folder, place_folder, prepare_job_folder, read_json, subprocess_runner
 
@@ -72,8 +71,6 @@ __all__ = [
     "write_index",
     "pane_defaults",
     "check_panes",
-    "write_csv",
-    "csv_cell",
 ]
 
 logger = logging.getLogger(__name__)
@@ -368,6 +365,7 @@ def _record_pane(pane, out, tmp, outcome, seconds, report, export):
         "fingerprint": pane.fingerprint(report=report, export=export), "seconds": round(seconds, 2),
         "finished_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "pane": {k: (str(v) if v is not None else None) for k, v in asdict(pane).items()},
+        "history": _history_line(outcome.log),
     }
     (tmp / "analyze.log").write_text(outcome.log, encoding="utf-8")
     (tmp / "pane.json").write_text(json.dumps(record, indent=2) + "\n", encoding="utf-8")
@@ -375,6 +373,15 @@ def _record_pane(pane, out, tmp, outcome, seconds, report, export):
     failed_json.unlink(missing_ok=True)
     failed_log.unlink(missing_ok=True)
     return record
+
+
+_HISTORY_LINES = ("history: ", "warning: this run was not recorded in the history")
+
+
+def _history_line(log: str) -> str | None:
+    """Where the pane's record went, as its ``glassdist analyze`` said (the database, or the spool file keeping it)."""
+    found = [line for line in log.splitlines() if line.startswith(_HISTORY_LINES)]
+    return found[-1] if found else None
 
 
 def _done_record(pane, out, report, export):
@@ -473,6 +480,8 @@ def _run_panes(panes, todo, out, records, runner, report, export, executor, cwd,
             label = rec.get("verdict") or ("analysed" if rec["status"] == "done" else "ERROR")
             tail = f": {safe_text(rec['error'])}" if rec["status"] == "error" else ""
             echo(f"[{len(records)}/{len(panes)}] {pane.id}  {label}  ({rec['seconds']:.1f} s){tail}")
+            if (rec.get("history") or "").startswith("warning:"):  # its record waits in the spool: say so here too
+                echo(f"  {pane.id}: {rec['history']}")
             write_index(panes, out, figures=False)
             bar.advance(task)
 
@@ -552,30 +561,6 @@ def _index_rows(panes, out):
 
 def _round(v):
     return "" if v is None else f"{float(v):.4g}"
-
-
-_FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
-
-
-def csv_cell(value):
-    """A text cell that a spreadsheet would run as a formula (``=``, ``+``, ``-``, ``@``, tab, CR) gets a ``'``."""
-    if isinstance(value, str) and value.startswith(_FORMULA_START):
-        try:
-            float(value)
-        except ValueError:
-            return "'" + value
-    return value
-
-
-def write_csv(path, rows):
-    """Write rows (dicts with the same keys) as a CSV file, atomically; formula-like text cells neutralised."""
-    import io
-
-    buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
-    writer.writeheader()
-    writer.writerows({k: csv_cell(v) for k, v in row.items()} for row in rows)
-    return atomic_write_text(path, buf.getvalue())
 
 
 def write_index(panes, out, *, figures=True):

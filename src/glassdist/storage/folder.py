@@ -187,6 +187,7 @@ class OutputFolder:
     removed: list[str] = field(default_factory=list)  # an earlier run's files this run removed
     problems: list[str] = field(default_factory=list)  # those it could not remove
     created: Path | None = None  # the topmost folder this run created, if any
+    recorded: object = None  # where the run's record went (glassdist.history.store.Recorded), once written
     _lock_fd: int | None = None
 
     def close(self, failed: bool = False) -> None:

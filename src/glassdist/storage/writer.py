@@ -79,9 +79,10 @@ def write_outputs(result, out_dir, *, fields="analysis", report=False, export=Fa
         with the analysed region outlined (``input_region.png``).
     history : glassdist.history.Recording or False, optional
         How the run is recorded in the results history once its files are written
-        (:func:`glassdist.history.record_run`: a history that cannot be written is a
-        warning on stderr, nothing more); default ``Recording(source='api')`` (the
-        database of ``GLASSDIST_DB``, else the user's data folder); False: not recorded.
+        (:func:`glassdist.history.store.record`: a history that cannot be written keeps
+        the record in the spool until a later run reaches it, and says so with a
+        ``RuntimeWarning``); default ``Recording(source='api')`` (the database of
+        ``GLASSDIST_DB``, else the user's data folder); False: not recorded.
 
     Returns
     -------
@@ -104,6 +105,10 @@ def write_outputs(result, out_dir, *, fields="analysis", report=False, export=Fa
     with open_output_folder(out_dir, planned=planned, inputs=(*inputs.paths, spec_file)) as folder:
         record = build_record(request, inputs, result)
         write_run(record, folder)
+    if folder.recorded is not None and folder.recorded.warning:  # kept in the spool (or lost): said, not printed
+        import warnings
+
+        warnings.warn(folder.recorded.line().removeprefix("warning: "), RuntimeWarning, stacklevel=2)
     return record.exit_code
 
 
@@ -115,7 +120,8 @@ def write_run(record, folder: OutputFolder) -> dict:
     ``summary.json`` with the size and SHA-256 of every file, hashed from the bytes as
     they were written (nothing is read back). Then the files of an earlier run into the
     folder that this run did not write again are removed (where they still have the
-    SHA-256 it recorded) and the run is recorded in the results history.
+    SHA-256 it recorded) and the run is recorded in the results history (where its record
+    went: ``folder.recorded``, a :class:`glassdist.history.store.Recorded`).
 
     Parameters
     ----------
@@ -164,10 +170,11 @@ def _write_files(record, folder) -> dict:
     # The earlier run's files that this one did not write again (its report, masks of another spec).
     names = sorted(set(folder.previous) - set(summary["outputs"]))
     folder.removed, folder.problems = remove_outputs(out, folder.previous, names, keep=folder.inputs)
-    if record.request.history is not False:  # once every file is in place: the history can cost the run nothing
-        from ..history import Recording, record_run
+    # once every file is in place: the history can cost the run nothing (a record it cannot write waits in the spool)
+    from ..history.store import record as record_in_history
 
-        record_run(summary, exit_code=record.exit_code, out_dir=out, recording=record.request.history or Recording())
+    folder.recorded = record_in_history(summary, exit_code=record.exit_code, out_dir=out,
+                                        recording=record.request.history)
     logger.info("outputs written to %s: %s", out, ", ".join(summary["outputs"]))
     return summary
 

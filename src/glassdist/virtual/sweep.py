@@ -372,9 +372,7 @@ def _fmt(v):
 
 def write_sweep_index(variants, out):
     """Write ``OUT/index.csv`` and ``OUT/index.json``: one row per variant (varied values, status, figures)."""
-    from ..fs import atomic_write_text
-
-    from ..jobs.batch import write_csv
+    from ..fs import atomic_write_text, write_csv
 
     out = Path(out)
     rows = _index_rows(variants, out)

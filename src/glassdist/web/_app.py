@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import io
 import logging
+import re
 import sys
 import zipfile
 from pathlib import Path
@@ -16,16 +17,21 @@ from fastapi.templating import Jinja2Templates
 
 from .._version import __version__
 from ..errors import InputError
-from ._jobs import ROLES, JobStore, display_name, stored_name
+from ._jobs import LABELS, ROLES, JobStore, display_name, form_language, stored_name
 
 __all__ = ["create_app", "serve"]
 
 logger = logging.getLogger(__name__)
 
 _TEMPLATES = Jinja2Templates(directory=str(Path(__file__).with_name("templates")))
+_TEMPLATES.env.globals["labels"] = LABELS  # the form's words, on every page that names a field
 #: Figures shown on the result page, in this order, when the analysis wrote them.
 _FIGURES = (("phi_eff.png", "phi_eff (mD)"), ("phi_shear.png", "phi_shear (mD)"), ("axis.png", "astigmatism axis"),
-            ("input_region.png", "photo, analysed region outlined"), ("histograms.png", "histograms"))
+            ("uncertainty.png", "standard uncertainty of phi_eff (mD)"),
+            ("input_region.png", "photo, analysed region outlined"))
+#: Figures after the threshold masks, in boxes twice as wide: their legends and panels need the room.
+_WIDE_FIGURES = (("quality.png", "quality: why each pixel is analysed or not"), ("histograms.png", "histograms"))
+_MASK = re.compile(r"mask_(?P<channel>[a-z_]+?)_(?P<limit>[-+0-9.e]+)mD\.png")
 _DOWNLOADS = (("report.html", "HTML report"), ("fields.npz", "fields (NPZ)"), ("statistics.csv", "statistics (CSV)"),
               ("summary.json", "summary (JSON)"), ("result.npz", "result.npz"))
 
@@ -135,13 +141,15 @@ def _add_job_routes(app: FastAPI, store: JobStore, pages: _Pages) -> None:
     @app.get("/jobs/{job_id}", response_class=HTMLResponse)
     async def job_page(request: Request, job_id: str):
         job = get_job(job_id)
-        outputs = set(job.outputs())
+        # only files that are there are linked or shown (a job without the report has no report link)
+        outputs = {name for name in job.outputs() if job.output_path(name) is not None}
         summary = job.summary() if job.state == "done" else {}
         return page(request, "job.html", job=job, summary=summary, verdict=summary.get("verdict"),
+                    warnings=[form_language(w, job.names, job.display) for w in summary.get("warnings") or []],
                     statistics=(summary.get("a4") or {}).get("statistics") or summary.get("statistics") or {},
-                    figures=[(f, t) for f, t in _FIGURES if f in outputs],
-                    downloads=[(f, t) for f, t in _DOWNLOADS if f in outputs],
-                    masks=sorted(f for f in outputs if f.startswith("mask_") and f.endswith(".png")))
+                    figures=[(f, t, "") for f, t in _FIGURES if f in outputs] + _mask_figures(outputs)
+                    + [(f, t, "wide") for f, t in _WIDE_FIGURES if f in outputs],
+                    downloads=[(f, t) for f, t in _DOWNLOADS if f in outputs], report="report.html" in outputs)
 
     @app.get("/jobs/{job_id}/status")
     async def job_status(job_id: str):
@@ -179,6 +187,12 @@ class _NotFound(Exception):
     pass
 
 
+def _mask_figures(outputs) -> list[tuple[str, str, str]]:
+    """The threshold masks among ``outputs``, by channel and limit: (file, caption, box class)."""
+    masks = [(m.group("channel"), float(m.group("limit")), name) for name in outputs if (m := _MASK.fullmatch(name))]
+    return [(name, f"|{channel}| over {limit:g} mD: red", "") for channel, limit, name in sorted(masks)]
+
+
 #: the history page's filters (query parameters), as ``glassdist history`` options
 _HISTORY_FILTERS = ("pane_id", "lot", "site", "operator", "verdict", "since", "until", "zone", "statistic")
 _HISTORY_ROWS = 500
@@ -186,6 +200,11 @@ _HISTORY_ROWS = 500
 
 def _history_filters(request: Request) -> dict:
     return {k: v.strip() for k in _HISTORY_FILTERS if (v := request.query_params.get(k, "")).strip()}
+
+
+def _unit(rows: list[dict]) -> str:
+    """The unit of the selected statistic: the records' own where they state it, else mD (the history's default)."""
+    return ", ".join(sorted({str(r["unit"]) for r in rows if r.get("unit")})) or "mD"
 
 
 def _add_history_routes(app: FastAPI, store: JobStore, pages: _Pages) -> None:
@@ -212,7 +231,8 @@ def _add_history_routes(app: FastAPI, store: JobStore, pages: _Pages) -> None:
         query = "&".join(f"{k}={quote(v)}" for k, v in filters.items())
         return pages.page(request, "history.html", status_code=400 if error else 200, rows=shown, total=len(rows),
                           filters=filters, error=error, lots=lots, chart=f"/history/chart.png?{query}" if lots else "",
-                          label=f"{rows[0]['statistic']} ({rows[0]['zone']})" if rows else "")
+                          label=f"{rows[0]['statistic']} ({rows[0]['zone']})" if rows else "",
+                          unit=_unit(rows))
 
     @app.get("/history/chart.png")
     async def history_chart(request: Request):
@@ -224,7 +244,7 @@ def _add_history_routes(app: FastAPI, store: JobStore, pages: _Pages) -> None:
         def draw():
             rows = records(filters)
             label = f"{rows[0]['statistic']} ({rows[0]['zone']})" if rows else "value"
-            return figure_png(plot_trends(trends(rows), label=label), dpi=80)
+            return figure_png(plot_trends(trends(rows), label=label), dpi=110)  # 9 in: 990 px, shown whole
 
         try:
             png = await run_in_threadpool(draw)

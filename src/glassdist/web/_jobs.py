@@ -18,7 +18,7 @@ from pathlib import Path
 from ..errors import InputError
 from ..history.options import record_as_args
 
-__all__ = ["Job", "JobStore", "ROLES", "FIELDS", "FLAGS"]
+__all__ = ["FIELDS", "FLAGS", "LABELS", "ROLES", "Job", "JobStore", "form_language"]
 
 logger = logging.getLogger(__name__)
 
@@ -34,6 +34,69 @@ FIELDS = {"pitch_mm": "--pitch-mm", "distance_m": "--distance-m", "pattern": "--
 
 #: Opt-in checkboxes of the form and the ``glassdist analyze`` flag each adds when ticked.
 FLAGS = {"report": "--report", "export": "--export"}
+
+#: What the form calls each upload, field and checkbox: the page's labels, and the words
+#: :func:`form_language` puts in place of the ``glassdist analyze`` options in errors and warnings.
+LABELS = {"image": "photo of the grid through the glass", "reference": "glass-less reference", "mask": "mask",
+          "spec": "acceptance specification",
+          "pitch_mm": "grid pitch, mm", "distance_m": "glass-to-grid distance L, m", "pattern": "pattern",
+          "detrend_degree": "detrend degree N", "sigma_mm": "smoothing sigma, mm", "optics": "optics",
+          "camera_distance_m": "camera-to-pane distance C, m", "incidence_deg": "incidence at the view's centre, deg",
+          "pane_id": "pane identifier", "lot": "lot", "site": "site", "operator": "operator",
+          "report": "HTML report", "export": "exports"}
+
+#: ``glassdist analyze`` option -> the form's word for it.
+_OPTION_LABELS = {option: LABELS[key] for key, option in {**FIELDS, **ROLES, **FLAGS}.items() if option}
+_OPTION = re.compile(r"--[a-z][a-z0-9-]*")
+# a value written after an option: a number, or one of the form's choices
+_VALUE = r"(?:[= ](?P<value>[-+]?(?:\d+\.?\d*|\.\d+)(?:e[-+]?\d+)?|reflection|transmission|lines|checkerboard|auto)\b)?"
+
+
+def _field(option: str) -> str:
+    return f"\u201c{_OPTION_LABELS[option]}\u201d"
+
+
+def form_language(line: str, names: dict | None = None, display: dict | None = None) -> str:
+    """An analyze error or warning line in the words of the web form.
+
+    The command's prefix (``glassdist analyze: error:``) and its ``--help`` pointer go; each
+    option the form offers becomes the quoted label of its field (``--pitch-mm 5`` ->
+    \u201cgrid pitch, mm\u201d = 5; the required-options error lists the fields to fill in); an
+    option the form does not offer is said to be the command line's; the uploads' stored
+    names (``names``: role -> stored name) become the client's file names (``display``).
+    """
+    for role, name in (names or {}).items():
+        line = line.replace(f"'{name}'", f"'{(display or {}).get(role, name)}'")
+    line = re.sub(r"^\s*glassdist(?: [a-z]+)?: (?:error|warning): ", "", line)
+    line = re.sub(r"\s*\(see glassdist [a-z]+ --help\)", "", line)
+    # a required option (argparse's words, or the protocol's when a specification was given): the fields to fill in
+    required = (re.fullmatch(r"the following arguments are required: (.*)", line)
+                or re.fullmatch(r"(--[a-z-]+) is required \(.*\), or a --spec whose protocol pins [a-z_]+", line))
+    if required:
+        options = [o.strip() for o in required.group(1).split(",")]
+        if all(o in _OPTION_LABELS for o in options):
+            fields = [_field(o) for o in options]
+            return ("fill in " + (", ".join(fields[:-1]) + " and " if len(fields) > 1 else "") + fields[-1]
+                    + f" (or choose an acceptance specification whose protocol pins {'them' if len(fields) > 1 else 'it'})")
+    # quoted text (a file name, a value as typed) is left as it is: split it off, translate the rest
+    parts = re.split(r"((?<!\w)'[^']*'(?!\w))", line)
+    line = "".join(part if k % 2 else _options_in_words(part) for k, part in enumerate(parts))
+    return re.sub(r"\b([Aa]) (?=\u201c[aeiou])", r"\1n ", line)  # "a --spec": "an “acceptance specification”"
+
+
+_KNOWN = re.compile(f"(?P<option>{'|'.join(map(re.escape, sorted(_OPTION_LABELS, key=len, reverse=True)))})"
+                    r"(?![a-z0-9-])" + _VALUE)
+_ARGUMENT = re.compile(r"\bargument (--[a-z][a-z0-9-]*)(?:/-[a-zA-Z])?:")
+# a run of options only the command line has ("--lens-photo, --camera-file"): one note for the run
+_UNKNOWN = re.compile(rf"{_OPTION.pattern}(?:(?:, | or | and ){_OPTION.pattern})*")
+
+
+def _options_in_words(text: str) -> str:
+    text = _ARGUMENT.sub(lambda m: (_field(m.group(1)) if m.group(1) in _OPTION_LABELS else m.group(1)) + ":", text)
+    text = _KNOWN.sub(lambda m: _field(m.group("option")) + (f" = {m.group('value')}" if m.group("value") else ""),
+                      text)
+    return _UNKNOWN.sub(lambda m: m.group(0) + " on the command line", text)
+
 
 # The first bytes of the formats analyze reads; an upload is stored under a name of our own with the
 # suffix its content shows (client file names never become paths).
@@ -204,6 +267,11 @@ class JobStore:
         """Build the analyze arguments from the uploads and form fields, list the job and start it."""
         if "image" not in job.names:
             raise InputError("choose a photo of the grid to analyse (PNG, TIFF, BMP or JPEG)")
+        if "spec" not in job.names:  # only a specification's protocol can pin them
+            missing = [key for key in ("pitch_mm", "distance_m") if not (form.get(key) or "").strip()]
+            if missing:
+                raise InputError(form_language("the following arguments are required: "
+                                               + ", ".join(FIELDS[key] for key in missing)))
         args = ["analyze"]
         for key, option in FIELDS.items():
             value = (form.get(key) or "").strip()
@@ -231,7 +299,7 @@ class JobStore:
         try:
             outcome = run_glassdist(job.args, cwd=job.folder, timeout_s=self.timeout_s)
             job.exit_code, job.log = outcome.exit_code, outcome.log
-            job.error = self._client_names(job, outcome.error)
+            job.error = form_language(outcome.error, job.names, job.display)
             job.state = "done" if outcome.exit_code in (0, EXIT_SPEC_FAIL) else "failed"
         except Exception as exc:  # noqa: BLE001 - shown on the job's page, the server goes on
             logger.exception("job %s", job.id)
@@ -240,12 +308,6 @@ class JobStore:
             job.finished = time.time()
             with self._lock:
                 self._evict()  # its outputs now count against the disk budget
-
-    @staticmethod
-    def _client_names(job: Job, line: str) -> str:
-        for role, name in job.names.items():
-            line = line.replace(f"'{name}'", f"'{job.display.get(role, name)}'")
-        return line
 
     def disk_bytes(self) -> int:
         """Bytes the listed jobs' folders take (uploads and outputs)."""
