@@ -5,7 +5,7 @@ Every ``glassdist analyze``, batch pane, web job and Python-API run (all write t
 operator, camera, input hashes, the resolved protocol, the verdict with each check, the
 statistics per zone, the standard measures, warnings and the output folder. A re-run is a
 new row; rows are never changed. ``glassdist history`` lists, filters, exports and charts
-them; :func:`history` returns them to Python. See ``docs/history.md``.
+them; :func:`history` returns them to Python. See ``docs/user-guide/history.md``.
 
 Modules: :mod:`~glassdist.history.models` (the tables), :mod:`~glassdist.history.store`
 (where the database is, opening, upgrading, writing), :mod:`~glassdist.history.query`

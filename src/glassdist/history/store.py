@@ -458,5 +458,5 @@ def record_run(summary: dict, *, exit_code: int, out_dir, recording: Recording =
             return insert_runs(store, [entry])[0]
     except Exception as exc:  # noqa: BLE001 - the history never costs a run its outputs or exit status
         warn(f"warning: this run was not recorded in the history '{where}': {describe_failure(exc)} "
-             "(its outputs are complete; see docs/history.md, or --no-history)")
+             "(its outputs are complete; see docs/user-guide/history.md, or --no-history)")
         return None
