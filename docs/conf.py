@@ -49,6 +49,7 @@ myst_heading_anchors = 4  # [text](page.md#a-heading) links are checked like any
 # --- autodoc and numpydoc -------------------------------------------------------------------
 autodoc_typehints = "none"  # the numpydoc sections state types and units; signatures stay readable
 autodoc_member_order = "bysource"
+autodoc_inherit_docstrings = False  # SQLAlchemy's and pydantic's own members stay theirs
 autodoc_default_options = {"members": True, "undoc-members": False}
 numpydoc_show_class_members = False
 numpydoc_xref_param_type = False
@@ -89,8 +90,8 @@ html_show_sourcelink = False
 nitpicky = True
 nitpick_ignore_regex = [
     # the standard library, NumPy, pydantic and typing: their inventories are on the web
-    ("py:class", r"(numpy|np|pydantic|pydantic_core|typing|collections|pathlib|os|datetime|enum|argparse|io|"
-                 r"concurrent|sqlalchemy|dask|distributed|matplotlib)\..*"),
+    ("py:.*", r"(numpy|np|scipy|skimage|cv2|pydantic|pydantic_core|typing|collections|pathlib|os|datetime|enum|"
+              r"argparse|io|concurrent|sqlalchemy|dask|distributed|matplotlib|tifffile|fastapi|starlette)\..*"),
     ("py:class", r"(ndarray|array_like|ArrayLike|Path|PathLike|Generator|Callable|Iterable|Iterator|Sequence|"
                  r"Mapping|BaseModel|Enum|Figure|Axes|Literal|Any|Self|NoneType|float64|float32|"
                  r"int|float|str|bool|dict|list|tuple|bytes|None|object|type)"),

@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import importlib
 import json
+import os
+import re
 import sys
 import tempfile
 import types
@@ -67,12 +69,32 @@ def _source(name: str) -> str:
     return line + (f", *written by* `{cmd}`." if cmd else ".")
 
 
+_LINK = re.compile(r"\[([^\]]*)\]\(([^)#\s]+)(#[^)\s]*)?\)")
+
+
+def _relinked(text: str, page_dir: Path) -> str:
+    """Links of a record's notes (relative to ``docs/records/``) as links of the page that includes them.
+
+    A link to another benchmark's markdown becomes a reference to that benchmark's section
+    (its label is the record's name); any other relative link is re-rooted at ``page_dir``.
+    """
+    def sub(m):
+        words, target, anchor = m.group(1), m.group(2), m.group(3) or ""
+        if "://" in target:
+            return m.group(0)
+        if target.endswith(".md") and (RECORDS / target).with_suffix(".json").exists() and "/" not in target:
+            return f"{{ref}}`{words.replace('`', '')} <{target[:-3]}>`"
+        return f"[{words}]({os.path.relpath(RECORDS / target, page_dir)}{anchor})"
+
+    return _LINK.sub(sub, text)
+
+
 def _notes(md_name: str) -> str:
     """What follows the notes mark of a benchmark's markdown (the prose written by hand), or ''."""
     text = (RECORDS / md_name).read_text()
     if NOTES_MARK not in text:
         return ""
-    return text.split(NOTES_MARK, 1)[1].split("-->", 1)[1].strip()
+    return _relinked(text.split(NOTES_MARK, 1)[1].split("-->", 1)[1].strip(), DOCS / "validation")
 
 
 # --- reference -------------------------------------------------------------------------------
@@ -155,13 +177,13 @@ def _model_tables(root, heading: str) -> str:
 def spec_schema_page() -> str:
     from glassdist.acceptance.spec import Spec
 
-    return _model_tables(Spec, "###")
+    return _model_tables(Spec, "##")
 
 
 def scene_schema_page() -> str:
     from glassdist.scene.model import Scene
 
-    return _model_tables(Scene, "###")
+    return _model_tables(Scene, "##")
 
 
 def summary_keys_page() -> str:
@@ -209,7 +231,7 @@ def accuracy_page() -> str:
 
     text = accuracy_markdown(_record("accuracy.json"))
     text = text.split("\n", 1)[1] if text.startswith("# ") else text  # the page has its own title
-    return _demote(text) + "\n"
+    return text + "\n"
 
 
 def experiments_page() -> str:
@@ -372,6 +394,140 @@ def generate(app=None) -> None:
             path.write_text(text)
 
 
+_BARS = re.compile(r"(?<![\\|`])\|([^|\s`](?:[^|`\n]*[^|\s`])?)\|(?![_|])")
+
+
+def escape_bars(app, what, name, obj, options, lines) -> None:
+    """``|phi|`` in a docstring is an absolute value, not a reStructuredText substitution."""
+    for i, line in enumerate(lines):
+        s = line.strip()
+        table_row = s.startswith(("+-", "+=")) or (s.startswith("|") and s.endswith("|") and s.count(" | ") > 0)
+        if "|" in line and not table_row:
+            lines[i] = _BARS.sub(lambda m: "\\|" + m.group(1) + "\\|", line)
+
+
+def _lookup(name: str):
+    """``(object, module holding it)`` for a dotted name of the package, or None when it does not exist."""
+    parts = name.split(".")
+    for i in range(len(parts), 0, -1):
+        modname = ".".join(parts[:i])
+        if modname != "glassdist" and not modname.startswith("glassdist."):
+            return None
+        try:
+            obj = importlib.import_module(modname)
+        except ImportError:
+            continue
+        holder = modname
+        rest = parts[i:]
+        for k, attr in enumerate(rest):
+            if isinstance(obj, types.ModuleType):
+                holder = obj.__name__
+            if hasattr(obj, attr):
+                obj = getattr(obj, attr)
+            elif k == len(rest) - 1 and attr in (getattr(obj, "__dataclass_fields__", None)
+                                                 or getattr(obj, "model_fields", None) or {}):
+                return obj, holder  # a field of a dataclass or a model: its class is its entry
+            else:
+                return None
+        return obj, holder
+    return None
+
+
+def resolve_code_reference(app, env, node, contnode):
+    """A Python reference to a name of the package that Sphinx did not find by its written name.
+
+    Docstrings name objects where they are used (``InputError`` in a module that imports it,
+    ``glassdist.analyzer.AnalysisResult`` re-exported from its module, a private helper): the
+    name is looked up in the code, from the referring module outwards. It resolves to the
+    object's documented canonical entry, else to the documented module that holds it. A name
+    that the code does not have (a renamed or removed function) stays unresolved and fails
+    the strict build.
+    """
+    from sphinx.util.nodes import make_refnode
+
+    if node.get("refdomain") != "py":
+        return None
+    target = node["reftarget"].lstrip(".~")
+    module, cls = node.get("py:module"), node.get("py:class")
+    # the module the docstring was written in (the page may document it under another name)
+    source = str(node.source or "")
+    written_in = source.rpartition("docstring of ")[2] or None
+    scopes = []
+    for where in filter(None, (f"{module}.{cls}" if module and cls else None, written_in, module)):
+        parts = where.split(".")
+        scopes += [".".join(parts[:i]) for i in range(len(parts), 0, -1) if ".".join(parts[:i]) not in scopes]
+    candidates = [target] + [f"{s}.{target}" for s in scopes]
+    py = env.get_domain("py")
+    for cand in candidates:
+        found = _lookup(cand)
+        if found is None:
+            continue
+        obj, holder = found
+        names = [cand]
+        defined = isinstance(obj, type) or callable(obj) and hasattr(obj, "__qualname__")
+        if defined and getattr(obj, "__module__", None):
+            names.insert(0, f"{obj.__module__}.{obj.__qualname__}")
+        if isinstance(obj, types.ModuleType):
+            names.insert(0, obj.__name__)
+        for name in names:
+            if name in py.objects:
+                entry = py.objects[name]
+                return make_refnode(app.builder, node["refdoc"], entry.docname, entry.node_id, contnode, name)
+        home = (obj.__module__ if defined and isinstance(getattr(obj, "__module__", None), str) else None) or holder
+        while home:
+            if home in py.modules:
+                entry = py.modules[home]
+                return make_refnode(app.builder, node["refdoc"], entry.docname, entry.node_id, contnode, home)
+            home = home.rpartition(".")[0]
+    # a name the referring module does not import (a type named in prose): the one documented
+    # object of the package whose name ends with it, or with its parent (an undocumented method)
+    for name in (target, target.rpartition(".")[0]):
+        if not name:
+            continue
+        hits = [k for k in py.objects if k.startswith("glassdist.") and k.endswith("." + name)]
+        if len(hits) == 1:
+            entry = py.objects[hits[0]]
+            return make_refnode(app.builder, node["refdoc"], entry.docname, entry.node_id, contnode, hits[0])
+    return None
+
+
+class DocstringSectionsAreNotLabels:
+    """Section titles of a module docstring (``References``, ``Conventions``) stay local to its page.
+
+    Parsed inside ``automodule`` they are registered as explicit targets, hence as site-wide
+    labels, and every module with a ``References`` section would clash with the others.
+    """
+
+    @staticmethod
+    def make():
+        from docutils import nodes
+        from docutils.transforms import Transform
+
+        class _Transform(Transform):
+            default_priority = 840  # before Sphinx registers the labels (SphinxDomains, 850)
+
+            def apply(self):
+                doc = self.document
+                for name, explicit in list(doc.nametypes.items()):
+                    node = doc.ids.get(doc.nameids.get(name) or "")
+                    if explicit and isinstance(node, nodes.section) and "docstring of" in str(node.source or ""):
+                        doc.nametypes[name] = False
+
+        return _Transform
+
+
+def skip_library_members(app, what, name, obj, skip, options):
+    """Members a class inherits from SQLAlchemy or pydantic (``metadata``, ``registry``) are theirs."""
+    owner = getattr(type(obj), "__module__", "") or ""
+    if what == "class" and owner.startswith(("sqlalchemy", "pydantic")):
+        return True
+    return None
+
+
 def setup(app: types.SimpleNamespace):
+    app.connect("autodoc-skip-member", skip_library_members)
+    app.add_transform(DocstringSectionsAreNotLabels.make())
+    app.connect("missing-reference", resolve_code_reference)
     app.connect("builder-inited", generate)
+    app.connect("autodoc-process-docstring", escape_bars)
     return {"parallel_read_safe": True, "parallel_write_safe": True}
