@@ -23,7 +23,7 @@ the full-resolution path (no decimation) on one size.
 
 Usage::
 
-    python benchmarks/bench_analyze.py --sizes 2000x1500 6000x4000 --out benchmarks/results.json
+    python benchmarks/bench_analyze.py --sizes 2000x1500 6000x4000 --out docs/records/performance/results.json
 """
 
 from __future__ import annotations

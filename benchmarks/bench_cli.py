@@ -21,7 +21,7 @@ field at that sample's pixel (Pearson correlation, mean |phi| ratio), and whethe
 Usage::
 
     flock /tmp/glassdist-heavy.lock python benchmarks/bench_cli.py --sizes 3000x2000 6000x4000 12000x8400 \
-        --out benchmarks/cli_results.json
+        --out docs/records/performance/cli_results.json
 """
 
 from __future__ import annotations

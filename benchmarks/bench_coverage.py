@@ -20,7 +20,7 @@ Usage::
 
     python benchmarks/bench_coverage.py [--params JSON] [--out FILE.json] [--cases SUBSTR,...] [--before FILE.json]
 
-``--out docs/coverage.json`` is the record docs/accuracy.md shows; ``--before`` embeds an
+``--out docs/records/coverage.json`` is the record docs/validation/accuracy.md shows; ``--before`` embeds an
 earlier run's records (e.g. of an earlier version) as the "before" columns.
 """
 

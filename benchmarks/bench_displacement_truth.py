@@ -22,7 +22,7 @@ through glassdist's documented transfer (``bench_waves_peers.matched``), against
 
 Usage::
 
-    python benchmarks/bench_displacement_truth.py [--params JSON] [--out docs/displacement_truth.md]
+    python benchmarks/bench_displacement_truth.py [--params JSON] [--out docs/records/displacement_truth.md]
 """
 
 from __future__ import annotations

@@ -12,7 +12,7 @@ Runs the same commands a user types, as child processes, and times them end to e
 Each parallel run's outputs are checked against the serial run's (every file but
 logs and timings byte-identical). Usage::
 
-    python benchmarks/bench_distributed.py --out benchmarks/distributed_results.json
+    python benchmarks/bench_distributed.py --out docs/records/performance/distributed_results.json
 """
 
 from __future__ import annotations

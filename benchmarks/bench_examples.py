@@ -9,7 +9,7 @@ records of an earlier version (made by running this script with that version fir
 ``PYTHONPATH``)::
 
     PYTHONPATH=/path/to/old/src python benchmarks/bench_examples.py --out old.json
-    python benchmarks/bench_examples.py --before old.json --before-command "..." --out docs/examples_before_after.json
+    python benchmarks/bench_examples.py --before old.json --before-command "..." --out docs/records/examples_before_after.json
 """
 
 from __future__ import annotations

@@ -9,7 +9,7 @@ truth and is measured with the growth off too.
 
 Per scene and method the accuracy scene is rendered once (exact engine, the accuracy experiment's
 settings) and analysed with the growth on (the default) and off; the ratios (mean |φ| Analyzer /
-truth over a set of pixels, as docs/accuracy.md, truth detrended on the documented region of the
+truth over a set of pixels, as docs/validation/accuracy.md, truth detrended on the documented region of the
 run with the growth on) are given over
 
 * **all**: that run's compared region;
@@ -24,7 +24,7 @@ relative to its mean there (0: the mirror holds the same truth).
 
 Usage::
 
-    python benchmarks/bench_growth_mirror.py [--scenes biconvex_lens_p48] [--out docs/growth_mirror.md]
+    python benchmarks/bench_growth_mirror.py [--scenes biconvex_lens_p48] [--out docs/records/growth_mirror.md]
 """
 
 from __future__ import annotations
@@ -73,7 +73,7 @@ def run(names: list[str]) -> list[dict]:
     from glassdist.experiments.accuracy import SCENES, against_truth
     from glassdist.theory import analysis_params
 
-    def ratios(val, where):  # mean |Analyzer| / mean |truth| per channel, as docs/accuracy.md
+    def ratios(val, where):  # mean |Analyzer| / mean |truth| per channel, as docs/validation/accuracy.md
         return against_truth(val, where)["ratios_vs_exact"]
 
     opts = RunOptions()

@@ -21,7 +21,7 @@ rises with the load, the CPU time much less.
 
 Usage::
 
-    python benchmarks/bench_history.py [--runs 10000] [--repeat 5] [--out benchmarks/history_results.json]
+    python benchmarks/bench_history.py [--runs 10000] [--repeat 5] [--out docs/records/performance/history_results.json]
 """
 
 from __future__ import annotations

@@ -95,6 +95,23 @@ def run_case(scene, sigma_periods, degree: int, overrides: dict | None = None) -
     return rows
 
 
+HEADER = ("| ripple, periods | sigma, periods | method | ratio (stack) | ratio (indep.) | p95 abs phi_eff, mD "
+          "(truth) | interior | valid |", "|---|---|---|---|---|---|---|---|")
+
+
+def row(r: dict) -> str:
+    """One record's line of the table (``r["periods"]`` None: the dome alone)."""
+    n = r["periods"]
+    return (f"| {'dome alone' if n is None else f'{n:g}'} | {r['sigma_periods']:g} | {r['method']} | "
+            f"{r['ratio_stack']:.4f} | {r['ratio_independent']:.4f} | {r['p95_abs_mD']:.4f} "
+            f"({r['truth_p95_abs_mD']:.4f}) | {100 * r['interior']:.0f}% | {100 * r['valid']:.0f}% |")
+
+
+def table(recs: list[dict]) -> str:
+    """The markdown table of a run's records (what ``--out`` writes)."""
+    return "\n".join([*HEADER, *(row(r) for r in recs)])
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scale", type=float, default=0.5)
@@ -113,8 +130,7 @@ def main(argv=None) -> int:
     degree = a.degree if a.degree is not None else (4 if dome else 2)
     cases = [None] if a.dome_only else a.periods
     overrides = {**json.loads(a.params), **({} if a.passes is None else {"deformation_passes": a.passes})}
-    lines = ["| ripple, periods | sigma, periods | method | ratio (stack) | ratio (indep.) | p95 abs phi_eff, mD "
-             "(truth) | interior | valid |", "|---|---|---|---|---|---|---|---|"]
+    lines = list(HEADER)
     print("\n".join(lines), flush=True)
     recs = []
     for n in cases:
@@ -122,9 +138,7 @@ def main(argv=None) -> int:
         for r in run_case(scene, a.sigma, degree, overrides):
             r["periods"] = n
             recs.append(r)
-            line = (f"| {'dome alone' if n is None else f'{n:g}'} | {r['sigma_periods']:g} | {r['method']} | "
-                    f"{r['ratio_stack']:.4f} | {r['ratio_independent']:.4f} | {r['p95_abs_mD']:.4f} "
-                    f"({r['truth_p95_abs_mD']:.4f}) | {100 * r['interior']:.0f}% | {100 * r['valid']:.0f}% |")
+            line = row(r)
             lines.append(line)
             print(line, flush=True)
     if a.out:

@@ -38,14 +38,14 @@ Usage::
     python benchmarks/bench_waves_peers.py --farneback-sweep [--out FILE.md]
     python benchmarks/bench_waves_peers.py --replica [--out FILE.md]
 
-``--out docs/waves_peers.md`` is the table the docs show (the command is written in it).
+``--out docs/records/waves_peers.md`` is the table the docs show (the command is written in it).
 ``--replica`` asks which of glassdist and FCD is right where the photo alone cannot say: it
 builds replicas of the photo with a known displacement (``replicas``) and scores every method
-against that truth (docs/waves_replica.md).
+against that truth (docs/records/waves_replica.md).
 ``--farneback-sweep`` runs the Farneback peer over a grid of its own settings (window, iterations,
 polynomial expansion) and tabulates, per setting, the area where the two peers agree and the share
 of glassdist's region inside it. A setting is judged by the peers' agreement alone, which does not
-involve glassdist (docs/waves_peers_farneback.md).
+involve glassdist (docs/records/waves_peers_farneback.md).
 """
 
 from __future__ import annotations
@@ -117,7 +117,7 @@ def matched(u: np.ndarray, res) -> np.ndarray:
     """A peer's field ``u`` (px) through the transfer of glassdist's displacement output, per carrier.
 
     The whole documented transfer (:meth:`glassdist.analyzer.transfer.InstrumentTransfer.response`,
-    docs/transfer_function.md): Block F's Gaussian ``G_i``, or after F5's ``n`` demodulations
+    docs/explanation/transfer-function.md): Block F's Gaussian ``G_i``, or after F5's ``n`` demodulations
     (``res.demodulations``) ``(1 - (1 - G_i B)^n) / B`` (with its photo passes, ``res.photo_passes``,
     from the low-pass of ``res.restart_sigma_px``, as there), times the block means of the analysis grid
     and the cubic B-spline from it to every pixel, applied in the spectrum of the whole field

@@ -7,18 +7,18 @@ every border that the analyzer's fit never sees. A change of a ratio between suc
 today's can therefore come from the analyzer or from the yardstick. This benchmark renders the
 accuracy scenes once (exact engine, the experiment's settings), analyses each with both methods,
 and gives per run the φ_eff and φ_shear ratios (mean |φ| Analyzer / truth over the compared
-region, as in docs/accuracy.md; the flat-glass controls have none):
+region, as in docs/validation/accuracy.md; the flat-glass controls have none):
 
 * **record**: the earlier record (``git show COMMIT:docs/accuracy.json``; blank when git or the
   commit is not available);
 * **on ``valid``**: today's analyzer, the truth detrended on ``valid`` (the record's yardstick);
-* **documented**: today's analyzer on today's yardstick (docs/accuracy.md's figures).
+* **documented**: today's analyzer on today's yardstick (docs/validation/accuracy.md's figures).
 
 The first two columns differ only by the analyzer; the last two only by the yardstick.
 
 Usage::
 
-    python benchmarks/bench_yardstick.py [--record-commit 8c60441] [--scenes a,b] [--out docs/yardstick.md]
+    python benchmarks/bench_yardstick.py [--record-commit 8c60441] [--scenes a,b] [--out docs/records/yardstick.md]
 """
 
 from __future__ import annotations
@@ -86,7 +86,7 @@ def table(rows: list[dict], record: dict, commit: str) -> str:
         return f"{d[ch]:.3f}" if d and ch in d else "—"
 
     for r in rows:
-        if r["kind"] == "flat":  # no distortion to read: a ratio to a truth of ~0 says nothing (docs/accuracy.md)
+        if r["kind"] == "flat":  # no distortion to read: a ratio to a truth of ~0 says nothing (docs/validation/accuracy.md)
             continue
         rec = record.get((r["scene"], r["method"]), {})
         cells = [r["scene"], r["method"]]

@@ -5,7 +5,7 @@ A 512 x 384 view of a regular grid (8 px per period), a radial Gaussian bump of 
 (k1 = -0.02, half-diagonal normalisation). Printed per case: the joint fit's k1, k2, the
 share of the bare homography's mean squared residual it removes (the lens is applied from
 0.5) and the leave-out refit figures of :func:`glassdist.analyzer.lens.radial_consistency`
-(refused above 0.2 for the inner disc, 0.3 for a quadrant); the figures of docs/lens_calibration.md::
+(refused above 0.2 for the inner disc, 0.3 for a quadrant); the figures of docs/user-guide/lens-calibration.md::
 
     PYTHONPATH=src python benchmarks/lens_consistency.py
 

@@ -2,7 +2,7 @@
 
 Checkerboard, ``--pitch-mm 5 --distance-m 0.5``, detrend degrees 1-3; mean |phi_eff| over
 each result's trusted pixels, Direct / Comparative, for ``lens_model`` none, radial (the
-default) and radial + tangential + principal point (the table of docs/lens_calibration.md), after
+default) and radial + tangential + principal point (the table of docs/user-guide/lens-calibration.md), after
 the Direct Method's floor on this camera and board (the glass-less reference read by it)::
 
     PYTHONPATH=src python benchmarks/lens_photos.py
@@ -10,7 +10,7 @@ the Direct Method's floor on this camera and board (the glass-less reference rea
 ``--variants`` instead reads each photo and its reference through changes that leave the pane's
 distortion as it is (intensities inverted, mirrored, seeded noise, 5 % exposure, half and 1.7×
 size, a 3 px blur) and tabulates the radial self-calibration's leave-out figures, whether the
-lens was applied and Direct / Comparative at N = 2 and 3 (docs/lens_calibration.md, "How stable
+lens was applied and Direct / Comparative at N = 2 and 3 (docs/user-guide/lens-calibration.md, "How stable
 the decision is")::
 
     PYTHONPATH=src python benchmarks/lens_photos.py --variants

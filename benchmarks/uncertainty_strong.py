@@ -23,8 +23,8 @@ Usage::
     python benchmarks/uncertainty_strong.py [--n 16] [--noise 0.03] [--amplitude 4] [--size 320 400]
         [--seed 0] [--degree 1] [--methods comparative direct] [--minus-projective] [--out FILE.json]
 
-``docs/uncertainty_strong.json`` holds the run with ``--minus-projective`` (figures and
-discussion: ``docs/transfer_function.md``, "With image deformation (F5)").
+``docs/records/uncertainty_strong.json`` holds the run with ``--minus-projective`` (figures and
+discussion: ``docs/explanation/transfer-function.md``, "With image deformation (F5)").
 """
 
 from __future__ import annotations

@@ -10,7 +10,7 @@ Usage::
 
     python scripts/check_known_bugs.py [--python PYTHON]
 
-The bugs (docs/testing.md):
+The bugs (docs/validation/testing.md):
 
 1. the strain turned into the camera frame the wrong way (``R @ eps @ R.T``);
 2. the A2 detrend fitted with degree N - 1;

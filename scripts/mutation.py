@@ -25,7 +25,7 @@ Usage::
 Writes a JSON record (every mutant: module, line, the changed source line, the outcome)
 and prints the kill rate per module, each surviving mutant, and the overall kill rate with
 its 95 % Wilson interval (the sample's binomial uncertainty). It need not run in CI:
-a full sample takes about 40 minutes on two cores (docs/testing.md).
+a full sample takes about 40 minutes on two cores (docs/validation/testing.md).
 """
 
 from __future__ import annotations

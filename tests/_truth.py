@@ -25,7 +25,7 @@ that rule):
 
   axis = direction of largest stretch of the traceless part of eps, degrees in (-90, 90]
   from +x towards +y.
-* Reflection (docs/reflection.md "Definitions"): the reflective power of a height field
+* Reflection (docs/user-guide/reflection.md "Definitions"): the reflective power of a height field
   Z(u, v) on the pane, Coddington's equations for a mirror written out,
   P = 2 [[Z_tt / cos theta, Z_ts], [Z_ts, Z_ss cos theta]], with the Hessian by centred
   differences of the analytic surface, t along the in-plane vector from the camera's foot

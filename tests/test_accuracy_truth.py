@@ -104,7 +104,7 @@ def test_calibration_of_displacement_and_phi_sub_percent(method):
 
     Not a lens: on a Gaussian lens of 60 mm radius the Comparative Method's displacement
     reads 0.992 of the truth (Direct 0.998; phi_eff 1.003 both), the demodulation blur on
-    the lens's curvature (docs/testing.md).
+    the lens's curvature (docs/validation/testing.md).
     """
     cap = synthetic_capture((320, 384), pitch_mm=PITCH, mm_per_px=1.0, displacement=wave_displacement(0.3, 140.0, 35.0))
     res = _analyze(cap, method, sigma_mm=16.0)

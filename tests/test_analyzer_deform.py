@@ -247,7 +247,7 @@ def test_photo_passes_read_a_strong_wave_through_the_linear_transfer(strong_wave
     # Three photo passes after the warped reference's, from its field low-passed (4 x 4 block means), against the
     # transfer with them (_through_transfer): 0.0011 period RMS, 0.0043 at most (Comparative), 0.0010, 0.0043
     # (Direct), against 0.0018, 0.0098 / 0.0101 without them. Resampling the photo bilinearly, or starting from
-    # the warped reference's field itself, read worse (docs/transfer_function.md, "Photo deformation").
+    # the warped reference's field itself, read worse (docs/explanation/transfer-function.md, "Photo deformation").
     ref = strong_wave.reference if method == "comparative" else None
     res = analyze(strong_wave.image, pitch_mm=PITCH, distance_m=10.0, reference=ref,
                   params={"sigma_mm": 16.0, "detrend_degree": 1, "deformation_passes": 3, "analysis_block": 4,
@@ -315,7 +315,7 @@ def test_photo_passes_leave_what_the_reference_never_saw_to_the_warped_reference
 
 
 def test_photo_passes_run_by_default_in_the_comparative_method_only(strong_wave):
-    # deformation_photo_passes 'auto': 6 with a reference, none without (docs/transfer_function.md, "Why the
+    # deformation_photo_passes 'auto': 6 with a reference, none without (docs/explanation/transfer-function.md, "Why the
     # Comparative Method only"); an integer applies to both methods, and out-of-range values are refused.
     from glassdist.analyzer.params import AUTO_PHOTO_PASSES, load_params
     from glassdist.errors import InputError

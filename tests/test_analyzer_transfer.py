@@ -177,7 +177,7 @@ def test_ray_traced_ripple_reduced():
     assert ok.mean() > 0.05
     # Measured at this reduced size: 0.9809 (against the exact truth through the stack) and 0.9819
     # (independent evaluation); the full-size experiment reads 0.9998-1.0003 at 4, 6 and 10 periods
-    # (docs/transfer_function.md). Held at the reduced figures: the render is seeded, the margin
+    # (docs/explanation/transfer-function.md). Held at the reduced figures: the render is seeded, the margin
     # (0.005) covers the platform's arithmetic, not a change of method.
     assert _rms_ratio(an, ex, ok) == pytest.approx(0.981, abs=0.005)
     assert _rms_ratio(an, ind, ok) == pytest.approx(0.982, abs=0.005)

@@ -66,7 +66,7 @@ def test_every_subpackage_declares_its_public_api(sub):
     assert "__all__" in names
 
 
-#: Test helpers holding the truths the accuracy tests compare the analyzer with (docs/testing.md).
+#: Test helpers holding the truths the accuracy tests compare the analyzer with (docs/validation/testing.md).
 TRUTH_HELPERS = [Path(__file__).parent / "_truth.py"]
 
 

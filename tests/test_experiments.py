@@ -1,7 +1,7 @@
 """The paper's virtual experiments (§3): reduced runs against the bounds of issue 5, and the committed full runs.
 
 Reduced runs use half-size images (512 x 384 px) and 4 samples per pixel; they
-check the same bounds as the full runs in ``docs/experiments/`` (parity ratios and
+check the same bounds as the full runs in ``docs/records/experiments/`` (parity ratios and
 Procrustes scale within 2 %, rotation below 0.1 deg; pitch spread within ±2 %,
 Direct vs Comparative within 3 %; rotation ratio within 2 %).
 """
@@ -18,7 +18,7 @@ from glassdist.experiments import run_parity, run_pitch, run_rotation, scaled_sc
 from glassdist.experiments._common import relative_difference
 
 REPO = Path(__file__).resolve().parents[1]
-DOCS = REPO / "docs" / "experiments"
+DOCS = REPO / "docs" / "records" / "experiments"
 REDUCED = {"scale": 0.5, "spp": 4}
 
 
@@ -27,7 +27,7 @@ def _failed(record: dict) -> list[str]:
     return [f"{b['what']}: {b['value']:.4g}" for b in record["bounds"].values() if not b["met"]]
 
 
-#: What the reduced runs measured (docs/experiments/README.md, "Reduced versions"): the tests hold
+#: What the reduced runs measured (docs/records/experiments/README.md, "Reduced versions"): the tests hold
 #: them at these figures. The exact tracer is seeded and deterministic; the margins (0.003 on
 #: ratios, 0.005 on Direct / truth, 0.02 deg) cover the platform's arithmetic, not a change of
 #: method (re-measure, then update the docs and these figures).
@@ -91,14 +91,14 @@ def test_rotation_reduced():
     """§3.3 at half size: mean |phi_eff| of aligned and rotated grids within 2 %."""
     res = run_rotation(**REDUCED)
     assert res.record["ratio"] >= 0.98, res.record["ratio"]
-    assert res.record["ratio"] == pytest.approx(0.9957, abs=0.003)  # measured at half size (docs/experiments)
+    assert res.record["ratio"] == pytest.approx(0.9957, abs=0.003)  # measured at half size (docs/records/experiments)
     assert res.record["runs"]["rotated"]["grid_rotation_deg"] != res.record["runs"]["aligned"]["grid_rotation_deg"]
     assert res.passed
 
 
 @pytest.mark.parametrize("name", ["parity", "pitch", "rotation"])
 def test_committed_full_runs_meet_bounds(name):
-    """The committed documents: the full-size runs under docs/experiments/ meet every bound of issue 5.
+    """The committed documents: the full-size runs under docs/records/experiments/ meet every bound of issue 5.
 
     A check of the documents, not of the code (a full run takes minutes; the reduced runs above
     recompute): it fails when a committed record is replaced by one that misses a bound.

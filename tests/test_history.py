@@ -680,10 +680,10 @@ def test_an_old_database_is_upgraded_in_place_and_keeps_its_runs(summary, sqlite
 
 
 def _documented_columns() -> list[str]:
-    """The column names of the table "What a run records" in docs/history.md."""
+    """The column names of the table "What a run records" in docs/user-guide/history.md."""
     import re
 
-    text = (Path(__file__).parents[1] / "docs" / "history.md").read_text()
+    text = (Path(__file__).parents[1] / "docs" / "user-guide" / "history.md").read_text()
     table = text.split("## What a run records", 1)[1].split("\n\n", 2)[1]
     names = []
     for line in table.splitlines()[2:]:

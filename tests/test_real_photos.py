@@ -43,7 +43,7 @@ def test_comparative_and_direct_agree_on_waves(real_data):
     # README ("Accuracy"): correlation 0.997 / 0.997 (measured 0.9977 / 0.9977); mean |phi| of the
     # Direct Method 1.9 % above the Comparative on phi_eff (measured 1.0194) and 1.7 % on phi_shear (1.0173),
     # the Comparative with F5's photo passes (6, its default; without them r 0.9982 / 0.9982 and 1.0178 /
-    # 1.0147: the photo passes move the Comparative field towards FCD's, docs/transfer_function.md),
+    # 1.0147: the photo passes move the Comparative field towards FCD's, docs/explanation/transfer-function.md),
     # with F5 grown into the rings' steep flanks on its finer grid and Block A on 2 x 2 means of it
     # (1.0136 / 1.0104, r 0.9986 / 0.9988 on 4 x 4 means; 3.4 % / 3.6 % when F5 kept to the one pass's
     # region and grid; 1.7 % / 0.04 % before F5), the Comparative's A1 Jacobian through
@@ -75,7 +75,7 @@ def _explains(ref, img, u, where) -> float:
 
 
 def test_waves_field_explains_the_photo_and_agrees_with_fcd(real_data):
-    # docs/waves_peers.md: F5 grows into the rings' steep flanks. Measured: 92.1 % of the photo
+    # docs/records/waves_peers.md: F5 grows into the rings' steep flanks. Measured: 92.1 % of the photo
     # analysed in 2 parts (80.7 % without the growth, 80.4 % in one pass), 99.2 % of it within 0.1
     # period of FCD's field, and the reference warped by glassdist's field correlates with the photo at
     # 0.9885 over that region against 0.9806 for FCD's field on the same pixels (Farneback's, in the
@@ -98,7 +98,7 @@ def test_waves_field_explains_the_photo_and_agrees_with_fcd(real_data):
 
 
 def _waves_replica(real_data, peer: str, smoothing_periods: float, scale: float, seed: int):
-    """A replica of the waves photo (docs/waves_replica.md) and glassdist's analysis of it.
+    """A replica of the waves photo (docs/records/waves_replica.md) and glassdist's analysis of it.
 
     The truth is a peer's own field of the photo (never glassdist's), smoothed by ``smoothing_periods``
     carrier periods and scaled about its mean by ``scale``; the replica is the reference warped by it
@@ -116,8 +116,8 @@ def _waves_replica(real_data, peer: str, smoothing_periods: float, scale: float,
 
 
 def test_on_a_replica_of_the_waves_photo_the_amplitude_is_the_truths_and_fcd_reads_short(real_data):
-    # docs/waves_replica.md: the photo's rings, known. The truth is FCD's field of the photo smoothed by
-    # half a carrier period and scaled by 1.061, the factor the photo prefers for it (docs/waves_peers.md).
+    # docs/records/waves_replica.md: the photo's rings, known. The truth is FCD's field of the photo smoothed by
+    # half a carrier period and scaled by 1.061, the factor the photo prefers for it (docs/records/waves_peers.md).
     # Measured (one period of smoothing over glassdist's region, plain mask-normalised Gaussians):
     # glassdist 0.991 of the truth (0.968 without F5's photo passes, most of it within a period of the
     # region's border), FCD 0.957, and glassdist 1.032 of FCD through its transfer: the waves photo's
@@ -149,7 +149,7 @@ def test_on_a_replica_of_the_waves_photo_the_amplitude_is_the_truths_and_fcd_rea
 
 
 def test_no_whole_period_slips_on_a_replica_with_steeper_rings(real_data):
-    # docs/waves_replica.md: the truth is the Farneback peer's field of the photo smoothed by a quarter
+    # docs/records/waves_replica.md: the truth is the Farneback peer's field of the photo smoothed by a quarter
     # of a carrier period and scaled by 1.05 (the factor the photo prefers for it): rings steeper than the
     # photo's (displacement gradient p99 0.66). Excluded areas on their flanks held a net phase residue:
     # the unwrapper, going round them, put a whole carrier period on 23.5 % of the region (quality
@@ -192,7 +192,7 @@ def test_the_waves_photos_lens_is_applied_when_the_photo_is_inverted(real_data):
     stays applied and the Direct Method at the default N = 2 reads the Comparative's mean |phi_eff|
     as on the photo itself: 1.032 (1.029 with Block A on 4 x 4 means of F5's grid). Its leave-one-quadrant-out figure is 0.239
     (0.145 on the photo as bundled): with the quadrant bound at the inner disc's 0.2 the lens was
-    refused and the reading was 1.406 (docs/lens_calibration.md, "How stable the decision is")."""
+    refused and the reading was 1.406 (docs/user-guide/lens-calibration.md, "How stable the decision is")."""
 
     def negative(a):
         return np.floor((1.0 - a) * 65535) / 65535

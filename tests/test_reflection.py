@@ -234,7 +234,7 @@ def test_sphere_at_30_deg_reads_tangential_and_sagittal_powers():
 
 def _roll_wave_capture(deformation, incidence_deg):
     """The roll-wave capture: 28 mm board pitch (about 13 px per carrier period), 640 x 480 px, the camera noise
-    of docs/accuracy.md (full well 10000 e-, read noise 0.01), one sample per pixel."""
+    of docs/validation/accuracy.md (full well 10000 e-, read noise 0.01), one sample per pixel."""
     return _scene(deformation, incidence_deg=incidence_deg, pixels=(640, 480), focal_mm=105, pitch_mm=28,
                   spp=1).with_changes(imaging=NOISY_CAMERA)
 
@@ -298,7 +298,7 @@ def test_roll_wave_maps_within_two_percent_of_the_truth(roll_wave_photos):
 
 def test_roll_wave_direct_maps_within_two_percent_but_for_the_homography(roll_wave_photos):
     """The Direct Method on the same photo. Its homography takes a uniform power (a change of scale) and keystone
-    ramps, which a single photo cannot tell from the glass (docs/reflection.md; the summary says so): with each
+    ramps, which a single photo cannot tell from the glass (docs/user-guide/reflection.md; the summary says so): with each
     power component's best-fit plane removed from the difference, phi_eff and the astigmatism tensor are within 2 %
     of the truth (measured 0.74 % / 1.10 % at normal incidence, 1.30 % / 1.27 % at 20 deg; with the planes kept,
     1.03 % / 4.22 % and 3.48 % / 10.36 %, the mean phi_eff 1.0 mD off at 20 deg)."""
@@ -355,7 +355,7 @@ def test_back_face_ghost_against_a_float_reference_moves_the_roll_wave_map_littl
     """With a float-pane reference of the same uncoated glass (its ghost too), the ghost's uniform power cancels:
     at 20 deg (ghost offset 2.8 mm on the board, a tenth of the 28 mm pitch) the roll wave's phi_eff map moves by
     under 0.2 mD on average and 1.5 % of its RMS from the front-face-only map against a mirror
-    (docs/reflection.md: +0.06 mD, 1.16 %)."""
+    (docs/user-guide/reflection.md: +0.06 mD, 1.16 %)."""
     th = 20.0
     wave = [{"kind": "roller_wave", "amplitude_mm": WAVE_A_MM, "wavelength_mm": WAVE_PERIOD_MM}]
     ghost = {"mode": "reflection", "back_face": True}

@@ -156,7 +156,7 @@ def test_example_specifications_and_manifest_use_detrend_3_with_the_direct_metho
     contract = load_spec(examples / "insitu" / "contract_spec.json").spec
     assert factory.protocol.method == "comparative"
     # the contract pins N = 3 for the Direct method: the bundled board is not a perfect grid, and at N = 2 the
-    # weak floating ring reads 1.22 of the Comparative (docs/lens_calibration.md)
+    # weak floating ring reads 1.22 of the Comparative (docs/user-guide/lens-calibration.md)
     assert contract.protocol.method == "direct" and contract.protocol.detrend_degree == 3
     panes = read_manifest(examples / "batch" / "manifest.csv")
     direct = [p for p in panes if p.reference is None]

@@ -43,7 +43,7 @@ def test_validate_command_on_a_small_wavy_slab(tmp_path, method):
 
     320 x 240 px, 48.4 mm pitch, 4 spp. The truth is the tracer's exact displacement through
     ``tests/_truth.py`` (not the evaluation stack the analyzer and the model share), on the
-    compared region. Measured (docs/virtual_pipeline.md): analyzer / truth 0.9915, 0.9918,
+    compared region. Measured (docs/explanation/virtual-pipeline.md): analyzer / truth 0.9915, 0.9918,
     0.9924 (Direct) and 0.9957, 0.9980, 0.9981 (Comparative); the same-stack model ratios
     0.9910-0.9919 and 0.9952-0.9976, rotation 0.070 and 0.073 deg. Margins: 0.004 on ratios
     (the render is seeded, so what moves them is the platform's arithmetic and a change of

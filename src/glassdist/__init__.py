@@ -5,7 +5,7 @@ displacement of the grid and its two optical-power channels (sphere-equivalent
 power phi_eff and cylinder-equivalent astigmatism phi_shear, in millidiopters).
 
 Conventions (used everywhere in the package)
--------------------------------------------
+--------------------------------------------
 * Images are indexed ``(row, col)``; ``x`` runs along columns (left to right),
   ``y`` along rows (top to bottom).
 * Lengths are in mm, the glass-to-backdrop distance ``L`` in m, optical power in mD.

@@ -21,7 +21,7 @@ def evaluate_spec(result, spec, *, mask=None):
         From :func:`glassdist.analyze`.
     spec : Spec, dict or path
         The specification (its JSON form as a dict, or the JSON file); see
-        ``docs/industrial_workflow.md``.
+        ``docs/user-guide/factory-acceptance.md``.
     mask : ndarray of bool (H, W), optional
         The region the analysis was asked for (``analyze(..., mask=)``): the coverage
         limit ``min_valid_percent`` is then checked against it, not the whole image.

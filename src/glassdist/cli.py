@@ -112,7 +112,7 @@ def _register_analyze(sub) -> None:
     p.add_argument("--distance-m", type=number_option(DISTANCE_M), help="glass-to-grid distance L, m (reflection: board-to-pane distance D); required unless the --spec protocol pins distance_m")
     p.add_argument("--optics", choices=["transmission", "reflection"],
                    help="transmission (default: the grid seen through the pane) or reflection (a grid board seen in the "
-                   "pane; phi in reflective power on the pane, docs/reflection.md)")
+                   "pane; phi in reflective power on the pane, docs/user-guide/reflection.md)")
     p.add_argument("--camera-distance-m", type=number_option(DISTANCE_M),
                    help="reflection: camera-to-pane distance C, m (default: the camera in the board plane, C = D); "
                    "transmission, Direct Method with --camera-file: the camera-to-pane distance along the pane normal, "

@@ -2,7 +2,7 @@
 
 The industry reads glass distortion with scalar measures of its own; a grid photo serves
 them all once the displacement field is known (formulas and references in
-``docs/standard_measures.md``):
+``docs/user-guide/standard-measures.md``):
 
 * :func:`roll_wave` -- roll-wave period, direction and amplitude (ASTM C1651 quantities),
   from the spectrum of the field's divergence;

@@ -461,7 +461,7 @@ def load_spec(path) -> LoadedSpec:
     digest = hashlib.sha256()
     data = load_mapping(p, "specification file", option="--spec", fmt="json", expect="'name' and 'criteria'",
                         digest=digest)
-    spec = validate_model(Spec, data, "specification", f"'{safe_text(p)}'", "see docs/industrial_workflow.md for the format")
+    spec = validate_model(Spec, data, "specification", f"'{safe_text(p)}'", "see docs/user-guide/factory-acceptance.md for the format")
     return LoadedSpec(spec, digest.hexdigest(), str(path))
 
 
@@ -480,7 +480,7 @@ def as_spec(spec) -> LoadedSpec:
     if isinstance(spec, dict):
         data = {k: v for k, v in spec.items() if k != "$comment"}
         return LoadedSpec(validate_model(Spec, data, "specification", "the given mapping",
-                                         "see docs/industrial_workflow.md for the format"))
+                                         "see docs/user-guide/factory-acceptance.md for the format"))
     return load_spec(spec)
 
 

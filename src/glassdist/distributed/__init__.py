@@ -8,7 +8,7 @@ in this process, one after the other (the default), or on the workers of a Dask
 worker must see them under the same path (a shared filesystem);
 :meth:`Executor.check_paths` verifies that on each worker before any job runs.
 
-Dask is imported only when a cluster is asked for. See ``docs/distributed.md``.
+Dask is imported only when a cluster is asked for. See ``docs/user-guide/batches-and-dask.md``.
 """
 
 from ._executor import (

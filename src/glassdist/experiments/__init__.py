@@ -7,9 +7,9 @@
 * :func:`run_rotation` — §3.3, Fig. 9: the same slab with the grid axis-aligned
   and rotated about its normal.
 * :func:`run_accuracy` — both methods against the exact ray-traced truth on 13
-  scenes (docs/accuracy.md).
+  scenes (docs/validation/accuracy.md).
 * :func:`run_transfer` — the Analyzer's measured transfer function, ray-traced ripples
-  and a large lens (docs/transfer_function.md).
+  and a large lens (docs/explanation/transfer-function.md).
 
 Each takes the rendering options of :class:`RunOptions` as keywords (``engine``,
 ``scale``, ``spp``, ``progress``), renders its scenes once and evaluates them

@@ -27,7 +27,7 @@ def register(subparsers):
         "DIR/NAME.json (numbers, settings, bound checks), DIR/NAME.md (tables next to the paper's) and the "
         "paper's figures re-made from the data. parity: §3.1 (Table 2, Fig. 6, bandpass ablation); "
         "pitch: §3.2 (Figs. 7, 8, 10); rotation: §3.3 (Fig. 9); accuracy: both methods against the exact "
-        "ray-traced truth on 13 scenes (docs/accuracy.md). With --workers N or --scheduler ADDRESS the "
+        "ray-traced truth on 13 scenes (docs/validation/accuracy.md). With --workers N or --scheduler ADDRESS the "
         "scenes render in parallel on Dask workers.",
     )
     p.add_argument("name", choices=_NAMES, help="experiment to run")

@@ -55,7 +55,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 SCENES_DIR = Path(__file__).resolve().parents[3] / "examples" / "scenes"
-DOCS_DIR = Path(__file__).resolve().parents[3] / "docs"
+DOCS_DIR = Path(__file__).resolve().parents[3] / "docs" / "records"
 METHODS = ("comparative", "direct")
 CHANNELS = ("phi_eff", "phi_shear")
 
@@ -556,7 +556,7 @@ def notes(record: dict) -> str:
             text += (
                 ": the deficit is not only a border effect. The lens (aperture 160 mm) spans under two carrier "
                 "periods of the 96.9 mm grid, and at σ = 100 mm (about one period) the demodulation bandwidth takes "
-                "more of its rim than the truth's Gaussian (see `docs/experiments/README.md`, \"Coarse grid, not met\")."
+                "more of its rim than the truth's Gaussian (see `docs/records/experiments/README.md`, \"Coarse grid, not met\")."
             )
         else:
             text += ": within 2 % there, so most of the deficit lies in the band along the region's border."

@@ -1,6 +1,6 @@
 """The Analyzer's transfer function for a displacement field, measured, and ray-traced ripples and a large lens.
 
-Three parts (docs/transfer_function.md):
+Three parts (docs/explanation/transfer-function.md):
 
 * **Measured transfer function** (synthetic captures, :mod:`glassdist.synthetic`): a small
   sinusoidal displacement of wavelength ``n`` carrier periods is pushed through the
@@ -28,7 +28,7 @@ Three parts (docs/transfer_function.md):
   ``examples/scenes/wide_gaussian_lens.yaml``, a Gaussian lens wider than the view (no
   flat glass in view: reported, not bounded).
 
-    glassdist experiment transfer --out docs/experiments
+    glassdist experiment transfer --out docs/records/experiments
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ operator, camera, input hashes, the resolved protocol, the verdict with each che
 statistics per zone, the standard measures, warnings and the output folder. A re-run is a
 new row; rows are never changed. ``glassdist history`` lists, filters, exports and charts
 them; :func:`history` returns them to Python, and the subpackage itself is callable as it
-(``glassdist.history(lot="42")``). See ``docs/history.md``.
+(``glassdist.history(lot="42")``). See ``docs/user-guide/history.md``.
 
 A record that cannot reach its database (server down, driver missing, folder unwritable)
 waits in a local spool and is written, once, by the next run or read that reaches it.

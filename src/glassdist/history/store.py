@@ -520,9 +520,9 @@ class Recorded:
         if self.spooled is not None:
             return (f"warning: this run was not recorded in the history {where}: {self.reason}; its record is kept in "
                     f"'{self.spooled}' and is written there by the next run or 'glassdist history' that reaches it "
-                    "(its outputs are complete; see docs/history.md)")
+                    "(its outputs are complete; see docs/user-guide/history.md)")
         return (f"warning: this run was not recorded in the history {where}: {self.reason} (its outputs are complete; "
-                "see docs/history.md, or --no-history)")
+                "see docs/user-guide/history.md, or --no-history)")
 
 
 def _write_waiting(loc: Location, db) -> tuple[int, int]:

@@ -256,7 +256,7 @@ def install_cycles(
         if _bpy_version(str(py)) is None:
             raise InputError(
                 f"{BPY_REQUIREMENT} was installed into {env} but 'import bpy' fails; "
-                "see docs/cycles.md for the system libraries it needs"
+                "see docs/user-guide/cycles.md for the system libraries it needs"
             )
     return py
 

@@ -351,7 +351,7 @@ class Scene(BaseModel):
 
 def scene_from_dict(data: dict, *, source: str = "scene") -> Scene:
     """Validate a parsed scene mapping; raises :class:`InputError` on any problem."""
-    return validate_model(Scene, data, "scene", source, "see docs/virtual_pipeline.md for the scene format")
+    return validate_model(Scene, data, "scene", source, "see docs/explanation/virtual-pipeline.md for the scene format")
 
 
 def load_scene(path) -> Scene:

@@ -74,7 +74,7 @@ point moves by :math:`\\tan\\alpha\\,h_f`, the exit point by
 :math:`d\\sec^2\\beta\\,\\delta\\beta` when the slope turns the in-glass ray); the
 change of the prefactors and of :math:`\\ell` with the perturbed angles. The
 relative error of the prism term scales as :math:`|\\nabla h| / \\tan\\beta`
-(see docs/virtual_pipeline.md for measured values).
+(see docs/explanation/virtual-pipeline.md for measured values).
 
 References
 ----------

@@ -107,7 +107,7 @@ def _set_dotted(data: dict, key: str, value):
             where = ".".join(parts[:i]) or "the scene"
             keys = ", ".join(sorted(node)) if isinstance(node, dict) else "none"
             raise InputError(f"--vary key '{key}': {where} has no '{part}' (its keys: {keys}); "
-                             "see docs/virtual_pipeline.md for the scene format")
+                             "see docs/explanation/virtual-pipeline.md for the scene format")
         if last:
             node[part] = value
         else:

@@ -6,7 +6,7 @@ statistics, verdict and warnings; download the HTML report and the exports. Each
 runs the ``glassdist analyze`` command in its own process inside a private temporary
 folder, so the page shows exactly what the command line writes, with the same
 validation, limits and one-line errors. FastAPI/Starlette and uvicorn are imported
-only when the application is created. See ``docs/web_app.md``.
+only when the application is created. See ``docs/user-guide/web-app.md``.
 """
 
 from ._jobs import Job, JobStore
