@@ -124,22 +124,43 @@ class RunInputs:
             ((Path(self.mask),) if self.mask is not None else ())
 
 
-def read_inputs(image_path=None, reference_path=None, mask_path=None, *, image=None) -> RunInputs:
+def read_inputs(image_path=None, reference_path=None, mask_path=None, *, image=None, sources=None) -> RunInputs:
     """The :class:`RunInputs` of a result analysed elsewhere (the Python API): each file read once.
 
     The photo is read once for its preview, SHA-256 and EXIF (:func:`glassdist.io.read_photo`);
     the reference is hashed. ``image``: the photo's pixels when no ``image_path`` is given
-    (drawn, not recorded).
+    (drawn, not recorded). ``sources``: the files the analysis read
+    (``AnalysisResult.sources``), the default of each path not given.
+
+    Raises
+    ------
+    InputError
+        A file of ``sources`` no longer holds the bytes that were analysed.
     """
     from ..io import preview
 
+    sources = sources or {}
+    image_path = sources.get("image") if image_path is None else image_path
+    reference_path = sources.get("reference") if reference_path is None else reference_path
+    mask_path = sources.get("mask") if mask_path is None else mask_path
     photo_file, camera, small = None, False, None if image is None else preview(image)
     if image_path is not None:
         photo = read_photo(image_path, dtype=np.float32)
+        _same_bytes(image_path, photo.sha256, sources, "image")
         photo_file, camera, small = InputFile(str(image_path), photo.sha256), photo.camera, preview(photo.image)
-    reference = None if reference_path is None else InputFile(str(reference_path), file_sha256(reference_path))
+    reference = None
+    if reference_path is not None:
+        reference = InputFile(str(reference_path), file_sha256(reference_path))
+        _same_bytes(reference_path, reference.sha256, sources, "reference")
     return RunInputs(image=photo_file, reference=reference, mask=None if mask_path is None else str(mask_path),
                      camera=camera, preview=small)
+
+
+def _same_bytes(path, sha256: str, sources: dict, role: str) -> None:
+    """A file the analysis read must still hold what it read: the record states its SHA-256."""
+    if sources.get(role) is not None and str(sources[role]) == str(path) and sources.get(f"{role}_sha256") != sha256:
+        raise InputError(f"the {role} '{path}' has changed since it was analysed (SHA-256 {sources[f'{role}_sha256']}, "
+                         f"now {sha256}); analyse it again before writing its record")
 
 
 @dataclass(frozen=True)

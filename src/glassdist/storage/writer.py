@@ -76,7 +76,8 @@ def write_outputs(result, out_dir, *, fields="analysis", report=False, export=Fa
         ``image_path`` is given.
     image_path, reference_path, mask_path : path, optional
         The inputs: recorded with their SHA-256, never overwritten; the photo is drawn
-        with the analysed region outlined (``input_region.png``).
+        with the analysed region outlined (``input_region.png``). Default: the files
+        :func:`glassdist.analyze` read, when it was given paths (``result.sources``).
     history : glassdist.history.Recording or False, optional
         How the run is recorded in the results history once its files are written
         (:func:`glassdist.history.record_run`: a history that cannot be written is a
@@ -98,7 +99,7 @@ def write_outputs(result, out_dir, *, fields="analysis", report=False, export=Fa
     loaded = as_spec(given) if given is not None else None
     request = RunRequest(fields=fields, report=report, export=export, spec=loaded, protocol=protocol, mask=mask,
                          metadata=dict(metadata or {}), history=history)
-    inputs = read_inputs(image_path, reference_path, mask_path, image=image)
+    inputs = read_inputs(image_path, reference_path, mask_path, image=image, sources=result.sources)
     planned = plan_outputs(result.field_specs(), fields=fields, report=report, export=export, limits=request.limits)
     spec_file = Path(loaded.path) if loaded is not None and loaded.path else None
     with open_output_folder(out_dir, planned=planned, inputs=(*inputs.paths, spec_file)) as folder:
