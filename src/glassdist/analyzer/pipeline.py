@@ -37,7 +37,7 @@ from .metrics import (
     detrend_increment, evaluate_displacement, inverse_2x2, masked_gaussian, polynomial_detrend, strain_tensor,
 )
 from .transfer import InstrumentTransfer, dirichlet_response
-from .params import AnalyzerParams, load_params
+from .params import AnalyzerParams, given_settings, load_params
 from .pattern import settle_pattern
 from .region import (
     ANALYSED, BEYOND_RANGE, FRAGMENT, LOW_MODULATION, PHASE_RESIDUE, Region, beyond_range_warning, contamination_px,
@@ -1257,6 +1257,7 @@ def analyze(
     True
     """
     image, reference, params, mask, sources = _api_inputs(image, reference, params, mask, detrend_degree, sigma_mm)
+    sources["given"] = given_settings(params, pattern=pattern, fallback=getattr(reference, "params", None))
     if camera_distance_m is not None:
         camera_distance_m = check_number(camera_distance_m, "camera_distance_m (--camera-distance-m, camera to pane)",
                                          DISTANCE_M)
@@ -1270,7 +1271,7 @@ def analyze(
         del image  # Block A needs no photo: freed here unless the caller keeps it (the command line does not)
         evaluated = _evaluate(meas, meas.ag, warn)
     res = _result(meas, evaluated, warn, camera_distance_m=camera_distance_m)
-    return replace(res, sources=sources) if sources else res
+    return replace(res, sources=sources)
 
 
 def _api_inputs(image, reference, params, mask, detrend_degree, sigma_mm):

@@ -183,10 +183,11 @@ class AnalysisResult:
     restart_sigma_px : float
         Sigma of the low-pass of the warped reference's field the photo passes started from, px.
     sources : dict
-        The files analysed, when :func:`~glassdist.analyzer.pipeline.analyze` was given paths
-        (:func:`glassdist.io.read_sources`: ``image``, ``image_sha256``, ``camera``,
-        ``reference``, ``reference_sha256``, ``mask``); :func:`glassdist.write_outputs`
-        records them. Empty for arrays.
+        Where the inputs of :func:`~glassdist.analyzer.pipeline.analyze` came from: the files
+        it read, when given paths (:func:`glassdist.io.read_sources`: ``image``,
+        ``image_sha256``, ``camera``, ``reference``, ``reference_sha256``, ``mask``), and
+        ``given``, the settings the caller chose (:func:`~glassdist.analyzer.params.given_settings`);
+        :func:`glassdist.write_outputs` records them. Empty for other results.
     """
 
     method: str

@@ -35,7 +35,7 @@ from ..report.maps import run_figures
 from .fields import SUMMARY_NAME, grid_members, pixel_members, write_fields_npz, write_fields_tiff, write_npz
 from .fields import write_statistics_csv
 from .folder import OutputFolder, estimate_output_bytes, open_output_folder, plan_outputs, remove_outputs
-from .record import EXIT_OK, EXIT_SPEC_FAIL, RunRequest, build_record, read_inputs
+from .record import EXIT_OK, EXIT_SPEC_FAIL, RunRequest, build_record, read_inputs, result_protocol
 
 __all__ = ["EXIT_OK", "EXIT_SPEC_FAIL", "write_outputs", "write_run"]
 
@@ -66,7 +66,9 @@ def write_outputs(result, out_dir, *, fields="analysis", report=False, export=Fa
     spec_path : path, optional
         The specification file, when ``spec`` is not given.
     protocol : ResolvedProtocol, optional
-        The settings resolved from the options and the specification (recorded).
+        The settings resolved from the options and the specification (recorded). Default,
+        for a result of :func:`glassdist.analyze`: the command line's record of the same
+        settings (:func:`~glassdist.storage.record.result_protocol`).
     mask : ndarray of bool, optional
         The region the analysis was asked for (coverage is of it).
     metadata : dict, optional
@@ -97,6 +99,8 @@ def write_outputs(result, out_dir, *, fields="analysis", report=False, export=Fa
     """
     given = spec if spec is not None else spec_path
     loaded = as_spec(given) if given is not None else None
+    if protocol is None:
+        protocol = result_protocol(result, loaded)
     request = RunRequest(fields=fields, report=report, export=export, spec=loaded, protocol=protocol, mask=mask,
                          metadata=dict(metadata or {}), history=history)
     inputs = read_inputs(image_path, reference_path, mask_path, image=image, sources=result.sources)
