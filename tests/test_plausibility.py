@@ -121,6 +121,22 @@ def test_swapped_real_pair_warns():
     assert not plausibility_warnings(analyze(waves, reference=ref, **kw).warnings)
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["wavy_slab", "biconvex_lens_p64", "mild_slab_rotated"])
+def test_swapped_rendered_pair_warns(name):
+    """Ray-traced pairs given the other way round warn (the grid spreads 4 to 13 times the reference's at half size)."""
+    from glassdist.experiments import scaled_scene
+    from glassdist.render import render_scene
+    from glassdist.scene import load_scene
+    from glassdist.theory import analysis_params
+
+    scene = scaled_scene(load_scene(EXAMPLES / "scenes" / f"{name}.yaml"), scale=0.5, spp=1)
+    img, ref = render_scene(scene, engine="exact"), render_scene(scene, engine="exact", reference=True)
+    res = analyze(ref, reference=img, pitch_mm=scene.backdrop.pitch_mm, distance_m=scene.backdrop.distance_m,
+                  params=analysis_params(scene))
+    assert any("swapped" in w for w in res.warnings), res.warnings
+
+
 def test_grid_spread_on_the_real_photos():
     """The figures the swap test rests on: the waves photo spreads its grid's frequency 8 times the reference's;
     the floating ring, a local disturbance, hardly at all (so a swapped ring pair is not told)."""

@@ -86,15 +86,27 @@ def _summary(folder):
     return json.loads((folder / "summary.json").read_text())
 
 
-def test_command_line_batch_and_api_write_the_same_summary(pair, tmp_path):
+#: The same settings as options of ``glassdist analyze``, keywords of ``analyze`` and fields of a batch pane.
+SETTINGS = {
+    "defaults": ([], {}),
+    "chosen": (["--pattern", "lines", "--detrend-degree", "3", "--sigma-mm", "6"],
+               {"pattern": "lines", "detrend_degree": 3, "sigma_mm": 6.0}),
+}
+
+
+@pytest.mark.parametrize("settings", [pytest.param("defaults"), pytest.param("chosen", marks=pytest.mark.slow)])
+def test_command_line_batch_and_api_write_the_same_summary(pair, tmp_path, settings):
     from glassdist.jobs.batch import Pane, run_batch
 
+    options, keywords = SETTINGS[settings]
     cli = run_cli("analyze", pair / "pane.png", "--reference", pair / "reference.png", "--pitch-mm", "2",
-                  "--distance-m", "1", "--pane-id", "P-1", "--out", tmp_path / "cli", "-q")
+                  "--distance-m", "1", *options, "--pane-id", "P-1", "--out", tmp_path / "cli", "-q")
     assert cli.returncode == 0, cli.stderr
-    res = glassdist.analyze(pair / "pane.png", reference=pair / "reference.png", pitch_mm=2.0, distance_m=1.0)
+    res = glassdist.analyze(pair / "pane.png", reference=pair / "reference.png", pitch_mm=2.0, distance_m=1.0,
+                            **keywords)
     assert glassdist.write_outputs(res, tmp_path / "api", metadata={"pane_id": "P-1"}) == 0
-    pane = Pane(id="P-1", image=pair / "pane.png", reference=pair / "reference.png", pitch_mm=2.0, distance_m=1.0)
+    pane = Pane(id="P-1", image=pair / "pane.png", reference=pair / "reference.png", pitch_mm=2.0, distance_m=1.0,
+                **keywords)
     run_batch([pane], tmp_path / "batch", progress=False, echo=lambda s: None)
     a, b, c = (_summary(f) for f in (tmp_path / "cli", tmp_path / "api", tmp_path / "batch" / "panes" / "P-1"))
     assert _comparable(b) == _comparable(a)
