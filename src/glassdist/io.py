@@ -14,11 +14,10 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import io as _io
-import json
 import os
 import warnings
 from dataclasses import dataclass
-from pathlib import Path, PurePosixPath
+from pathlib import Path
 
 import numpy as np
 

@@ -18,17 +18,17 @@ import math
 import numpy as np
 
 __all__ = [
-    "MIN_VIEW_ANGLE_DEG",
-    "SWAP_RATIO",
-    "SWAP_FLOOR",
     "EXIF_SCALE_FACTOR",
-    "view_angle_deg",
+    "MIN_VIEW_ANGLE_DEG",
+    "SWAP_FLOOR",
+    "SWAP_RATIO",
     "distance_warning",
-    "grid_spread",
-    "swap_warning",
     "exif_scale_mm_per_px",
     "exif_scale_warning",
+    "grid_spread",
     "review_measurement",
+    "swap_warning",
+    "view_angle_deg",
 ]
 
 #: Narrowest full angle of view, degrees, of any camera set-up glassdist expects: about a
@@ -114,7 +114,7 @@ def _baseband(spectrum, f: np.ndarray) -> tuple[np.ndarray, tuple[float, float]]
     H, W = spectrum.shape
     half = 0.5 * float(np.hypot(*f))
     ry, rx = max(2, int(half * H)), max(2, int(half * W))
-    cy, cx = int(round(f[1] * H)), int(round(f[0] * W))
+    cy, cx = round(float(f[1]) * H), round(float(f[0]) * W)
     patch = spectrum.block(cy - ry, cx - rx, 2 * ry + 1, 2 * rx + 1)
     # a raised-cosine window on the patch: the baseband's ringing stays off the statistic
     patch = patch * np.outer(np.hanning(2 * ry + 3)[1:-1], np.hanning(2 * rx + 3)[1:-1]).astype(np.float32)
@@ -152,6 +152,8 @@ def grid_spread(image: np.ndarray | None, carriers, *, spectrum=None) -> float:
     from .analyzer.fourier import compute_spectrum
 
     if spectrum is None:
+        if image is None:
+            raise ValueError("grid_spread needs the image or its spectrum")
         spectrum = compute_spectrum(image)
     out = []
     for c in (carriers.k1, carriers.k2):
@@ -241,7 +243,7 @@ def exif_scale_warning(camera: dict | None, mm_per_px: float, image_shape: tuple
     the wrong unit moves it by a factor of 10 or more.
     """
     expected = exif_scale_mm_per_px(camera, image_shape)
-    if expected is None or not (np.isfinite(mm_per_px) and mm_per_px > 0):
+    if camera is None or expected is None or not (np.isfinite(mm_per_px) and mm_per_px > 0):
         return None
     ratio = mm_per_px / expected
     if 1.0 / EXIF_SCALE_FACTOR <= ratio <= EXIF_SCALE_FACTOR:
