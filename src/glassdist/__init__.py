@@ -16,8 +16,15 @@ Conventions (used everywhere in the package)
   backdrop mm: a converging lens reads ``phi_eff < 0``.
 """
 
+import logging
+
 from ._lazy import lazy_exports
 from ._version import __version__
+
+# A library prints nothing: its warnings are on the results, its log records go to the
+# handlers the application configures (the command line's), never to logging's
+# last-resort handler on stderr.
+logging.getLogger(__name__).addHandler(logging.NullHandler())
 
 # Public names and the module that holds each. They load on first use (PEP 562), so that
 # ``glassdist --help``, a refused input and each batch pane's process do not pay for

@@ -357,7 +357,8 @@ def _run_analyze(args) -> int:
             kw = dict(pitch_mm=protocol.pitch_mm, distance_m=L, reference=reference, params=params, mask=request.mask)
             # a single photo is handed over, so that the analysis frees it once Block F is done
             pin = args.camera_distance_m if optics is None else None  # transmission: the Direct bulk channel
-            result = (analyze(images.pop(), lens=lens, camera_distance_m=pin, **kw) if len(images) == 1
+            result = (analyze(images.pop(), lens=lens, camera_distance_m=pin, camera=inputs.camera or None, **kw)
+                      if len(images) == 1
                       else analyze_captures(images, **kw))
             del images, reference, kw
             if optics is not None:

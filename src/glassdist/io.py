@@ -14,18 +14,17 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import io as _io
-import json
 import os
 import warnings
 from dataclasses import dataclass
-from pathlib import Path, PurePosixPath
+from pathlib import Path
 
 import numpy as np
 
 from .errors import InputError
 from .validation import check_input_file, limits, safe_text
 
-__all__ = ["Photo", "read_photo", "read_image", "preview", "image_shape", "read_mask", "write_png16", "prepare_output_dir", "open_with_pillow",
+__all__ = ["Photo", "read_photo", "read_sources", "read_image", "preview", "image_shape", "read_mask", "write_png16", "prepare_output_dir", "open_with_pillow",
            "camera_metadata", "to_jsonable"]
 
 _READABLE = {".png", ".tif", ".tiff", ".bmp", ".jpg", ".jpeg"}
@@ -53,7 +52,8 @@ def _imread_any(path: Path, data: bytes, max_pixels: float) -> tuple[np.ndarray,
             f"cannot decode image '{safe_text(path)}'; supported formats are PNG, TIFF, BMP and JPEG (8 or 16 bit)"
         )
     if img.ndim == 3:
-        img = img[..., ::-1] if img.shape[2] in (3, 4) else img  # BGR(A) -> RGB(A)
+        if img.shape[2] in (3, 4):  # BGR(A) -> RGB(A): the alpha channel stays last
+            img = img[..., [2, 1, 0, *range(3, img.shape[2])]]
     return img, None
 
 
@@ -73,7 +73,25 @@ def _tiff_page(tif, p: Path, max_pixels: float):
     _check_pixels(p, int(page.imagewidth), int(page.imagelength), max_pixels)
     if np.dtype(page.dtype).kind == "c":
         raise InputError(f"TIFF image '{shown}' holds complex numbers; give a real-valued (intensity) image")
+    planes = _tiff_planes(page)
+    if planes > 1:
+        raise InputError(
+            f"TIFF image '{shown}' holds {planes} image planes in one page (a stack, not colour channels); glassdist "
+            "analyses one photo: save the frame to analyse as a single grey or colour image"
+        )
     return page
+
+
+def _tiff_planes(page) -> int:
+    """Image planes of a TIFF page that are neither colour channels nor alpha: depth slices or unnamed samples."""
+    import tifffile
+
+    depth = int(getattr(page, "imagedepth", 1) or 1)
+    samples = int(page.samplesperpixel)
+    colour = 3 if page.photometric in (tifffile.PHOTOMETRIC.RGB, tifffile.PHOTOMETRIC.YCBCR) else 1
+    # ExtraSamples 1 and 2 are (associated, unassociated) alpha; 0 is unspecified data
+    alpha = sum(1 for e in (page.extrasamples or ()) if int(e) in (1, 2))
+    return depth * max(samples - colour - alpha + 1, 1)
 
 
 def _open_tiff(p: Path, use, data: bytes | None = None):
@@ -187,8 +205,9 @@ def read_image(path: str | os.PathLike, *, max_megapixels: float | None = None, 
     ----------
     path : str or path-like
         PNG, TIFF, BMP or JPEG file; 8- to 16-bit integer or floating point;
-        grey, RGB or RGBA (alpha is ignored), colour planes contiguous or separate
-        (planar TIFF). A TIFF must hold one frame (reduced-resolution previews aside).
+        grey, RGB or RGBA (fully opaque: alpha is not used), colour planes contiguous or
+        separate (planar TIFF). A TIFF must hold one frame (reduced-resolution previews
+        aside). Floats are intensities in [0, 1].
     max_megapixels : float, optional
         Largest image accepted, megapixels, checked from the file's header before the
         pixels are decoded; default :attr:`glassdist.validation.Limits.megapixels`
@@ -210,8 +229,9 @@ def read_image(path: str | os.PathLike, *, max_megapixels: float | None = None, 
     ------
     InputError
         If the file is missing, not a regular file, unreadable, empty, larger than the
-        limit, not decodable, not a single 2-D frame, complex-valued, or holds NaN or
-        infinite values.
+        limit, not decodable, not a single 2-D frame (a stack of pages, or of planes in
+        one page), complex-valued, black and white only (1 bit), has transparent pixels,
+        holds floats outside [0, 1] or NaN or infinite values.
 
     Examples
     --------
@@ -241,9 +261,46 @@ def read_image(path: str | os.PathLike, *, max_megapixels: float | None = None, 
     return _decoded(p, _read_bytes(p), max_megapixels, dtype)
 
 
-def _decoded(p: Path, data: bytes, max_megapixels, dtype) -> np.ndarray:
-    """:func:`read_image` of the file ``p`` whose bytes are ``data``."""
+def _check_samples(p: Path, raw: np.ndarray, *, binary: bool = False) -> None:
+    """What a decoded photo may not hold: transparency, only black and white, or floats that are not intensities in [0, 1].
+
+    ``binary``: a black-and-white image is accepted (a mask).
+    """
+    shown = safe_text(p)
+    if raw.ndim == 3 and raw.shape[2] in (2, 4):
+        alpha = raw[..., -1]
+        opaque = np.iinfo(alpha.dtype).max if np.issubdtype(alpha.dtype, np.integer) else 1.0
+        clear = float(np.count_nonzero(alpha < opaque)) / alpha.size
+        if clear > 0:
+            raise InputError(
+                f"image '{shown}' has transparent pixels ({100 * clear:.3g}% of its alpha channel below opaque); the "
+                "colour under them is not the photo's: save it without transparency (flattened), and give any part "
+                "to leave out as a mask (--mask)"
+            )
+    if raw.dtype == bool and not binary:
+        raise InputError(
+            f"image '{shown}' is black and white only (1 bit per pixel): the grey levels the grid's phase is measured "
+            "from are lost; give the camera's grey or colour image"
+        )
+    if raw.dtype.kind == "f" and raw.size:
+        lo, hi = float(np.nanmin(raw)), float(np.nanmax(raw))
+        if np.isfinite(lo) and np.isfinite(hi) and (lo < -_FLOAT_SLACK or hi > 1.0 + _FLOAT_SLACK):
+            raise InputError(
+                f"image '{shown}' holds floating-point values from {lo:.4g} to {hi:.4g}; glassdist reads a float image "
+                "as intensities in [0, 1] (1 = full scale, which saturation and contrast checks rely on): scale it to "
+                "[0, 1] or save it as an 8- or 16-bit integer image"
+            )
+
+
+#: How far a float image may stray outside [0, 1] (noise around a dark-frame subtraction, a
+#: white slightly above full scale) and still be read as intensities.
+_FLOAT_SLACK = 0.05
+
+
+def _decoded(p: Path, data: bytes, max_megapixels, dtype, *, binary: bool = False) -> np.ndarray:
+    """:func:`read_image` of the file ``p`` whose bytes are ``data`` (``binary``: black and white accepted)."""
     raw, bits = _imread_any(p, data, _max_pixels(max_megapixels))
+    _check_samples(p, raw, binary=binary)
     if raw.ndim == 3 and raw.shape[2] >= 3:
         rgb = raw[..., :3].astype(np.float64)
         grey = 0.299 * rgb[..., 0] + 0.587 * rgb[..., 1] + 0.114 * rgb[..., 2]
@@ -301,7 +358,8 @@ def read_mask(path: str | os.PathLike, shape: tuple[int, int] | None = None) -> 
     if p.suffix.lower() == ".npy":
         mask = _read_npy_mask(check_input_file(p, "mask file", option="--mask"))
     else:
-        mask = read_image(p) > 0.5 / 255.0
+        q = _checked_image_path(p)
+        mask = _decoded(q, _read_bytes(q), None, np.float32, binary=True) > 0.5 / 255.0
     shown = safe_text(p)
     if mask.ndim != 2:
         raise InputError(f"mask '{shown}' must be a 2-D image, got shape {mask.shape}")
@@ -369,7 +427,12 @@ def prepare_output_dir(path: str | os.PathLike) -> Path:
 _EXIF_TAGS = {  # EXIF tag id -> name recorded
     0x010F: "make", 0x0110: "model", 0x0132: "datetime", 0x9003: "datetime_original", 0x829A: "exposure_time_s",
     0x829D: "f_number", 0x920A: "focal_length_mm", 0x8827: "iso", 0xA434: "lens_model", 0xA431: "serial_number",
+    # the capture geometry (glassdist.plausibility): focus distance, 35 mm-equivalent focal length, native width
+    0x9206: "subject_distance_m", 0xA405: "focal_length_35mm_mm", 0xA002: "pixel_width",
+    0xA003: "pixel_height",
 }
+#: EXIF FocalPlaneResolutionUnit -> mm per unit (2 inch, 3 cm, 4 mm, 5 um)
+_FOCAL_PLANE_UNIT_MM = {2: 25.4, 3: 10.0, 4: 1.0, 5: 1e-3}
 
 
 def camera_metadata(path):
@@ -385,7 +448,8 @@ def camera_metadata(path):
     dict or None
         Any of ``make``, ``model``, ``lens_model``, ``serial_number``, ``datetime``,
         ``datetime_original``, ``exposure_time_s``, ``f_number``, ``focal_length_mm``,
-        ``iso`` that the file records.
+        ``iso``, ``subject_distance_m``, ``focal_length_35mm_mm``, ``pixel_width``, ``pixel_height`` (px, as taken),
+        ``focal_plane_px_per_mm`` (the sensor's pixels per mm) that the file records.
     """
     try:
         with open_with_pillow(path) as im:
@@ -413,6 +477,12 @@ def camera_metadata(path):
             except (TypeError, ValueError):
                 value = str(value)
         out[name] = value
+    res, unit = tags.get(0xA20E), _FOCAL_PLANE_UNIT_MM.get(tags.get(0xA210, 2))
+    try:
+        if res is not None and unit is not None and float(res) > 0:
+            out["focal_plane_px_per_mm"] = float(res) / unit
+    except (TypeError, ValueError, ZeroDivisionError):
+        pass
     return out or None
 
 
@@ -479,3 +549,37 @@ def preview(image, max_px: int = 1200) -> np.ndarray:
         return img
     size = (max(1, round(img.shape[1] / k)), max(1, round(img.shape[0] / k)))
     return cv2.resize(img, size, interpolation=cv2.INTER_AREA)
+
+
+def read_sources(image, reference=None, mask=None) -> tuple:
+    """The photo, reference and mask of an analysis, each read where it is given as a path, and the files read.
+
+    Parameters
+    ----------
+    image, reference : ndarray or path
+        Read with :func:`read_photo` (single precision, what the analyzer works in) when paths.
+    mask : ndarray or path, optional
+        Read with :func:`read_mask` (the photo's size) when a path.
+
+    Returns
+    -------
+    image, reference, mask
+        Arrays (or as given).
+    sources : dict
+        What was read from files: ``image`` (path), ``image_sha256`` and ``camera``
+        (:func:`camera_metadata`), ``reference`` and ``reference_sha256``, ``mask``; empty
+        when nothing was given as a path.
+    """
+    sources: dict = {}
+    if isinstance(image, (str, os.PathLike)):
+        photo = read_photo(image, dtype=np.float32)
+        sources.update(image=os.fspath(image), image_sha256=photo.sha256, camera=photo.camera)
+        image = photo.image
+    if isinstance(reference, (str, os.PathLike)):
+        ref = read_photo(reference, dtype=np.float32)
+        sources.update(reference=os.fspath(reference), reference_sha256=ref.sha256)
+        reference = ref.image
+    if isinstance(mask, (str, os.PathLike)):
+        sources["mask"] = os.fspath(mask)
+        mask = read_mask(mask, np.shape(image))
+    return image, reference, mask, sources

@@ -369,14 +369,25 @@ def _fundamental(i: int, vecs: np.ndarray, strengths: np.ndarray, size: int) -> 
     return i
 
 
+def _one_family(f1: np.ndarray, size: int, found: str) -> InputError:
+    """The error for a spectrum with one peak family: a line grid, or no grid at all.
+
+    A peak within 2 periods of the band's low cut (4 periods across the image) is the tail
+    of the illumination's spectrum (a brightness gradient, a few large shapes), not a grid.
+    """
+    if np.linalg.norm(f1) * size < 6.0:
+        return InputError("no grid pattern found in the image (its only periodic content is a brightness gradient or "
+                          "a few large shapes); check the photo shows the printed grid in focus, and that at least "
+                          "6 grid periods fit across it")
+    return InputError(f"{found}; glassdist needs a crossed line grid or a checkerboard")
+
+
 def _pick_pair(vecs: np.ndarray, strengths: np.ndarray, size: int) -> tuple[int, int]:
     """Indices of k1 (strongest fundamental) and k2 (> 45 deg from it, not a cross term k_a +- k1)."""
     i1 = _fundamental(0, vecs, strengths, size)
     cand = [j for j in range(len(vecs)) if j != i1 and _angle_between(vecs[j], vecs[i1]) > 45.0]
     if not cand:
-        raise InputError(
-            "only one family of grid lines found; glassdist needs a crossed line grid or a checkerboard"
-        )
+        raise _one_family(vecs[i1], size, "only one family of grid lines found")
     i2 = _fundamental(max(cand, key=lambda j: strengths[j]), vecs, strengths, size)
     # Reject cross terms q = p +- k1: prefer the lower-frequency peak p if it exists and is >45 deg from k1.
     for _ in range(2):
@@ -395,9 +406,7 @@ def _pick_pair(vecs: np.ndarray, strengths: np.ndarray, size: int) -> tuple[int,
             break
         i2 = better
     if strengths[i2] < 4.0:
-        raise InputError(
-            "only one family of grid lines is visible; glassdist needs a crossed line grid or a checkerboard"
-        )
+        raise _one_family(vecs[i1], size, "only one family of grid lines is visible")
     return i1, i2
 
 
@@ -463,6 +472,8 @@ def find_carriers(spectrum: Spectrum, *, min_period_px: float = 3.0, max_peaks: 
     _check_no_finer_grid(spectrum, min_period_px, abs(spectrum.rfft[int(kys[i1]) % H, int(kxs[i1])]))
     c1 = _refine_carrier(spectrum, kys[i1], kxs[i1], float(strengths[i1]))
     c2 = _refine_carrier(spectrum, kys[i2], kxs[i2], float(strengths[i2]))
+    if min(c1.norm, c2.norm) * min(H, W) < 4.0:  # refined below the band's low cut: the illumination's tail
+        raise _one_family(np.zeros(2), 1, "")
     if np.linalg.det(np.array([c1.f, c2.f])) < 0:
         c2 = c2.negated()
     return CarrierPair(c1, c2)

@@ -645,7 +645,8 @@ def _ambiguous_offsets(spread: float, n: int, offsets: np.ndarray, warn: list[st
     """
     if spread < _AMBIGUOUS_SPREAD_PERIODS:
         return False
-    taken = ", ".join(f"({u:+.0f}, {v:+.0f})" for u, v in offsets[2:])
+    # whole periods, as integers: a float -0.0 would print '-0'
+    taken = ", ".join(f"({round(float(u)):d}, {round(float(v)):d})" for u, v in offsets[2:])
     warn.append(
         f"Direct Method: the analysed region falls into {n} parts and the glass moves the grid by up to "
         f"{spread:.1f} carrier periods within them, so Block I cannot tell the parts' whole-period offsets "

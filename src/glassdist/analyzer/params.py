@@ -23,7 +23,7 @@ from ..validation import MODEL_CONFIG, SIGMA_MM, load_mapping, safe_text, valida
 # explained at 0.9859 / 0.9871 / 0.9879 / 0.9885 after 3 / 4 / 5 / 6 (docs/transfer_function.md)
 AUTO_PHOTO_PASSES = 6
 
-__all__ = ["AnalyzerParams", "load_params", "default_params_path"]
+__all__ = ["AnalyzerParams", "RECORDED_SETTINGS", "given_settings", "load_params", "default_params_path"]
 
 
 def _auto_or_int(name: str, v, lo: int, hi: int):
@@ -246,3 +246,31 @@ def load_params(source: str | Path | dict | None = None, **overrides) -> Analyze
     data.update({k: v for k, v in overrides.items() if v is not None})
     return validate_model(AnalyzerParams, data, "parameters", label,
                           f"see {default_params_path().name} for the valid keys and defaults")
+
+
+#: The analysis settings a run's record tells chosen from defaulted (its protocol's ``sources``).
+RECORDED_SETTINGS = ("pattern", "detrend_degree", "sigma_mm", "sigma_periods")
+
+
+def given_settings(params, *, pattern: str | None = None, fallback: AnalyzerParams | None = None) -> tuple[str, ...]:
+    """Which of :data:`RECORDED_SETTINGS` a caller chose: set in ``params`` or, for the pattern, given as ``pattern``.
+
+    Parameters
+    ----------
+    params : AnalyzerParams, dict, path or None
+        As :func:`glassdist.analyze` takes it (an ``AnalyzerParams``' fields set, a mapping's
+        or a file's keys).
+    pattern : str, optional
+        The ``pattern`` keyword; 'auto' (the photo decides) is not a choice.
+    fallback : AnalyzerParams, optional
+        The parameters used when ``params`` is None (a prepared reference's).
+    """
+    source = fallback if params is None else params
+    if source is None:
+        chosen = set()
+    else:
+        held = source if isinstance(source, AnalyzerParams) else load_params(source)
+        chosen = {k for k in held.model_fields_set if not (k == "pattern" and held.pattern == "auto")}
+    if pattern is not None and pattern != "auto":
+        chosen.add("pattern")
+    return tuple(k for k in RECORDED_SETTINGS if k in chosen)

@@ -26,6 +26,7 @@ import numpy as np
 from scipy import ndimage
 
 from ..errors import AnalysisError, InputError
+from ..plausibility import grid_spread, review_measurement
 from ..validation import DISTANCE_M, PITCH_MM, check_number
 from . import deform as D
 from . import fourier as F
@@ -36,11 +37,11 @@ from .metrics import (
     detrend_increment, evaluate_displacement, inverse_2x2, masked_gaussian, polynomial_detrend, strain_tensor,
 )
 from .transfer import InstrumentTransfer, dirichlet_response
-from .params import AnalyzerParams, load_params
+from .params import AnalyzerParams, given_settings, load_params
 from .pattern import settle_pattern
 from .region import (
     ANALYSED, BEYOND_RANGE, FRAGMENT, LOW_MODULATION, PHASE_RESIDUE, Region, beyond_range_warning, contamination_px,
-    downsample_mask, grid_seen, guard_band, local_contrast, trim_edges, valid_region, within,
+    downsample_mask, grid_seen, guard_band, local_contrast, pixel_quality, trim_edges, valid_region, within,
 )
 from .resample import image_grid_valid
 from .result import AnalysisResult
@@ -71,6 +72,7 @@ class ReferenceModel:
     params: AnalyzerParams = field(repr=False)
     warnings: tuple[str, ...] = ()
     noise_std: float = float("nan")
+    grid_spread: float = float("nan")  # glassdist.plausibility.grid_spread: the swapped-pair check
 
 
 # --------------------------------------------------------------------------- checks
@@ -1154,7 +1156,8 @@ def prepare_reference(reference: np.ndarray, *, params: AnalyzerParams | dict | 
         V = carriers.k2.fx * xx + carriers.k2.fy * yy + psi[1] / (2 * np.pi)
         fit, _ = fit_grid_homography((U, V), yy, xx, region.labels, region.n, carriers, grid, p, [])
         noise = noise_std(spec, carriers)
-    return ReferenceModel(ref.shape, carriers, covs, grid, bb, mods, fit, p, tuple(warn), noise)
+    return ReferenceModel(ref.shape, carriers, covs, grid, bb, mods, fit, p, tuple(warn), noise,
+                          grid_spread(None, carriers, spectrum=spec))
 
 
 def analyze(
@@ -1170,6 +1173,7 @@ def analyze(
     sigma_mm: float | None = None,
     lens: LensCalibration | None = None,
     camera_distance_m: float | None = None,
+    camera: dict | None = None,
 ) -> AnalysisResult:
     """Measure the distortion field of a photo of a grid seen through glass.
 
@@ -1203,6 +1207,10 @@ def analyze(
         Direct Method: the camera's distance from the pane along its normal, m, the camera
         facing the pane. With a camera file's ``lens`` (its focal length) it pins the
         magnification, and the bulk channel is reported (:mod:`glassdist.analyzer.bulk`).
+    camera : dict, optional
+        The photo's EXIF facts (:func:`glassdist.io.camera_metadata`; read from the file when
+        ``image`` is a path): a focal length and subject distance cross-check the measured
+        scale against ``pitch_mm`` (:mod:`glassdist.plausibility`).
 
     Returns
     -------
@@ -1248,28 +1256,33 @@ def analyze(
     >>> bool(res.phi_eff_mD[96, 128] < 0)  # a converging lens reads phi_eff < 0
     True
     """
-    image, reference, params, mask = _api_inputs(image, reference, params, mask, detrend_degree, sigma_mm)
+    image, reference, params, mask, sources = _api_inputs(image, reference, params, mask, detrend_degree, sigma_mm)
+    sources["given"] = given_settings(params, pattern=pattern, fallback=getattr(reference, "params", None))
     if camera_distance_m is not None:
         camera_distance_m = check_number(camera_distance_m, "camera_distance_m (--camera-distance-m, camera to pane)",
                                          DISTANCE_M)
     warn: list[str] = []
     with _routed_warnings(warn):
         meas = _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn, lens=lens)
+        refm = meas.inputs.reference
+        warn.extend(review_measurement(image, None if refm is None else refm.grid_spread, meas.carriers,
+                                       mm_per_px=meas.mm_per_px, distance_m=distance_m, pitch_mm=pitch_mm,
+                                       camera=sources.get("camera") if camera is None else camera))
         del image  # Block A needs no photo: freed here unless the caller keeps it (the command line does not)
         evaluated = _evaluate(meas, meas.ag, warn)
-    return _result(meas, evaluated, warn, camera_distance_m=camera_distance_m)
+    res = _result(meas, evaluated, warn, camera_distance_m=camera_distance_m)
+    return replace(res, sources=sources)
 
 
 def _api_inputs(image, reference, params, mask, detrend_degree, sigma_mm):
-    """Photos and mask given as paths read; ``detrend_degree`` / ``sigma_mm`` merged into the parameters."""
-    from ..io import read_image, read_mask
+    """Photos and mask given as paths read; ``detrend_degree`` / ``sigma_mm`` merged into the parameters.
 
-    if isinstance(image, (str, os.PathLike)):
-        image = read_image(image, dtype=np.float32)
-    if isinstance(reference, (str, os.PathLike)):
-        reference = read_image(reference, dtype=np.float32)
-    if isinstance(mask, (str, os.PathLike)):
-        mask = read_mask(mask, np.shape(image))
+    Also returns the files read (:attr:`AnalysisResult.sources`): each path with the SHA-256 of
+    the bytes decoded, and the photo's EXIF camera.
+    """
+    from ..io import read_sources
+
+    image, reference, mask, sources = read_sources(image, reference, mask)
     settings = {k: v for k, v in (("detrend_degree", detrend_degree), ("sigma_mm", sigma_mm)) if v is not None}
     if settings:
         if params is None and isinstance(reference, ReferenceModel):
@@ -1278,7 +1291,7 @@ def _api_inputs(image, reference, params, mask, detrend_degree, sigma_mm):
             params = {**params.model_dump(exclude_unset=True), **settings}
         else:
             params = load_params(params, **settings)
-    return image, reference, params, mask
+    return image, reference, params, mask, sources
 
 
 @dataclass(frozen=True)
@@ -1348,9 +1361,6 @@ def _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn
         warn.extend(f5_warn)
         _check_region(region, demod.mods, warn)
         phases = _unwrapped_phases(demod, region, p)
-    w_beyond = beyond_range_warning(region.quality, inp.mask, demod.grid, p)
-    if w_beyond:
-        warn.append(w_beyond)
     fit = _direct_baseline(phases, demod, region, p, warn, lens) if demod.method == "direct" else None
     H_jac = fit.matrix if fit is not None else inp.reference.homography.matrix
     phases[~region.valid] = np.nan
@@ -1459,9 +1469,14 @@ def _result(meas: _Measurement, evaluated, warn: list[str], *, extra_fields: dic
     """The :class:`AnalysisResult` of :func:`_evaluate`'s output (``extra_fields``: more registered fields)."""
     ag, fields, valid_full, idx = evaluated
     p = meas.inputs.params
+    # stated from the pixel labels the result and its quality legend count (computed once, kept)
+    q_px = pixel_quality(meas.quality, meas.label_grid, valid_full, meas.inputs.mask, meas.margin_px[1]) \
+        if np.any(meas.quality == BEYOND_RANGE) else None
+    w_beyond = None if q_px is None else beyond_range_warning(q_px, p)
+    warn = [*warn, w_beyond] if w_beyond else warn
     for w in warn:
         log.warning(w)
-    return AnalysisResult(
+    res = AnalysisResult(
         method="direct" if meas.fit is not None else "comparative",
         valid=valid_full,
         mm_per_px=meas.mm_per_px,
@@ -1490,6 +1505,9 @@ def _result(meas: _Measurement, evaluated, warn: list[str], *, extra_fields: dic
                    "fit_valid": np.ascontiguousarray(ag.valid),
                    "label_grid": meas.label_grid, "mask": meas.inputs.mask},
     )
+    if q_px is not None:
+        res.__dict__["quality"] = q_px  # the cache of the result's pixel-grid field
+    return res
 
 
 def calibrate_from_photo(image, *, pitch_mm: float, pattern: str | None = None, params=None,

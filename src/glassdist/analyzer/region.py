@@ -435,25 +435,25 @@ def _kept_beyond_margins(labels: np.ndarray, ok, modulated, half, grid: F.Sampli
     return kept
 
 
-def beyond_range_warning(labels: np.ndarray, user_mask, grid: F.SamplingGrid, p) -> str | None:
+def beyond_range_warning(quality: np.ndarray, p) -> str | None:
     """The warning of a region of which over 1% is :data:`BEYOND_RANGE`, stating every excluded share.
 
     Parameters
     ----------
-    labels : ndarray of uint8 (h, w)
-        Final quality labels of the demodulation grid (before the guard band).
-    user_mask : ndarray of bool (H, W) or None
-    grid : SamplingGrid
+    quality : ndarray of uint8 (H, W)
+        The quality labels on the image's pixel grid (:func:`pixel_quality`, the result's
+        ``quality``): the shares are those of the quality map's legend, one count of the
+        same pixels.
     p : AnalyzerParams
 
     Returns
     -------
     str or None
-        Shares are of the samples inside the user's region.
+        Shares are of the pixels inside the user's region (all pixels without a mask).
     """
-    in_mask = np.ones(grid.shape, bool) if user_mask is None else downsample_mask(user_mask, grid)
-    n = max(int(np.count_nonzero(in_mask)), 1)
-    share = {k: np.count_nonzero((labels == k) & in_mask) / n for k in EXCLUDED}
+    counts = {k: int(np.count_nonzero(quality == k)) for k in (*EXCLUDED, USER_MASK)}
+    n = max(quality.size - counts[USER_MASK], 1)
+    share = {k: counts[k] / n for k in EXCLUDED}
     if share[BEYOND_RANGE] <= 0.01:
         return None
     reach = p.deformation_max_deviation if p.deformation_passes > 0 else p.max_frequency_deviation

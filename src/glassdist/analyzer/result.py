@@ -182,6 +182,12 @@ class AnalysisResult:
         Of those, F5's photo passes (0: none ran).
     restart_sigma_px : float
         Sigma of the low-pass of the warped reference's field the photo passes started from, px.
+    sources : dict
+        Where the inputs of :func:`~glassdist.analyzer.pipeline.analyze` came from: the files
+        it read, when given paths (:func:`glassdist.io.read_sources`: ``image``,
+        ``image_sha256``, ``camera``, ``reference``, ``reference_sha256``, ``mask``), and
+        ``given``, the settings the caller chose (:func:`~glassdist.analyzer.params.given_settings`);
+        :func:`glassdist.write_outputs` records them. Empty for other results.
     """
 
     method: str
@@ -211,6 +217,7 @@ class AnalysisResult:
     demodulations: int = 1
     photo_passes: int = 0
     restart_sigma_px: float = 0.0
+    sources: dict = field(default_factory=dict, compare=False)
     _deferred: dict | None = field(default=None, repr=False, compare=False)
 
     def field_specs(self) -> tuple[FieldSpec, ...]:

@@ -35,7 +35,8 @@ from .fields import FIELD_LAYOUTS, GRID_KEYS
 if TYPE_CHECKING:
     from ..acceptance.assess import Acceptance
 
-__all__ = ["EXIT_OK", "EXIT_SPEC_FAIL", "InputFile", "RunInputs", "RunRecord", "RunRequest", "build_record", "read_inputs"]
+__all__ = ["EXIT_OK", "EXIT_SPEC_FAIL", "InputFile", "RunInputs", "RunRecord", "RunRequest", "build_record", "read_inputs",
+           "result_protocol"]
 
 EXIT_OK = 0
 #: exit status of ``glassdist analyze --spec`` when the analysis ran but the specification failed
@@ -124,22 +125,73 @@ class RunInputs:
             ((Path(self.mask),) if self.mask is not None else ())
 
 
-def read_inputs(image_path=None, reference_path=None, mask_path=None, *, image=None) -> RunInputs:
+def read_inputs(image_path=None, reference_path=None, mask_path=None, *, image=None, sources=None) -> RunInputs:
     """The :class:`RunInputs` of a result analysed elsewhere (the Python API): each file read once.
 
     The photo is read once for its preview, SHA-256 and EXIF (:func:`glassdist.io.read_photo`);
     the reference is hashed. ``image``: the photo's pixels when no ``image_path`` is given
-    (drawn, not recorded).
+    (drawn, not recorded). ``sources``: the files the analysis read
+    (``AnalysisResult.sources``), the default of each path not given.
+
+    Raises
+    ------
+    InputError
+        A file of ``sources`` no longer holds the bytes that were analysed.
     """
     from ..io import preview
 
+    sources = sources or {}
+    image_path = sources.get("image") if image_path is None else image_path
+    reference_path = sources.get("reference") if reference_path is None else reference_path
+    mask_path = sources.get("mask") if mask_path is None else mask_path
     photo_file, camera, small = None, False, None if image is None else preview(image)
     if image_path is not None:
         photo = read_photo(image_path, dtype=np.float32)
+        _same_bytes(image_path, photo.sha256, sources, "image")
         photo_file, camera, small = InputFile(str(image_path), photo.sha256), photo.camera, preview(photo.image)
-    reference = None if reference_path is None else InputFile(str(reference_path), file_sha256(reference_path))
+    reference = None
+    if reference_path is not None:
+        reference = InputFile(str(reference_path), file_sha256(reference_path))
+        _same_bytes(reference_path, reference.sha256, sources, "reference")
     return RunInputs(image=photo_file, reference=reference, mask=None if mask_path is None else str(mask_path),
                      camera=camera, preview=small)
+
+
+def _same_bytes(path, sha256: str, sources: dict, role: str) -> None:
+    """A file the analysis read must still hold what it read: the record states its SHA-256."""
+    if sources.get(role) is not None and str(sources[role]) == str(path) and sources.get(f"{role}_sha256") != sha256:
+        raise InputError(f"the {role} '{path}' has changed since it was analysed (SHA-256 {sources[f'{role}_sha256']}, "
+                         f"now {sha256}); analyse it again before writing its record")
+
+
+def result_protocol(result, spec: LoadedSpec | None = None):
+    """The protocol record ``glassdist analyze`` writes for the settings of a result analysed in Python, or None.
+
+    As the command line resolves its options (:func:`glassdist.acceptance.spec.resolve_protocol`):
+    the pitch, distance and method are the caller's ("option"), as is each setting
+    ``result.sources['given']`` names; a pattern neither given nor pinned was decided from
+    the photo ("auto"); the rest are defaults. None for a result that does not say what its
+    caller gave (not from :func:`glassdist.analyze`), or whose settings contradict the
+    specification's pins (the verdict's protocol checks then say so).
+    """
+    from dataclasses import replace
+
+    from ..acceptance.spec import resolve_protocol
+
+    sources = getattr(result, "sources", None) or {}
+    if "given" not in sources or result.optics is not None:
+        return None
+    given = set(sources["given"])
+    pinned = spec.spec.protocol if spec is not None else None
+    chosen = {"sigma_mm": result.sigma_mm if given & {"sigma_mm", "sigma_periods"} else None,
+              "detrend_degree": result.detrend_degree if "detrend_degree" in given else None}
+    decided = "pattern" not in given and getattr(pinned, "pattern", None) is None
+    try:
+        protocol = resolve_protocol(pinned, reference_given=result.method == "comparative", pitch_mm=result.pitch_mm,
+                                    distance_m=result.distance_m, pattern=result.params.pattern, **chosen)
+    except InputError:
+        return None
+    return replace(protocol, sources={**protocol.sources, "pattern": "auto"}) if decided else protocol
 
 
 @dataclass(frozen=True)

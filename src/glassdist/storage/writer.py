@@ -35,7 +35,7 @@ from ..report.maps import run_figures
 from .fields import SUMMARY_NAME, grid_members, pixel_members, write_fields_npz, write_fields_tiff, write_npz
 from .fields import write_statistics_csv
 from .folder import OutputFolder, estimate_output_bytes, open_output_folder, plan_outputs, remove_outputs
-from .record import EXIT_OK, EXIT_SPEC_FAIL, RunRequest, build_record, read_inputs
+from .record import EXIT_OK, EXIT_SPEC_FAIL, RunRequest, build_record, read_inputs, result_protocol
 
 __all__ = ["EXIT_OK", "EXIT_SPEC_FAIL", "write_outputs", "write_run"]
 
@@ -66,7 +66,9 @@ def write_outputs(result, out_dir, *, fields="analysis", report=False, export=Fa
     spec_path : path, optional
         The specification file, when ``spec`` is not given.
     protocol : ResolvedProtocol, optional
-        The settings resolved from the options and the specification (recorded).
+        The settings resolved from the options and the specification (recorded). Default,
+        for a result of :func:`glassdist.analyze`: the command line's record of the same
+        settings (:func:`~glassdist.storage.record.result_protocol`).
     mask : ndarray of bool, optional
         The region the analysis was asked for (coverage is of it).
     metadata : dict, optional
@@ -76,7 +78,8 @@ def write_outputs(result, out_dir, *, fields="analysis", report=False, export=Fa
         ``image_path`` is given.
     image_path, reference_path, mask_path : path, optional
         The inputs: recorded with their SHA-256, never overwritten; the photo is drawn
-        with the analysed region outlined (``input_region.png``).
+        with the analysed region outlined (``input_region.png``). Default: the files
+        :func:`glassdist.analyze` read, when it was given paths (``result.sources``).
     history : glassdist.history.Recording or False, optional
         How the run is recorded in the results history once its files are written
         (:func:`glassdist.history.store.record`: a history that cannot be written keeps
@@ -97,9 +100,11 @@ def write_outputs(result, out_dir, *, fields="analysis", report=False, export=Fa
     """
     given = spec if spec is not None else spec_path
     loaded = as_spec(given) if given is not None else None
+    if protocol is None:
+        protocol = result_protocol(result, loaded)
     request = RunRequest(fields=fields, report=report, export=export, spec=loaded, protocol=protocol, mask=mask,
                          metadata=dict(metadata or {}), history=history)
-    inputs = read_inputs(image_path, reference_path, mask_path, image=image)
+    inputs = read_inputs(image_path, reference_path, mask_path, image=image, sources=result.sources)
     planned = plan_outputs(result.field_specs(), fields=fields, report=report, export=export, limits=request.limits)
     spec_file = Path(loaded.path) if loaded is not None and loaded.path else None
     with open_output_folder(out_dir, planned=planned, inputs=(*inputs.paths, spec_file)) as folder:
