@@ -310,7 +310,7 @@ class StoredResult:
         return upsample_field(f, idx, grid, ~self.valid)
 
     def to_pixel_grid(self) -> dict:
-        """Every field on the pixel grid, ``valid`` and ``detrend_region``: the keys of ``--fields pixel``'s result.npz."""
+        """Every field on the pixel grid, ``valid`` and ``detrend_region``: ``--fields pixel``'s result.npz keys."""
         regions = {"valid": self.valid}
         if self.detrend_region is not None:
             regions["detrend_region"] = self.detrend_region
@@ -358,8 +358,8 @@ def load_result(out_dir) -> StoredResult:
             valid = np.unpackbits(z["valid_bits"], count=H * W).reshape(H, W).astype(bool)
             fit = (np.unpackbits(z["detrend_region_bits"], count=H * W).reshape(H, W).astype(bool)
                    if "detrend_region_bits" in z.files else None)
-            return StoredResult("analysis", fields, valid, z["grid_valid"], z["grid_rows_px"], z["grid_cols_px"], summary,
-                                fit)
+            return StoredResult("analysis", fields, valid, z["grid_valid"], z["grid_rows_px"], z["grid_cols_px"],
+                                summary, fit)
         valid = z["valid"]
         fit = z["detrend_region"] if "detrend_region" in z.files else None
     H, W = valid.shape
