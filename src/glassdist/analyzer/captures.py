@@ -55,7 +55,7 @@ from .pipeline import (
     analyze,
     prepare_reference,
 )
-from .region import trusted_on
+from .region import min_region_samples, trusted_on
 from .result import AnalysisResult
 from .unwrap import label_regions
 
@@ -444,7 +444,8 @@ def _averaged_grid(m1: _Measurement, total: np.ndarray, count: np.ndarray, n_cap
     with np.errstate(invalid="ignore", divide="ignore"):
         avg = np.where(valid[..., None], total / np.maximum(count, 1)[..., None], np.nan).astype(np.float32)
     p = m1.inputs.params
-    labels, n = label_regions(valid, max(int(p.min_region_fraction * valid.size), 16))
+    period = max(m1.carriers.k1.period_px, m1.carriers.k2.period_px)
+    labels, n = label_regions(valid, min_region_samples(p, m1.ag.grid, period))
     valid = labels > 0
     avg[~valid] = np.nan
     # Reported: the averaged region and the first capture's partial border blocks around it

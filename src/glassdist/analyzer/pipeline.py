@@ -41,7 +41,7 @@ from .params import AnalyzerParams, given_settings, load_params
 from .pattern import settle_pattern
 from .region import (
     ANALYSED, BEYOND_RANGE, FRAGMENT, LOW_MODULATION, PHASE_RESIDUE, Region, beyond_range_warning, contamination_px,
-    downsample_mask, grid_seen, guard_band, local_contrast, pixel_quality, trim_edges, valid_region, within,
+    downsample_mask, excluded_area_warning, grid_seen, guard_band, local_contrast, pixel_quality, trim_edges, valid_region, within,
 )
 from .resample import image_grid_valid
 from .result import AnalysisResult
@@ -1365,6 +1365,10 @@ def _measure(image, pitch_mm, distance_m, reference, params, mask, pattern, warn
     H_jac = fit.matrix if fit is not None else inp.reference.homography.matrix
     phases[~region.valid] = np.nan
     mm_per_px = p_c * float(np.sqrt(carriers.k1.norm * carriers.k2.norm))
+    w_areas = excluded_area_warning(region.quality, inp.mask, demod.grid, max(carriers.k1.period_px, carriers.k2.period_px),
+                                    mm_per_px)
+    if w_areas:
+        warn.append(w_areas)
     sigma_mm, blur = _smoothing_mm(demod, p, p_c, mm_per_px, warn)
     sigma_px = sigma_mm / mm_per_px
     ag = _to_analysis_grid(phases, region, demod.grid, sigma_px, blur, p, passes=demod.passes,

@@ -21,11 +21,19 @@ Every sample of the demodulation grid gets one integer label (:data:`LABELS`):
                          smoothing there reaches the border and the channels are biased,
                          so it is left out of statistics and specifications
 7    fragment            an isolated piece of region too small to unwrap and detrend alone
+                         (smaller than ``min_region_fraction`` of the grid and than a
+                         patch of :data:`MIN_REGION_PERIODS` x :data:`MIN_REGION_PERIODS`
+                         carrier periods)
 ===  ==================  ==============================================================
 
 ``valid`` (the reported region) is labels 0 and 6; statistics use label 0. Connected
 parts of the measured region are labelled: a frame or mullion splits the pane into regions
-unwrapped, detrended and smoothed independently.
+unwrapped, detrended and smoothed independently. A part is kept when it holds a patch of
+:data:`MIN_REGION_PERIODS` x :data:`MIN_REGION_PERIODS` carrier periods, however small a share
+of the view that is: a coherent part the demodulation reads (the centre of a small strong
+lens inside the ring its rim makes unmeasurable) is analysed, not dropped as a fragment.
+Every excluded area of that size or larger is named in a warning
+(:func:`excluded_area_warning`: its size in periods and mm, where, and why).
 
 Margins (derived, not tuned): Block F's demodulation is a Gaussian low-pass of the
 baseband signal with covariance ``C`` (bandpass and complex smoothing, px^2). Behind a
@@ -75,6 +83,8 @@ __all__ = [
     "contamination_px",
     "local_contrast",
     "beyond_range_warning",
+    "excluded_area_warning",
+    "MIN_REGION_PERIODS",
     "local_frequency_deviation",
     "erode",
     "grid_seen",
@@ -103,6 +113,11 @@ LABELS = {
 #: Labels whose area is not measured and whose neighbourhood gets the guard band.
 EXCLUDED = (IMAGE_EDGE, LOW_MODULATION, BEYOND_RANGE, PHASE_RESIDUE, FRAGMENT)
 
+#: Side, in carrier periods, of the smallest square patch a connected part is analysed from on its own
+#: (two periods: the demodulation's own support, about a period, fits inside with room to unwrap); an
+#: excluded area of that size or larger is named in a warning.
+MIN_REGION_PERIODS = 2.0
+
 
 @dataclass(frozen=True)
 class Region:
@@ -115,15 +130,33 @@ class Region:
     labels : ndarray of int (h, w)
         Connected parts, 1..n by decreasing size; 0 outside.
     n : int
-        Number of parts kept (those of at least ``min_region_fraction`` of the grid).
+        Number of parts kept (see :func:`min_region_samples`).
     quality : ndarray of uint8 (h, w)
         :data:`LABELS` per sample (the guard band is added later, see :func:`guard_band`).
+    min_size : int
+        The smallest part kept, samples (:func:`min_region_samples`).
     """
 
     valid: np.ndarray
     labels: np.ndarray
     n: int
     quality: np.ndarray | None = None
+    min_size: int = 16
+
+
+def min_region_samples(p, grid: F.SamplingGrid, period_px: float) -> int:
+    """The smallest connected part (samples of ``grid``) unwrapped, detrended and smoothed on its own.
+
+    A part of ``min_region_fraction`` of the grid, or one holding a square of
+    :data:`MIN_REGION_PERIODS` carrier periods (``period_px``: the longer period) where that is
+    smaller; 16 samples at least. Only the first made the rule before: a small strong lens's
+    centre, coherent and read by the demodulation but 0.3 % of the view, was dropped.
+    """
+    h, w = grid.shape
+    sy, sx = grid.step
+    share = int(p.min_region_fraction * h * w)
+    periods = int(np.ceil((MIN_REGION_PERIODS * period_px) ** 2 / (sy * sx)))
+    return max(min(share, periods), 16)
 
 
 def contamination_px(blur_px2: np.ndarray, phase_error_periods: float) -> float:
@@ -254,11 +287,11 @@ def valid_region(
     kept = _kept_beyond_margins(labels, ok, modulated, half, grid, margin_px, edge_margin_px)
     valid = _without_residues(list(phases) + ([] if deviation_phases is None else list(deviation_phases)), kept & in_mask,
                               labels, warn, unwrapped=phases if cuts else ())
-    min_size = int(p.min_region_fraction * valid.size)
-    regions, n = label_regions(valid, max(min_size, 16))
+    min_size = min_region_samples(p, grid, period)
+    regions, n = label_regions(valid, min_size)
     labels[valid & (regions == 0)] = FRAGMENT
     labels[~in_mask] = USER_MASK
-    return Region(regions > 0, regions, n, labels)
+    return Region(regions > 0, regions, n, labels, min_size)
 
 
 def _signal_tests(phases, coherences, mods, carriers: F.CarrierPair, grid: F.SamplingGrid, p,
@@ -466,6 +499,73 @@ def beyond_range_warning(quality: np.ndarray, p) -> str | None:
     )
 
 
+#: Excluded areas named one by one in :func:`excluded_area_warning`; the rest are counted.
+_NAMED_AREAS = 4
+
+
+def excluded_area_warning(labels: np.ndarray, user_mask, grid: F.SamplingGrid, period_px: float,
+                          mm_per_px: float) -> str | None:
+    """The warning naming every excluded area of :data:`MIN_REGION_PERIODS` squared carrier periods or more.
+
+    An excluded area is a connected (8-neighbour) set of samples labelled occluded / low
+    modulation, beyond measurable distortion, phase residue or fragment inside the user's
+    region; the image edge's margin is expected and not named. Each area large enough to hold
+    the smallest part analysed alone (:func:`min_region_samples`) is named, largest first: its
+    area and extent in carrier periods and in mm, its centre in image pixels, and its labels'
+    shares. A small lens whose rim or whole aperture cannot be measured is then said, however
+    small a share of the view it is.
+
+    Parameters
+    ----------
+    labels : ndarray of uint8 (h, w)
+        Final quality labels of the demodulation grid (before the guard band).
+    user_mask : ndarray of bool (H, W) or None
+    grid : SamplingGrid
+    period_px : float
+        The longer carrier period, px.
+    mm_per_px : float
+        Scale on the backdrop (mm per image px).
+
+    Returns
+    -------
+    str or None
+    """
+    in_mask = np.ones(grid.shape, bool) if user_mask is None else downsample_mask(user_mask, grid)
+    causes = (LOW_MODULATION, BEYOND_RANGE, PHASE_RESIDUE, FRAGMENT)
+    excluded = np.isin(labels, causes) & in_mask
+    if not excluded.any():
+        return None
+    sy, sx = grid.step
+    parts, n = ndimage.label(excluded, structure=np.ones((3, 3), bool))
+    sizes = np.bincount(parts.ravel(), minlength=n + 1)[1:]
+    need = (MIN_REGION_PERIODS * period_px) ** 2 / (sy * sx)
+    big = [k for k in np.argsort(sizes)[::-1] if sizes[k] >= need]
+    if not big:
+        return None
+    boxes = ndimage.find_objects(parts)
+    named = []
+    for k in big[:_NAMED_AREAS]:
+        box = boxes[k]
+        part = parts[box] == k + 1
+        rows, cols = np.nonzero(part)
+        ext_y, ext_x = (box[0].stop - box[0].start) * sy, (box[1].stop - box[1].start) * sx  # px
+        cy, cx = (box[0].start + rows.mean() + 0.5) * sy, (box[1].start + cols.mean() + 0.5) * sx
+        lab = labels[box][part]
+        shares = ", ".join(f"{LABELS[c]} (label {c}) {100 * np.count_nonzero(lab == c) / lab.size:.0f}%"
+                           for c in causes if np.any(lab == c))
+        named.append(
+            f"{sizes[k] * sy * sx / period_px**2:.1f} square periods ({ext_x / period_px:.1f} x {ext_y / period_px:.1f} "
+            f"periods, {ext_x * mm_per_px:.0f} x {ext_y * mm_per_px:.0f} mm) around x {cx:.0f}, y {cy:.0f} px: {shares}"
+        )
+    more = len(big) - len(named)
+    return (
+        f"{len(big)} area{'s' if len(big) > 1 else ''} of {MIN_REGION_PERIODS:g} x {MIN_REGION_PERIODS:g} carrier "
+        f"periods or more {'are' if len(big) > 1 else 'is'} excluded from the analysis (no displacement or power is "
+        "reported there): " + "; ".join(named) + (f"; and {more} more" if more else "")
+        + "; check the quality map (quality.png) for what the glass does there"
+    )
+
+
 def _without_residues(phases, valid: np.ndarray, labels: np.ndarray, warn: list[str], unwrapped=None) -> np.ndarray:
     """``valid`` less the samples next to a phase residue of either wrapped phase, and the branch cuts.
 
@@ -525,9 +625,9 @@ def within(region: Region, first: Region, p, phases=()) -> Region:
         cut = branch_cuts(phases, valid)
         quality[cut] = PHASE_RESIDUE
         valid &= ~cut
-    regions, n = label_regions(valid, max(int(p.min_region_fraction * valid.size), 16))
+    regions, n = label_regions(valid, region.min_size)
     quality[valid & (regions == 0)] = FRAGMENT
-    return Region(regions > 0, regions, n, quality)
+    return Region(regions > 0, regions, n, quality, region.min_size)
 
 
 def guard_band(labels: np.ndarray, grid: F.SamplingGrid, guard_px: float) -> np.ndarray:

@@ -6,14 +6,21 @@
   (:data:`glassdist.analyzer.FIELDS`) on the analysis grid, float32, NaN outside the
   analysed region, with :data:`GRID_KEYS`: the samples' pixel coordinates, the grid's
   valid samples and the pixel-grid region as bits. :func:`load_result` reads it back and
-  brings any field to the pixel grid exactly as the analysis does. An NPZ with coordinate
+  brings any field to the pixel grid exactly as the analysis does; ``detrend_region`` is
+  the (h, w) samples the A2 detrend was fitted on, ``detrend_region_bits`` its pixels. An NPZ with coordinate
   vectors, rather than NetCDF or Zarr: it is what the pixel-grid file already is
   (``numpy.load``, nothing to install), the grid is regular (two vectors place every
   sample) and the units are in the key names, as everywhere in glassdist.
 * ``'pixel'``: the documented pixel-grid file, ``displacement_mm`` (H, W, 2; x, y),
   ``displacement_detrended_mm``, ``phi_eff_mD``, ``phi_shear_mD``, ``phi_total_mD``,
-  ``axis_deg`` (NaN where invalid), the other registered fields, and ``valid``; written
-  member by member, one field on the pixel grid at a time.
+  ``axis_deg`` (NaN where invalid), the other registered fields, ``valid`` and
+  ``detrend_region`` (the pixels the A2 detrend was fitted on); written member by member,
+  one field on the pixel grid at a time.
+
+The regions, one inside the next (:data:`REGION_DESCRIPTIONS`, also in ``summary.json``):
+``trusted`` (quality label 0: statistics) within ``detrend_region`` (the A2 fit) within
+``valid`` (reported). A truth meant to reproduce the maps is detrended on
+``detrend_region`` and compared on ``trusted``.
 
 Exports for other tools (each file written to a temporary name, then renamed, so a
 reader never sees half a file):
@@ -23,7 +30,7 @@ reader never sees half a file):
 * ``fields.npz``: every registered field of the result (:data:`glassdist.analyzer.FIELDS`:
   ``displacement_mm`` (H, W, 2; ``[..., 0] = x``, ``[..., 1] = y``),
   ``displacement_detrended_mm``, ``phi_eff_mD``, ``phi_shear_mD``, ``phi_total_mD``,
-  ``axis_deg``, uncertainty and label maps) on the pixel grid, ``valid``, plus scalars
+  ``axis_deg``, uncertainty and label maps) on the pixel grid, ``valid``, ``detrend_region``, plus scalars
   ``mm_per_px``, ``distance_m``, ``pitch_mm``, ``sigma_mm`` and the string ``version``
   (float fields are float32, NaN where invalid; label maps uint8);
 * ``tiff/<name>.tif``: the same fields, one TIFF each (vector fields split into
@@ -48,7 +55,7 @@ from ..errors import InputError
 from ..fs import atomic_write, atomic_write_bytes, atomic_write_text
 
 __all__ = [
-    "SUMMARY_NAME", "FIELD_LAYOUTS", "GRID_KEYS", "StoredResult", "grid_members", "load_result", "pixel_members", "statistics_table",
+    "SUMMARY_NAME", "FIELD_LAYOUTS", "GRID_KEYS", "REGION_DESCRIPTIONS", "region_summary", "StoredResult", "grid_members", "load_result", "pixel_members", "statistics_table",
     "tiff_names", "write_fields_npz", "write_fields_tiff", "write_npz", "write_statistics_csv",
 ]
 
@@ -117,6 +124,7 @@ def write_fields_npz(result, path, *, digests=None):
         for spec, a in _pixel_arrays(result):
             yield spec.name, a, spec.kind != "float"
         yield "valid", np.asarray(result.valid, dtype=bool), True
+        yield "detrend_region", np.asarray(result.detrend_region, dtype=bool), True
         for name in ("mm_per_px", "distance_m", "pitch_mm", "sigma_mm"):
             yield name, np.float64(getattr(result, name)), False
         yield "version", np.str_(result.version), False
@@ -164,8 +172,30 @@ GRID_KEYS = {
     "grid_cols_px": "(w,) column coordinate of each analysis-grid column, px",
     "grid_valid": "(h, w) bool: analysis-grid samples inside the analysed region",
     "valid_bits": "numpy.packbits of the (H, W) pixel-grid valid region, row-major",
+    "detrend_region": "(h, w) bool: analysis-grid samples the A2 detrend was fitted on (whole blocks)",
+    "detrend_region_bits": "numpy.packbits of the (H, W) pixel-grid detrend region, row-major",
     "mm_per_px": "backdrop mm per image px (mean scale)",
 }
+
+
+#: What each region of a result is (``summary.json``'s ``regions``); one inside the next
+REGION_DESCRIPTIONS = {
+    "valid": "the reported region: quality labels 0 (analysed) and 6 (guard band); every map is finite there",
+    "detrend_region": "the pixels the A2 detrend was fitted on: the whole analysis-grid blocks of the reported "
+                      "region; the polynomial fitted there is subtracted over all of valid (extrapolated on the ring "
+                      "of partial blocks valid adds, at most one analysis block wide). A truth meant to reproduce the "
+                      "maps is detrended on this region",
+    "trusted": "quality label 0, within detrend_region: the pixels statistics and specifications use",
+}
+
+
+def region_summary(result) -> dict:
+    """``summary.json``'s ``regions``: per region its description, pixel count and share of the image, percent."""
+    n = max(int(np.asarray(result.valid).size), 1)
+    regions = {"valid": result.valid, "detrend_region": result.detrend_region, "trusted": result.trusted}
+    return {name: {"description": REGION_DESCRIPTIONS[name], "pixels": int(np.count_nonzero(r)),
+                   "image_percent": 100.0 * np.count_nonzero(r) / n}
+            for name, r in regions.items()}
 
 
 def write_npz(fh, members) -> None:
@@ -195,6 +225,8 @@ def grid_members(result):
     yield "grid_cols_px", cols[0].astype(np.float64), False
     yield "grid_valid", gv, True
     yield "valid_bits", np.packbits(np.asarray(result.valid, dtype=bool), axis=None), True
+    yield "detrend_region", _grid_detrend_region(result), True
+    yield "detrend_region_bits", np.packbits(np.asarray(result.detrend_region, dtype=bool), axis=None), True
     yield "mm_per_px", np.float64(result.mm_per_px), False
     for spec in result.field_specs():
         if spec.kind == "float":
@@ -203,6 +235,14 @@ def grid_members(result):
             yield spec.name, f, False
         else:  # label maps: on the pixel grid (their own rules there), compressed to a few hundred kB
             yield spec.name, result.pixel_field(spec.name), True
+
+
+def _grid_detrend_region(result) -> np.ndarray:
+    """(h, w) bool: the analysis-grid samples the A2 detrend was fitted on (``grid_valid`` where not recorded)."""
+    d = result._deferred or {}
+    fit = d.get("fit_valid")
+    gv = np.asarray(result.grid_valid, dtype=bool)
+    return gv if fit is None else gv & np.asarray(fit, dtype=bool)
 
 
 def pixel_members(result, on_plane=None):
@@ -214,6 +254,7 @@ def pixel_members(result, on_plane=None):
         yield spec.name, plane, False
         del plane
     yield "valid", np.asarray(result.valid, dtype=bool), False
+    yield "detrend_region", np.asarray(result.detrend_region, dtype=bool), True
 
 
 @dataclass(frozen=True)
@@ -236,6 +277,9 @@ class StoredResult:
         pixel layout).
     summary : dict
         ``summary.json``.
+    detrend_region : ndarray (H, W) bool or None
+        The pixels the A2 detrend was fitted on (within ``valid``); None for a file written
+        before it was recorded.
     """
 
     layout: str
@@ -245,6 +289,7 @@ class StoredResult:
     grid_rows_px: np.ndarray
     grid_cols_px: np.ndarray
     summary: dict
+    detrend_region: np.ndarray | None = None
 
     def pixel_field(self, name: str) -> np.ndarray:
         """Field ``name`` on the input's pixel grid, brought there exactly as the analysis does."""
@@ -265,8 +310,11 @@ class StoredResult:
         return upsample_field(f, idx, grid, ~self.valid)
 
     def to_pixel_grid(self) -> dict:
-        """Every field on the pixel grid, plus ``valid``: the keys of ``analyze --fields pixel``'s result.npz."""
-        return {**{name: self.pixel_field(name) for name in self.fields}, "valid": self.valid}
+        """Every field on the pixel grid, ``valid`` and ``detrend_region``: ``--fields pixel``'s result.npz keys."""
+        regions = {"valid": self.valid}
+        if self.detrend_region is not None:
+            regions["detrend_region"] = self.detrend_region
+        return {**{name: self.pixel_field(name) for name in self.fields}, **regions}
 
 
 def load_result(out_dir) -> StoredResult:
@@ -308,8 +356,12 @@ def load_result(out_dir) -> StoredResult:
         if "layout" in z.files and str(z["layout"]) == "analysis":
             H, W = (int(v) for v in z["image_shape"])
             valid = np.unpackbits(z["valid_bits"], count=H * W).reshape(H, W).astype(bool)
-            return StoredResult("analysis", fields, valid, z["grid_valid"], z["grid_rows_px"], z["grid_cols_px"], summary)
+            fit = (np.unpackbits(z["detrend_region_bits"], count=H * W).reshape(H, W).astype(bool)
+                   if "detrend_region_bits" in z.files else None)
+            return StoredResult("analysis", fields, valid, z["grid_valid"], z["grid_rows_px"], z["grid_cols_px"],
+                                summary, fit)
         valid = z["valid"]
+        fit = z["detrend_region"] if "detrend_region" in z.files else None
     H, W = valid.shape
     return StoredResult("pixel", fields, valid, valid, np.arange(H, dtype=np.float64), np.arange(W, dtype=np.float64),
-                        summary)
+                        summary, fit)

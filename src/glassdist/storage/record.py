@@ -30,7 +30,7 @@ from ..acceptance.stats import STATISTIC_FIELDS
 from ..errors import InputError
 from ..fs import file_sha256
 from ..io import read_photo
-from .fields import FIELD_LAYOUTS, GRID_KEYS
+from .fields import FIELD_LAYOUTS, GRID_KEYS, region_summary
 
 if TYPE_CHECKING:
     from ..acceptance.assess import Acceptance
@@ -247,7 +247,8 @@ class RunRecord:
             summary["inputs"]["captures"] = [{"image": c.path, "sha256": c.sha256} for c in inputs.captures]
         layout = self.request.fields
         summary["fields"] = {"layout": layout, "file": "result.npz", "keys": [f.name for f in result.field_specs()]
-                             + (list(GRID_KEYS) if layout == "analysis" else ["valid"])}
+                             + (list(GRID_KEYS) if layout == "analysis" else ["valid", "detrend_region"])}
+        summary["regions"] = region_summary(result)
         summary.update({
             "verdict": acc.verdict.to_dict() if acc.verdict else None,
             "a4": {"statistics": acc.stats, "files": list(files),
