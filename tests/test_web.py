@@ -16,9 +16,10 @@ import pytest
 pytest.importorskip("fastapi", reason="the web application needs glassdist[web]")
 uvicorn = pytest.importorskip("uvicorn", reason="the web application needs glassdist[web]")
 
-from glassdist.web import create_app  # noqa: E402
+from conftest import DATA, EXAMPLES, needs_real_photos
 
-DATA = Path(__file__).resolve().parents[1] / "examples" / "data"
+from glassdist.web import create_app
+
 STRICT = {"name": "site check", "criteria": [{"channel": "phi_eff", "statistic": "p95_abs", "max_mD": 40}]}
 
 
@@ -70,7 +71,7 @@ def test_errors_limits_and_no_path_traversal(server, tmp_path):
         assert len(list(app.state.store.root.iterdir())) == 0  # refused uploads leave nothing behind
 
         # a client file name is never a path; a field value never becomes an option
-        r = client.post(f"{url}/jobs", files={"image": ("../../evil.png", (DATA / "reference.png").read_bytes())},
+        r = client.post(f"{url}/jobs", files={"image": ("../../evil.png", (EXAMPLES / "factory_reference.png").read_bytes())},
                         data={"pitch_mm": "--out=/tmp/x", "distance_m": "1"}, follow_redirects=False)
         assert r.status_code == 303
         job_id = r.headers["location"].rsplit("/", 1)[1]
@@ -121,6 +122,7 @@ def _submit(page, url, files: dict, fields: dict, options: dict = ()) -> None:
     page.wait_for_selector("#verdict", timeout=240_000)
 
 
+@needs_real_photos
 def test_upload_result_and_report_in_headless_chromium(server, tmp_path):
     exe = _chromium()  # skips without chromium or playwright: checked before anything is imported
     url, _ = server
@@ -167,7 +169,7 @@ def test_upload_result_and_report_in_headless_chromium(server, tmp_path):
 
 
 def test_contract_spec_with_the_form_as_it_loads_in_headless_chromium(server):
-    """The in-situ contract specification and the bundled photo, nothing else touched: the pinned fields are
+    """The in-situ contract specification and the example site photo, nothing else touched: the pinned fields are
     shown as pinned and not sent, the empty ones not sent either, and the verdict page comes back."""
     exe = _chromium()
     url, app = server
@@ -179,7 +181,7 @@ def test_contract_spec_with_the_form_as_it_loads_in_headless_chromium(server):
         # report and export opt-in, their cost stated; the kept jobs' budget stated
         assert not page.is_checked("#report") and not page.is_checked("#export")
         assert "1.9 GB" in page.inner_text("#job-form") and "2048 MB" in page.inner_text("#kept")
-        page.set_input_files("#image", str(DATA / "distorted_waves.bmp"))
+        page.set_input_files("#image", str(EXAMPLES / "site_pane.png"))
         page.set_input_files("#spec", str(spec))
         page.wait_for_function("document.getElementById('pitch_mm').disabled")
         for key in ("pitch_mm", "distance_m", "pattern", "detrend_degree"):
@@ -194,7 +196,7 @@ def test_contract_spec_with_the_form_as_it_loads_in_headless_chromium(server):
         job = app.state.store.get(page.url.rsplit("/", 1)[1])
         # only the photo, the specification and the output folder: no field, no report, no export
         assert [a for a in job.args if not a.startswith("--record-as=")] == [
-            "analyze", "--spec", "spec.json", "--out", "out", "--", "image.bmp"]
+            "analyze", "--spec", "spec.json", "--out", "out", "--", "image.png"]
         assert not any(n.startswith(("report", "fields", "tiff")) for n in job.outputs())
 
 
@@ -274,6 +276,7 @@ def test_a_server_reachable_from_elsewhere_says_so(capsys, monkeypatch):
 def test_history_page_filters_by_lot_shows_the_chart_and_links_kept_jobs(server, tmp_path, monkeypatch):
     """Runs recorded before (lots A and B) and a job run from the page (lot A): the page filtered by lot A."""
     from conftest import write_lens_pair
+
     from glassdist.history import open_store
     from glassdist.history.store import insert_runs, run_rows
 
