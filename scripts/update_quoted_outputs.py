@@ -143,7 +143,7 @@ def run_block(block: Block, root: Path, env: dict[str, str], timeout: float = 60
     for k, step in enumerate(block.steps):
         script += [f"printf '%s\\n' '{_MARK.format(k)}'", "(exit $__quoted_status)",
                    f"{{ {runnable(step.command)}\n}} 2>&1", "__quoted_status=$?"]
-    done = subprocess.run(["bash", "-c", "\n".join(script)], cwd=root, env=env, stdout=subprocess.PIPE,
+    done = subprocess.run(["bash", "-c", "\n".join(script)], check=False, cwd=root, env=env, stdout=subprocess.PIPE,
                           stderr=subprocess.STDOUT, text=True, timeout=timeout)
     outputs: list[list[str]] = []
     for line in done.stdout.split("\n"):

@@ -44,6 +44,14 @@ def test_every_example_photo_is_a_recorded_render():
         assert h * w <= 1024 * 1024, t
 
 
+def test_the_readme_figure_is_the_quick_starts():
+    """The README's figure is made by the README's Quick start (``render_examples.py --figure``)."""
+    script = _script()
+    readme = (REPO / "README.md").read_text(encoding="utf-8")
+    assert " ".join(["glassdist", *script.QUICK_START]) in readme
+    assert str(script.FIGURE.relative_to(REPO)) in readme and script.FIGURE.is_file()
+
+
 @pytest.mark.slow
 def test_the_reflection_pair_renders_again_as_committed(tmp_path):
     """``glassdist render`` of its scene gives the committed pair again (measured: bit-identical, 6 s)."""
