@@ -9,7 +9,7 @@ The flow the other way (reference to photo) is defined at the reference's pixels
 ``ref(r) = img(r + f(r))``, so ``u(r) = f(r - u(r))``. Taking ``u = f`` is a first-order
 approximation that errs by about ``(grad u) u``: on the waves photo's steep flanks
 (displacement gradient about 0.3, displacement a few px) that is about 0.1 carrier period,
-the agreement tolerance itself. Measured on ``examples/data/distorted_waves.bmp`` with no-pyramid
+the agreement tolerance itself. Measured on the real ``distorted_waves.bmp`` (``benchmarks/_data.py``) with no-pyramid
 Farneback (window 21 px, 30 iterations): FCD and the flow agree within 0.1 period on 84.3 % of
 the photo with the first-order flow, on 94.1 % computed from the photo.
 """

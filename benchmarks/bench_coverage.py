@@ -11,7 +11,7 @@ glassdist (Comparative Method) is then scored by
 * precision: share of the analysed region inside the agreement area,
 * accuracy: share of the analysed region where glassdist agrees with FCD within 0.1 period.
 
-Cases: the real photos of ``examples/data`` (1024 px), 320 px centre crops and 320 px
+Cases: the real photos (``benchmarks/_data.py``) (1024 px), 320 px centre crops and 320 px
 downscales of them, each also with an opaque drop (a dark disc, 120 px across at
 1024 px) painted into the distorted photo; synthetic renders (line grid and
 checkerboard, 512 and 320 px, a roller wave, with and without a drop).
@@ -39,8 +39,8 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 
-from _fcd import fcd_carriers, fcd_displacement  # noqa: E402
-from _flow import dis_displacement, farneback_displacement  # noqa: E402
+from _fcd import fcd_carriers, fcd_displacement
+from _flow import dis_displacement, farneback_displacement
 
 TOL_PERIODS = 0.1
 
@@ -55,11 +55,12 @@ def _paint_drop(img: np.ndarray, diameter_px: float, centre=(0.42, 0.58)) -> np.
 
 def cases(names: list[str] | None):
     import cv2
+    from _data import real_photos
 
     from glassdist.io import read_image
     from glassdist.synthetic import synthetic_capture, wave_displacement
 
-    data = ROOT / "examples" / "data"
+    data = real_photos()
     ref = read_image(data / "reference.png")
     out = []
     for stem in ("distorted_waves", "distorted_floating_ring"):

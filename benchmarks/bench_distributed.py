@@ -33,7 +33,9 @@ from pathlib import Path
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
-DATA = ROOT / "examples" / "data"
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _data import REAL_PHOTOS as DATA
+from _data import real_photos
 
 
 def _glassdist(*args):
@@ -71,6 +73,7 @@ def _same(serial: Path, parallel: Path) -> list[str]:
 
 
 def _manifest(folder: Path) -> Path:
+    real_photos()
     rows = ["id,image,reference,pitch_mm,distance_m,pattern,detrend_degree"]
     photos = [("waves", "distorted_waves.bmp"), ("ring", "distorted_floating_ring.bmp")]
     for k in range(2):

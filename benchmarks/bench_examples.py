@@ -1,4 +1,4 @@
-"""Analysed area and channel statistics on the real photos of ``examples/data``, as recorded before/after.
+"""Analysed area and channel statistics on the real photos (``benchmarks/_data.py``), as recorded before/after.
 
 The factory example's settings (checkerboard, pitch 5 mm, L = 1 m, N = 2, default sigma),
 both methods, both distorted photos. Per run: the reported share of the image (``valid``),
@@ -26,11 +26,13 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def measure() -> dict:
+    from _data import real_photos
+
     import glassdist
     from glassdist import analyze
     from glassdist.io import read_image
 
-    data = ROOT / "examples" / "data"
+    data = real_photos()
     ref = read_image(data / "reference.png")
     out = {"glassdist_version": glassdist.__version__, "records": []}
     for name in ("distorted_waves", "distorted_floating_ring"):

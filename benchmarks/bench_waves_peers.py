@@ -494,13 +494,17 @@ def table(rec: dict) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--image", type=Path, default=ROOT / "examples" / "data" / "distorted_waves.bmp")
-    ap.add_argument("--reference", type=Path, default=ROOT / "examples" / "data" / "reference.png")
+    from _data import REAL_PHOTOS, real_photos
+
+    ap.add_argument("--image", type=Path, default=REAL_PHOTOS / "distorted_waves.bmp")
+    ap.add_argument("--reference", type=Path, default=REAL_PHOTOS / "reference.png")
     ap.add_argument("--params", default="{}", help="analyzer parameter overrides, JSON")
     ap.add_argument("--out", type=Path, help="write the table (markdown) and the record (FILE.json beside it)")
     ap.add_argument("--farneback-sweep", action="store_true", help="the Farneback peer over a grid of its settings")
     ap.add_argument("--replica", action="store_true", help="every method on replicas of the photo with a known displacement")
     a = ap.parse_args(argv)
+    if REAL_PHOTOS in (a.image.parent, a.reference.parent):
+        real_photos()
     if a.replica:
         rec = replicas(a.image, a.reference, json.loads(a.params))
         text = replica_table(rec)

@@ -1,4 +1,4 @@
-"""The Direct Method against the Comparative Method on the bundled photos, with and without the lens model.
+"""The Direct Method against the Comparative Method on the real photos (``benchmarks/_data.py``), with and without the lens model.
 
 Checkerboard, ``--pitch-mm 5 --distance-m 0.5``, detrend degrees 1-3; mean |phi_eff| over
 each result's trusted pixels, Direct / Comparative, for ``lens_model`` none, radial (the
@@ -19,6 +19,7 @@ the decision is")::
 from __future__ import annotations
 
 import numpy as np
+from _data import real_photos
 
 import glassdist
 from glassdist.io import read_image
@@ -27,9 +28,9 @@ MODELS = ("none", "radial", "radial+tangential+center")
 
 
 def main() -> None:
-    ref = read_image("examples/data/reference.png")
+    ref = read_image(real_photos() / "reference.png")
     for name in ("distorted_waves.bmp", "distorted_floating_ring.bmp"):
-        img = read_image(f"examples/data/{name}")
+        img = read_image(real_photos() / name)
         for n in (1, 2, 3):
             common = dict(pitch_mm=5.0, distance_m=0.5)
             comp = glassdist.analyze(img, reference=ref, params={"detrend_degree": n, "pattern": "checkerboard"}, **common)
@@ -45,7 +46,7 @@ def main() -> None:
 
 def floor() -> None:
     """The Direct Method's floor on this camera and board: the glass-less reference read by the Direct Method."""
-    ref = read_image("examples/data/reference.png")
+    ref = read_image(real_photos() / "reference.png")
     H, W = ref.shape[:2]
     yy, xx = np.mgrid[0:H, 0:W]
     radius = np.hypot(xx - (W - 1) / 2, yy - (H - 1) / 2) / np.hypot(W / 2, H / 2)
@@ -68,7 +69,7 @@ def variants() -> None:
     import cv2
 
     logging.disable(logging.WARNING)  # the table says what matters here; each run's warnings are logged
-    ref = read_image("examples/data/reference.png")
+    ref = read_image(real_photos() / "reference.png")
 
     def scaled(a, f):
         return cv2.resize(a.astype(np.float32), None, fx=f, fy=f, interpolation=cv2.INTER_AREA if f < 1 else cv2.INTER_CUBIC)
@@ -86,7 +87,7 @@ def variants() -> None:
     print("| photo | change | d inner | d quadrant | lens applied | Direct / Comparative, N = 2 | N = 3 |")
     print("|---|---|---|---|---|---|---|")
     for name in ("distorted_waves.bmp", "distorted_floating_ring.bmp"):
-        img = read_image(f"examples/data/{name}")
+        img = read_image(real_photos() / name)
         for label, f in changes.items():
             # noise (seeded) and blur touch the photo alone, as a second capture of the pane would; the
             # other changes apply to the photo and its reference alike

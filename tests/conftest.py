@@ -21,14 +21,31 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 from _history_isolation import isolated_history_db  # noqa: E402,F401
 
 REPO = Path(__file__).resolve().parents[1]
-DATA = REPO / "examples" / "data"
+#: The project's own example photos, rendered by its tracer (scripts/render_examples.py).
+EXAMPLES = REPO / "examples" / "images"
+#: Real photographs (a checkerboard seen through disturbed water; reference.png, distorted_waves.bmp,
+#: distorted_floating_ring.bmp). They come from another repository, so they are never in this tree:
+#: they are read from the shared data folder beside the repository (CI has it).
+DATA = REPO.parent / "shared" / "data" / "real-checkerboard-water"
+REAL_PHOTOS_ABSENT = (f"needs the real photographs in {DATA} (the shared data folder beside the repository), "
+                      "which is absent here")
+#: Marks a test that reads :data:`DATA`: skipped, with the reason, where the folder is absent.
+needs_real_photos = pytest.mark.skipif(not (DATA / "reference.png").is_file(), reason=REAL_PHOTOS_ABSENT)
+
+
+def real_photos() -> Path:
+    """The folder of the real photographs (:data:`DATA`); skips the calling test where it is absent."""
+    if not (DATA / "reference.png").is_file():
+        pytest.skip(REAL_PHOTOS_ABSENT)
+    return DATA
 
 
 @pytest.fixture(scope="session")
 def real_data():
-    """The bundled real photos (checkerboard through disturbed water), grey float in [0, 1]."""
+    """The real photos (checkerboard through disturbed water), grey float in [0, 1]; skips where absent."""
     from glassdist.io import read_image
 
+    real_photos()
     return {
         "reference": read_image(DATA / "reference.png"),
         "waves": read_image(DATA / "distorted_waves.bmp"),

@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import DATA, REPO, run_cli
+from conftest import DATA, REPO, needs_real_photos, run_cli
 
 import glassdist
 from glassdist.analyzer.pattern import detect_pattern
@@ -59,8 +59,9 @@ _cli = run_cli  # in this process (conftest.run_cli)
 
 
 @pytest.mark.slow
+@needs_real_photos
 def test_bundled_checkerboard_photo_without_pattern(tmp_path):
-    """The bundled photo, no --pattern: checkerboard, mm_per_px 0.7221 (pitch 5, distance 0.5); --pattern lines warns."""
+    """The real waves photo, no --pattern: checkerboard, mm_per_px 0.7221 (pitch 5, distance 0.5); --pattern lines warns."""
     args = ["analyze", DATA / "distorted_waves.bmp", "--reference", DATA / "reference.png", "--pitch-mm", 5,
             "--distance-m", 0.5, "--detrend-degree", 3, "--quiet"]
     r = _cli(*args, "--out", tmp_path / "auto")

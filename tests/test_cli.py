@@ -7,7 +7,7 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import DATA, run_cli
+from conftest import EXAMPLES, run_cli
 
 from glassdist.io import write_png16
 from glassdist.synthetic import synthetic_capture, wave_displacement
@@ -129,8 +129,8 @@ def test_output_path_that_is_a_file_is_refused_and_untouched(photos, tmp_path):
 
 
 def test_bundled_example_runs(tmp_path):
-    r = _cli("analyze", DATA / "distorted_floating_ring.bmp", "--reference", DATA / "reference.png", "--pattern",
-             "checkerboard", "--pitch-mm", 5, "--distance-m", 0.5, "--out", tmp_path / "ring")
+    r = _cli("analyze", EXAMPLES / "factory_pane_clean.png", "--reference", EXAMPLES / "factory_reference.png",
+             "--pattern", "checkerboard", "--pitch-mm", 10, "--distance-m", 1, "--out", tmp_path / "clean")
     assert r.returncode == 0, r.stderr
 
 

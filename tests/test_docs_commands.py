@@ -1,17 +1,29 @@
-"""Every shell command documented in README.md, docs/*.md and examples/*/README.md works as written.
+"""Every shell command documented in the repository's Markdown works as written, and every quoted output is what it prints.
 
-The fenced ``bash`` blocks are read from the files themselves; each command (each part of an
-``&&`` chain, so that the Quick start's own analysis runs too) runs, unchanged,
-in a temporary folder set up as the README's Quick start leaves a clone: ``.venv`` (here a
-link to the environment running the tests, with this tree first on ``PYTHONPATH``) and the
-repository's ``examples/``. Commands that set up the environment, need a cluster, a server,
-Blender or several minutes are listed in :data:`NOT_RUN` with the reason; every other one runs.
-A command documented with an error (``glassdist: error`` in its block or in the output block
-after it) must exit 2; every other one 0 or 3 (a specification FAIL).
+Two kinds of fenced block are read from every ``.md`` file of the repository (wherever it lies,
+``scripts/update_quoted_outputs.markdown_files``):
+
+- ``bash`` (or ``sh``, ``shell``) blocks: each command (each part of an ``&&`` chain) runs,
+  unchanged, in a temporary folder set up as the README's Quick start leaves a clone: ``.venv``
+  (here a link to the environment running the tests, with this tree first on ``PYTHONPATH``) and
+  the repository's ``examples/``. Commands that set up the environment, need a cluster, a
+  server, Blender or several minutes are listed in :data:`NOT_RUN` with the reason; every other
+  one runs. A command documented with an error (``glassdist: error`` in its block or in the
+  output block after it) must exit 2; every other one 0 or 3 (a specification FAIL).
+- ``console`` blocks: terminal sessions whose output is quoted (the convention is written in
+  ``scripts/update_quoted_outputs.py``: ``$ `` lines are commands, the lines after them exactly
+  what they print, ``...`` for lines left out). The commands of a block run in order in one shell
+  in the same folder, and every quoted line is compared with what was printed: a change of
+  behaviour fails here until the quote is re-run (``scripts/update_quoted_outputs.py``
+  rewrites the quotes from the commands).
+
+Output is quoted only in ``console`` blocks: a block of another kind that shows what glassdist
+prints (a verdict, a summary line, an error) fails :func:`test_output_is_quoted_only_in_console_blocks`.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import re
 import subprocess
@@ -21,7 +33,18 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-DOC_FILES = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md")), *sorted((REPO / "examples").glob("*/README.md"))]
+
+
+def _quotes_module():
+    spec = importlib.util.spec_from_file_location("update_quoted_outputs", REPO / "scripts" / "update_quoted_outputs.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault(spec.name, module)
+    spec.loader.exec_module(module)
+    return module
+
+
+QUOTES = _quotes_module()
+DOC_FILES = QUOTES.markdown_files(REPO)
 
 #: Documented commands not run here: (regular expression searched in the command, why).
 NOT_RUN = [
@@ -33,9 +56,17 @@ NOT_RUN = [
     (r"glassdist serve", "starts a server that runs until stopped"),
     (r"scripts/check_known_bugs|scripts/mutation", "re-runs parts of the test suite on mutated copies (minutes)"),
     (r"\bPANE\.png|\bMANIFEST\.csv|\bFOLDER\b|\bDIR\b|\[--|photos/", "a synopsis with placeholders, not a command"),
+    (r"examples/data/", ("names the real photographs that are no longer in the tree (they are read from "
+                         "../shared/data/real-checkerboard-water/); the page is to move to the examples of examples/images/")),
 ]
 
-_SHELL = {"bash", "sh", "shell", "console"}
+#: Pages whose quoted output is not yet in ``console`` blocks: (file, why), each to be converted and removed.
+UNCONVERTED = {
+    "docs/industrial_workflow.md": "quotes the output of the real photographs' runs (examples/data/, no longer in the tree)",
+    "docs/distributed.md": "quotes an error a Dask cluster prints (not reproducible without one)",
+}
+
+_SHELL = {"bash", "sh", "shell"}
 
 
 def _blocks(path: Path):
@@ -77,13 +108,58 @@ def _not_run(command: str):
 COMMANDS = documented_commands()
 
 
+QUOTED = [block for path in DOC_FILES for block in QUOTES.console_blocks(path)]
+#: Output-like lines (what glassdist prints) that must sit in a ``console`` block.
+_PRINTED = re.compile(r"^(glassdist: error|VERDICT: |(PASS|FAIL)  |results written to |report: |\[\d+/\d+\] |"
+                      r"(comparative|direct) method: measured|exit status \d|\d+ panes: )")
+
+
 def test_documented_commands_found():
     """The extraction sees the documented commands, and every glassdist command names the environment's."""
-    assert len(COMMANDS) > 20
-    bare = [(where, c) for where, c, _ in COMMANDS if re.match(r"\s*(glassdist|python3? -m glassdist)\b", c)]
+    steps = [(block.where, step.command) for block in QUOTED for step in block.steps]
+    every = [(where, c) for where, c, _ in COMMANDS] + steps
+    assert len(every) > 20
+    bare = [(where, c) for where, c in every if re.match(r"\s*(glassdist|python3? -m glassdist)\b", c)]
     assert bare == []  # 'glassdist: command not found' after the Quick start
-    runnable = [c for _, c, _ in COMMANDS if _not_run(c) is None and "glassdist" in c]
+    runnable = [c for _, c in every if _not_run(c) is None and "glassdist" in c]
     assert len(runnable) >= 6
+
+
+def test_quoted_blocks_found():
+    """The README's Quick start and the examples' sessions are read as quoted blocks, each command with its lines."""
+    files = {str(block.path.relative_to(REPO)) for block in QUOTED}
+    assert {"README.md", "examples/factory/README.md", "examples/insitu/README.md", "examples/batch/README.md",
+            "examples/reflection/README.md"} <= files
+    (quick,) = [b for b in QUOTED if b.path.name == "README.md" and b.path.parent == REPO]
+    assert quick.steps[0].command.startswith("python3 -m venv .venv && .venv/bin/pip install -q -e . && "
+                                             ".venv/bin/glassdist analyze examples/")
+    assert QUOTES.runnable(quick.steps[0].command).startswith(".venv/bin/glassdist analyze ")
+    assert all(step.quoted for block in QUOTED for step in block.steps if "echo" in step.command)
+
+
+def test_the_quote_comparison_can_fail():
+    """A changed, a missing or an extra line is a difference; ``...`` stands for any lines, none included."""
+    printed = ["a 1", "b 2", "c 3"]
+    assert QUOTES.matches(printed, printed)
+    assert not QUOTES.matches(["a 1", "b 9", "c 3"], printed)
+    assert not QUOTES.matches(["a 1", "b 2"], printed) and not QUOTES.matches([*printed, "d"], printed)
+    assert QUOTES.matches(["a 1", "...", "c 3"], printed) and QUOTES.matches(["...", "a 1", "b 2", "c 3"], printed)
+    assert not QUOTES.matches(["...", "b 2"], printed)
+    assert QUOTES.requote(["x", "...", "y"], ["a", "b", "c", "d"]) == ["a", "...", "d"]
+
+
+def test_output_is_quoted_only_in_console_blocks():
+    """A block that shows what glassdist prints is a ``console`` block, so that its lines are compared."""
+    found = []
+    for path in DOC_FILES:
+        rel = str(path.relative_to(REPO))
+        if rel in UNCONVERTED:
+            continue
+        for lang, start, text in _blocks(path):
+            if lang != "console" and any(_PRINTED.match(line.lstrip("# ")) for line in text.splitlines()):
+                found.append(f"{rel}:{start}")
+    assert found == [], "quote these outputs in console blocks (scripts/update_quoted_outputs.py)"
+    assert all((REPO / name).is_file() for name in UNCONVERTED)  # an entry goes when its page does
 
 
 @pytest.fixture(scope="module")
@@ -106,7 +182,23 @@ def test_documented_command_runs_as_written(where, command, expect, after_quick_
     if why is not None:
         pytest.skip(f"not run here: {why}")
     root, env = after_quick_start
-    done = subprocess.run(["bash", "-c", command], cwd=root, env=env, capture_output=True, text=True, timeout=180)
+    done = subprocess.run(["bash", "-c", command], check=False, cwd=root, env=env, capture_output=True, text=True, timeout=180)
     out = done.stdout + done.stderr
     assert "command not found" not in out and "Traceback" not in out, out
     assert done.returncode in expect, f"{where}: exit {done.returncode}\n{out}"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("block", QUOTED, ids=[b.where for b in QUOTED])
+def test_quoted_output_is_what_the_commands_print(block, after_quick_start):
+    """The block's commands, run in order in one shell, print exactly the quoted lines."""
+    skipped = [why for step in block.steps if (why := _not_run(QUOTES.runnable(step.command)))]
+    if skipped:
+        pytest.skip(f"not run here: {skipped[0]}")
+    root, _ = after_quick_start
+    env = QUOTES.clone_like(root)
+    printed = QUOTES.run_block(block, root, env)
+    text = "\n".join(line for out in printed for line in out)
+    assert "command not found" not in text and "Traceback" not in text, text
+    problems = QUOTES.differences(block, printed)
+    assert problems == [], "\n\n".join(problems) + "\n(re-run: scripts/update_quoted_outputs.py)"

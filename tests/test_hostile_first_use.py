@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import DATA, REPO, run_cli
+from conftest import EXAMPLES, REPO, run_cli
 
 from glassdist.io import write_png16
 from glassdist.synthetic import synthetic_capture, wave_displacement
@@ -122,7 +122,7 @@ def test_a_100_mpx_photo_never_prints_pillows_bomb_warning(tmp_path):
 @pytest.mark.slow
 def test_batch_index_states_the_pitch_and_distance_a_spec_pins(tmp_path):
     manifest = tmp_path / "manifest.csv"
-    manifest.write_text(f"id,image,spec\nw1,{DATA / 'distorted_waves.bmp'},{REPO / 'examples/insitu/contract_spec.json'}\n")
+    manifest.write_text(f"id,image,spec\nw1,{EXAMPLES / 'site_pane.png'},{REPO / 'examples/insitu/contract_spec.json'}\n")
     r = _cli("batch", manifest, "--out", tmp_path / "out", "--no-progress")
     assert r.returncode in (0, 3), r.stderr
     protocol = json.loads((REPO / "examples/insitu/contract_spec.json").read_text())["protocol"]

@@ -19,7 +19,7 @@ from glassdist.experiments.transfer import independent_phi_eff
 from glassdist.render import landing_points, render_scene
 from glassdist.scene import landing_jacobian, load_scene, pixel_directions, scene_from_dict, straight_landing
 
-from conftest import REPO, run_cli
+from conftest import DATA, EXAMPLES, REPO, needs_real_photos, run_cli
 
 SCENES = REPO / "examples" / "scenes"
 LENSES = {"barrel": "lens_barrel_50mm", "pincushion": "lens_pincushion_50mm", "moustache": "lens_moustache_24mm"}
@@ -289,9 +289,8 @@ def test_a_centred_lens_filling_the_view_is_said():
     Block I's self-calibrated lens takes it whole (the Direct Method reads 0.093 of the truth, measured)
     and passes Block I's checks. The Direct Method then says what the lens holds, read as glass
     (measured 1.98 mD against the pane's 0.185 mD). With the lens model off the same capture reads 1.019
-    of the truth and nothing is said; the bundled waves photo at N = 3, whose lens holds 0.2 mD against
-    its 31 mD, says nothing either."""
-    from glassdist.io import read_image
+    of the truth and nothing is said; the real waves photo at N = 3, whose lens holds 0.2 mD against
+    its 31 mD, says nothing either (test_the_real_waves_photos_lens_is_not_said_to_hold_glass)."""
     from glassdist.theory import analysis_params
 
     said = "holds a radial distortion centred on the optical axis"
@@ -306,7 +305,17 @@ def test_a_centred_lens_filling_the_view_is_said():
     assert held > 5 * pane
     bare = glassdist.analyze(img, params=analysis_params(sc).model_copy(update={"lens_model": "none"}), **kw)
     assert not any(said in w for w in bare.warnings)
-    waves = glassdist.analyze(read_image(REPO / "examples" / "data" / "distorted_waves.bmp"), pattern="checkerboard",
+
+
+@pytest.mark.slow
+@needs_real_photos
+def test_the_real_waves_photos_lens_is_not_said_to_hold_glass():
+    """The real waves photo at N = 3, whose lens holds 0.2 mD against its 31 mD: Block I's lens is
+    applied and nothing is said (the warning of test_a_centred_lens_filling_the_view_is_said)."""
+    from glassdist.io import read_image
+
+    said = "holds a radial distortion centred on the optical axis"
+    waves = glassdist.analyze(read_image(DATA / "distorted_waves.bmp"), pattern="checkerboard",
                               pitch_mm=5, distance_m=0.5, detrend_degree=3)
     assert waves.homography_fit.lens_model is not None and not any(said in w for w in waves.warnings)
 
@@ -533,10 +542,9 @@ def test_pinned_bulk_of_a_turned_camera_reads_off_as_documented(tmp_path):
 def test_camera_distance_in_transmission_needs_a_camera_file(tmp_path):
     """--camera-distance-m without --optics reflection pins the Direct Method's magnification with a camera
     file's focal length: without --camera-file, or with --reference, it is refused with one line (exit 2)."""
-    data = REPO / "examples" / "data"
-    base = ["analyze", str(data / "distorted_waves.bmp"), "--pitch-mm", "5",
-            "--distance-m", "0.5", "--pattern", "checkerboard", "--camera-distance-m", "2", "-q"]
-    for extra in ([], ["--reference", str(data / "reference.png")]):
+    base = ["analyze", str(EXAMPLES / "site_pane.png"), "--pitch-mm", "10",
+            "--distance-m", "1", "--pattern", "checkerboard", "--camera-distance-m", "3", "-q"]
+    for extra in ([], ["--reference", str(EXAMPLES / "factory_reference.png")]):
         run = run_cli(*base, *extra, "--out", tmp_path / "o")
         assert run.returncode == 2 and "--camera-file" in run.stderr and len(run.stderr.strip().splitlines()) == 1
         assert not (tmp_path / "o").exists()

@@ -1,4 +1,7 @@
-"""Real photographs: a checkerboard seen through disturbed water (examples/data, no ground truth).
+"""Real photographs: a checkerboard seen through disturbed water (no ground truth).
+
+Read from the shared data folder beside the repository (``conftest.DATA``); every test here takes
+the ``real_data`` fixture, which skips with the reason where the folder is absent.
 
 Nominal geometry (pitch 5 mm, L = 0.5 m): the source records none, so values are checked for
 consistency (carriers, masking, Comparative vs Direct agreement), not for absolute truth.

@@ -6,7 +6,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from conftest import DATA
+from conftest import DATA, needs_real_photos
 
 from glassdist.acceptance.stats import shared_limit
 from glassdist.report import figures
@@ -148,9 +148,10 @@ def test_outputs_draw_the_quality_map_and_the_noise_floor(tmp_path):
 
 
 @pytest.mark.slow
+@needs_real_photos
 @pytest.mark.parametrize("photo", ["distorted_waves.bmp", "distorted_floating_ring.bmp"])
 def test_histogram_ranges_are_the_trusted_statistics_range(photo, tmp_path, monkeypatch):
-    """On the bundled photos the histograms span exactly the largest |phi| over the trusted pixels (quality 0),
+    """On the real photos the histograms span exactly the largest |phi| over the trusted pixels (quality 0),
     the statistics' pixels: not the guard band's or the excluded areas' values."""
     import glassdist
     from glassdist.report import figures

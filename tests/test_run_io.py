@@ -18,7 +18,7 @@ from collections import Counter
 from pathlib import Path
 
 import pytest
-from conftest import DATA
+from conftest import EXAMPLES
 
 from glassdist import cli
 
@@ -98,7 +98,7 @@ def counted_run(tmp_path_factory):
     mp = pytest.MonkeyPatch()
     counter.patch(mp)
     try:
-        code = cli.main(["analyze", str(DATA / "distorted_waves.bmp"), "--reference", str(DATA / "reference.png"),
+        code = cli.main(["analyze", str(EXAMPLES / "factory_pane.png"), "--reference", str(EXAMPLES / "factory_reference.png"),
                          "--spec", str(FACTORY_SPEC), "--report", "--no-history", "--quiet", "--out", str(out)])
     finally:
         counter.stop()
@@ -116,11 +116,11 @@ def test_the_run_is_the_documented_factory_run(counted_run):
 def test_each_input_is_read_once_and_hashed_from_the_bytes_read(counted_run):
     counter, _, out = counted_run
     assert counter.reads_of(FACTORY_SPEC) == 1
-    assert counter.reads_of(DATA / "distorted_waves.bmp") == 1  # decode, SHA-256 and EXIF from one read
-    assert counter.reads_of(DATA / "reference.png") == 1
+    assert counter.reads_of(EXAMPLES / "factory_pane.png") == 1  # decode, SHA-256 and EXIF from one read
+    assert counter.reads_of(EXAMPLES / "factory_reference.png") == 1
     summary = json.loads((out / "summary.json").read_text())
-    for name, key in (("distorted_waves.bmp", "image_sha256"), ("reference.png", "reference_sha256")):
-        assert summary["inputs"][key] == hashlib.sha256((DATA / name).read_bytes()).hexdigest()
+    for name, key in (("factory_pane.png", "image_sha256"), ("factory_reference.png", "reference_sha256")):
+        assert summary["inputs"][key] == hashlib.sha256((EXAMPLES / name).read_bytes()).hexdigest()
     assert summary["verdict"]["spec_sha256"] == hashlib.sha256(FACTORY_SPEC.read_bytes()).hexdigest()
 
 

@@ -433,7 +433,7 @@ least one of the flows within {rec['tolerance_periods']:g} carrier period (each 
 period in places). Coverage: share of the agreement area that glassdist (Comparative Method) reports
 (`valid`); precision: share of the reported region inside the agreement area; accuracy: share of the
 reported region where glassdist agrees with FCD within {rec['tolerance_periods']:g} period. Real photos:
-`examples/data` at 1024 px, 320 px centre crops and 320 px downscales, each also with an opaque drop
+the real photos (`../shared/data/real-checkerboard-water`) at 1024 px, 320 px centre crops and 320 px downscales, each also with an opaque drop
 (120 px across at 1024 px) painted in; synthetic: a roller wave behind a line grid or a checkerboard.
 
 | case | agree area | before: analysed / coverage / precision | analysed | coverage | precision | accuracy vs FCD |
@@ -462,7 +462,7 @@ def _examples_section(folder: Path) -> str:
         rows.append(f"| {r['photo']} | {r['method']} | before | {cells(b)} |" if b else "")
         rows.append(f"| {r['photo']} | {r['method']} | after | {cells(r)} |")
     return f"""
-## Real photos (examples/data): before and after the quality map
+## Real photos (../shared/data/real-checkerboard-water): before and after the quality map
 
 Produced by `{rec['command']}`. The factory example's settings (checkerboard, pitch 5 mm, L = 1 m, N = 2);
 reported: share of the image in `valid`; trusted: quality label 0 (before: the reported region, which
