@@ -457,7 +457,7 @@ def test_caption_says_clipped_only_beyond_the_colour_limit():
     assert describe_clipping(f, ok, vmax=20.0) == "max |phi| 10 mD"  # well under the limit
     assert describe_clipping(f, ok, vmax=10.0) == "max |phi| 10 mD"  # at it
     clipped = describe_clipping(f, ok, vmax=5.0)
-    assert clipped.startswith("max |phi| 10 mD; colours clipped at 5 mD") and "(33 % of the region beyond)" in clipped
+    assert clipped.startswith("max |phi| 10 mD; colours clipped at 5 mD") and "(33 % of the trusted region beyond)" in clipped
 
 
 def test_the_frame_warning_is_given_only_where_zones_need_the_frame():

@@ -31,8 +31,8 @@ pytestmark = [pytest.mark.slow, pytest.mark.skipif(not (REAL / "distorted_waves.
 
 #: the runs: (analysis settings, specification) of the README's Quick start and the factory example
 RUNS = {
-    "quick_start": (dict(pattern="checkerboard", pitch_mm=5.0, distance_m=0.5, detrend_degree=3), None),
-    "factory": (dict(pattern="checkerboard", pitch_mm=5.0, distance_m=1.0, detrend_degree=2), FACTORY),
+    "quick_start": ({"pattern": "checkerboard", "pitch_mm": 5.0, "distance_m": 0.5, "detrend_degree": 3}, None),
+    "factory": ({"pattern": "checkerboard", "pitch_mm": 5.0, "distance_m": 1.0, "detrend_degree": 2}, FACTORY),
 }
 
 
@@ -72,7 +72,7 @@ def _rgba(colour):
 
 
 def test_no_pixel_outside_the_trusted_region_is_in_a_colour_scale(run):
-    name, res, out, drawn = run
+    _, res, _, drawn = run
     trusted = _trusted(res)
     guard = np.asarray(res.valid, bool) & ~trusted
     assert guard.sum() > 200_000  # the guard band is large on this photo: drawn as data, it was a saturated ring
@@ -99,7 +99,7 @@ def test_no_pixel_outside_the_trusted_region_is_in_a_colour_scale(run):
 
 
 def test_colour_limits_come_from_the_trusted_pixels(run):
-    name, res, out, drawn = run
+    _, res, out, drawn = run
     summary = json.loads((out / "summary.json").read_text())
     heat = {kw["title"].split(",")[0]: ax for kind, args, kw, ax in drawn
             if kind == "plot_channel" and "uncertainty" not in kw["title"]}
@@ -119,8 +119,8 @@ def test_colour_limits_come_from_the_trusted_pixels(run):
 
 def _table_shares(report: str) -> dict:
     """``{(channel, limit_mD): text}`` of the Results table's |phi| > T columns in report.html."""
-    table = re.search(r'<table id="statistics">(.*?)</table>', report, re.S).group(1)
-    rows = re.findall(r"<tr>(.*?)</tr>", table, re.S)
+    table = re.search(r'<table id="statistics">(.*?)</table>', report, re.DOTALL).group(1)
+    rows = re.findall(r"<tr>(.*?)</tr>", table, re.DOTALL)
     head = [html.unescape(re.sub("<[^>]+>", "", c)) for c in re.findall(r"<th>(.*?)</th>", rows[0])]
     out = {}
     for row in rows[1:]:
@@ -134,7 +134,7 @@ def _table_shares(report: str) -> dict:
 
 
 def test_every_mask_states_and_draws_the_results_table_share(run):
-    name, res, out, drawn = run
+    name, _, out, drawn = run
     masks = [(kw, ax) for kind, args, kw, ax in drawn if kind == "plot_threshold_mask"]
     if name == "quick_start":
         assert masks == []  # no specification: no limits, no masks

@@ -151,7 +151,7 @@ def analyses(pair_x3):
     """The factory protocol's analysis of the bundled pair at 1024 px and upscaled 3 x (3072 px)."""
     import glassdist
 
-    kw = dict(pattern="checkerboard", pitch_mm=5.0, distance_m=1.0, detrend_degree=2)  # the spec's protocol
+    kw = {"pattern": "checkerboard", "pitch_mm": 5.0, "distance_m": 1.0, "detrend_degree": 2}  # the spec's protocol
     one = glassdist.analyze(REAL / "distorted_waves.bmp", reference=REAL / "reference.png", **kw)
     three = glassdist.analyze(pair_x3[0], reference=pair_x3[1], **kw)
     assert three.valid.shape == (3072, 3072)

@@ -363,8 +363,8 @@ def check_pane(pane, zones, result, *, spec_label="the specification"):
                 f"its '{key}' were written for another photo; give the corners of the pane in this photo, or as "
                 "fractions of the image ('corners_frac') to serve every resolution")
         s = float(getattr(result, "mm_per_px", float("nan")))
-        side = lambda a, b: float(np.hypot(*(c[a] - c[b])))  # noqa: E731
-        span = ((side(1, 0) + side(2, 3)) / 2 * s, (side(3, 0) + side(2, 1)) / 2 * s)
+        d = np.hypot(*(c[[1, 2, 3, 2]] - c[[0, 3, 0, 1]]).T)  # top, bottom, left, right edges, px
+        span = ((d[0] + d[1]) / 2 * s, (d[2] + d[3]) / 2 * s)
         size = tuple(float(v) for v in pane.size_mm)
         ratio = (span[0] / size[0], span[1] / size[1])
         optics = "reflection" if getattr(result, "optics", None) is not None else "transmission"

@@ -356,7 +356,7 @@ def plot_axis(axis_deg, phi_shear, valid=None, *, min_shear_mD=None, title=None,
                *_untrusted_patches(valid, guard)]
     own = ax is None
     fig, ax, cax = _map_ax(ax, np.shape(axis_deg), extent, colorbar, px_axis, legend_rows=count_legend_rows(handles))
-    shear, ok = _masked(phi_shear, valid)
+    _, ok = _masked(phi_shear, valid)
     if min_shear_mD is None:
         min_shear_mD = 0.1 * float(np.percentile(np.asarray(phi_shear)[ok], 95)) if ok.any() else 0.0
     ok &= np.isfinite(axis_deg)
@@ -448,7 +448,7 @@ def plot_threshold_mask(field, valid=None, *, limit_mD, absolute=True, name="φ"
     own = ax is None
     fig, ax, _ = _map_ax(ax, np.shape(field), extent, colorbar=False, px_axis=px_axis,
                          legend_rows=count_legend_rows(handles))
-    data, ok = _masked(field, valid)
+    _, ok = _masked(field, valid)
     values = np.abs(np.asarray(field)) if absolute else np.asarray(field)
     over = ok & (np.nan_to_num(values, nan=-np.inf) > limit_mD)
     img = np.ma.masked_where(~ok, over.astype(float))

@@ -363,4 +363,4 @@ def describe_clipping(field, valid, vmax, top=None):
     share = 100.0 * np.count_nonzero(np.abs(f[ok]) > vmax) / np.count_nonzero(ok)
     if top <= vmax or math.isclose(top, vmax):
         return f"max |phi| {top:.3g} mD"
-    return f"max |phi| {top:.3g} mD; colours clipped at {vmax:.3g} mD ({share:.2g} % of the region beyond)"
+    return f"max |phi| {top:.3g} mD; colours clipped at {vmax:.3g} mD ({share:.2g} % of the trusted region beyond)"
