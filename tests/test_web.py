@@ -395,6 +395,7 @@ def test_contract_spec_with_the_form_as_it_loads_in_headless_chromium(server, pa
             shown = f"{value:g}" if isinstance(value, float) else str(value)
             assert f"pinned by the specification: {shown}" in page.inner_text(f"#pin-{key}")
         assert page.is_disabled("#sigma_mm") and "carrier periods" in page.inner_text("#pin-sigma_mm")
+        assert page.eval_on_selector("#pattern", "s => s.options[s.selectedIndex].text") == "lines"  # the pinned one
         _assert_controls_readable(page)  # a pinned list still shows its choice whole
         page.click("#submit")
         page.wait_for_selector("#verdict", timeout=240_000)

@@ -60,10 +60,21 @@ def form_language(line: str, names: dict | None = None, display: dict | None = N
     """An analyze error or warning line in the words of the web form.
 
     The command's prefix (``glassdist analyze: error:``) and its ``--help`` pointer go; each
-    option the form offers becomes the quoted label of its field (``--pitch-mm 5`` ->
-    \u201cgrid pitch, mm\u201d = 5; the required-options error lists the fields to fill in); an
-    option the form does not offer is said to be the command line's; the uploads' stored
-    names (``names``: role -> stored name) become the client's file names (``display``).
+    option the form offers becomes the quoted label of its field (:data:`LABELS`:
+    ``--pitch-mm 5`` -> “grid pitch, mm” = 5; a missing required option: "fill in" the
+    fields); an option the form does not offer is said to be the command line's. Quoted
+    text (file names, values as typed) is left as it is.
+
+    Parameters
+    ----------
+    line : str
+        One line of ``glassdist analyze`` (its error line, or a warning of ``summary.json``).
+    names, display : dict, optional
+        Role -> the upload's stored name, and role -> the client's file name shown instead.
+
+    Returns
+    -------
+    str
     """
     for role, name in (names or {}).items():
         line = line.replace(f"'{name}'", f"'{(display or {}).get(role, name)}'")
