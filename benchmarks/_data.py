@@ -14,7 +14,7 @@ REAL_PHOTOS = Path(__file__).resolve().parents[2] / "shared" / "data" / "real-ch
 
 
 def real_photos() -> Path:
-    """:data:`REAL_PHOTOS`; exits with the reason (status 0: skipped, nothing measured) where it is absent."""
+    """:data:`REAL_PHOTOS`; where it is absent, exits (status 1, nothing measured) saying so."""
     if not (REAL_PHOTOS / "reference.png").is_file():
         raise SystemExit(f"skipped: needs the real photographs in {REAL_PHOTOS} (the shared data folder beside "
                          "the repository), which is absent here")

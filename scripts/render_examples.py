@@ -2,11 +2,13 @@
 
 Every example photo in the tree is rendered here from a scene file of ``examples/scenes/``
 by ``glassdist render`` (exact tracer, the scene's own samples per pixel and seed), so that
-the examples are the project's own and can be made again bit for bit::
+the examples are the project's own and can be made again (bit-identical on the machine that
+rendered them; another floating-point library may differ by a count in the last bit)::
 
-    python scripts/render_examples.py            # render every example (about 1.5 min on 2 cores)
-    python scripts/render_examples.py --check    # render into a temporary folder, compare, change nothing
-    python scripts/render_examples.py reflection # one of them (names below)
+    .venv/bin/python scripts/render_examples.py             # render every example (about 1.5 min on 2 cores)
+    .venv/bin/python scripts/render_examples.py --check     # render into a temporary folder, compare, change nothing
+    .venv/bin/python scripts/render_examples.py reflection  # one of them (the names of EXAMPLES)
+    .venv/bin/python scripts/render_examples.py --figure    # and the README's figure
 
 ``examples/images/SHA256SUMS`` lists the SHA-256 of every photo as rendered;
 ``tests/test_examples.py`` checks the files against it and re-renders the small reflection

@@ -125,6 +125,13 @@ def test_documented_commands_found():
     assert len(runnable) >= 6
 
 
+def test_the_readme_is_a_short_page():
+    """The README is read in minutes (at most 200 lines); the manual is the documentation site."""
+    text = (REPO / "README.md").read_text(encoding="utf-8")
+    assert len(text.splitlines()) <= 200
+    assert "docs/getting-started/index.md" in text and "docs/reference/index.md" in text
+
+
 def test_quoted_blocks_found():
     """The README's Quick start and the examples' sessions are read as quoted blocks, each command with its lines."""
     files = {str(block.path.relative_to(REPO)) for block in QUOTED}
