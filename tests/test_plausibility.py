@@ -271,3 +271,14 @@ def test_no_plausibility_warning_on_the_accuracy_set(method):
         if found:
             fired[name] = found
     assert fired == {}
+
+
+def test_several_captures_warn_as_one(lens_pair):
+    """``analyze_captures`` (``glassdist analyze A B ...``) checks the run's slips as ``analyze`` does."""
+    from glassdist import analyze_captures
+
+    rng = np.random.default_rng(1)
+    images = [lens_pair.reference + rng.normal(0, 0.01, lens_pair.reference.shape) for _ in range(2)]
+    res = analyze_captures(images, reference=lens_pair.image, pitch_mm=10.0, distance_m=500.0)
+    assert any("did you mean 0.5 m" in w for w in res.warnings)
+    assert any("swapped" in w for w in res.warnings)

@@ -113,3 +113,21 @@ def test_command_line_batch_and_api_write_the_same_summary(pair, tmp_path, setti
     assert _comparable(c) == _comparable(a)
     for s in (a, b, c):  # the same input digests
         assert s["inputs"]["image_sha256"] == _sha(pair / "pane.png")
+
+
+def test_api_prints_nothing_in_a_process_of_its_own(pair, tmp_path):
+    """Without the test runner's log capture: logging's last-resort handler would print the warnings on stderr."""
+    import subprocess
+    import sys
+
+    from conftest import child_env
+
+    code = ("import glassdist, sys; p = sys.argv[1]; "
+            "res = glassdist.analyze(p + '/pane.png', reference=p + '/reference.png', pitch_mm=2.0, distance_m=500.0); "
+            "assert any('implausible distance' in w for w in res.warnings); "
+            "glassdist.write_outputs(res, sys.argv[2], report=True)")
+    run = subprocess.run([sys.executable, "-c", code, str(pair), str(tmp_path / "out")], env=child_env(),
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout == "" and run.stderr == ""
+    assert (tmp_path / "out" / "input_region.png").exists()

@@ -40,6 +40,7 @@ import numpy as np
 from scipy import ndimage
 
 from ..errors import InputError
+from ..plausibility import review_measurement
 from .homography import apply_inverse, fit_homography, logical_coordinates, logical_grid_points
 from .metrics import masked_gaussian, polynomial_detrend
 from .params import AnalyzerParams
@@ -319,6 +320,9 @@ def analyze_captures(
     warn: list[str] = []
     with _routed_warnings(warn):
         meas = _measured_captures(images, pitch_mm, distance_m, reference, params, mask, pattern, warn)
+        refm = meas[0].inputs.reference  # the slips are the run's: checked on the first capture, as analyze does
+        warn.extend(review_measurement(images[0], None if refm is None else refm.grid_spread, meas[0].carriers,
+                                       mm_per_px=meas[0].mm_per_px, distance_m=distance_m, pitch_mm=pitch_mm))
         total, count, records = _registered_sums(meas)
         ag, n = _averaged_grid(meas[0], total, count, len(meas), warn)
         evaluated = _evaluate(meas[0], ag, warn)
