@@ -90,9 +90,11 @@ class Carrier:
         return float(np.degrees(np.arctan2(self.fy, self.fx)))
 
     def negated(self) -> "Carrier":
+        """The same carrier of opposite sign (frequency and phase negated)."""
         return Carrier(-self.fx, -self.fy, self.strength)
 
     def to_dict(self) -> dict:
+        """The record as a JSON-ready mapping."""
         return {
             "fx_cycles_per_px": self.fx,
             "fy_cycles_per_px": self.fy,
@@ -120,6 +122,7 @@ class CarrierPair:
         return np.array([self.k1.f, self.k2.f])
 
     def to_dict(self) -> dict:
+        """The record as a JSON-ready mapping."""
         a = abs(self.k1.angle_deg - self.k2.angle_deg) % 180.0
         return {"k1": self.k1.to_dict(), "k2": self.k2.to_dict(), "angle_between_deg": min(a, 180.0 - a)}
 
@@ -160,6 +163,7 @@ class SamplingGrid:
 
     @property
     def is_full(self) -> bool:
+        """Whether the grid samples every pixel (no decimation)."""
         return self.shape == self.full_shape
 
 

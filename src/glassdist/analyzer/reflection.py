@@ -133,12 +133,12 @@ class ReflectionGeometry:
     plane_deg: float = 0.0
 
     def __post_init__(self):
-        check_number(self.distance_m, "distance_m (--distance-m, the board-to-pane distance D)", DISTANCE_M)
+        check_number(self.distance_m, "distance_m (the board-to-pane distance D)", DISTANCE_M)
         if self.camera_distance_m is not None:
-            check_number(self.camera_distance_m, "camera_distance_m (--camera-distance-m, the camera-to-pane distance C)",
+            check_number(self.camera_distance_m, "camera_distance_m (the camera-to-pane distance C)",
                          DISTANCE_M)
         if not (math.isfinite(self.incidence_deg) and 0.0 <= self.incidence_deg < 80.0):
-            raise InputError(f"incidence_deg (--incidence-deg) must be in [0, 80) deg, got {self.incidence_deg!r}; "
+            raise InputError(f"incidence_deg must be in [0, 80) deg, got {self.incidence_deg!r}; "
                              "give the angle between the line of sight and the pane normal")
         if not math.isfinite(self.plane_deg):
             raise InputError(f"plane_deg must be a finite angle in deg, got {self.plane_deg!r}")
@@ -357,8 +357,8 @@ def reflect_result(result, geometry: ReflectionGeometry):
         ``phi_eff_mD``, ``phi_shear_mD``, ``phi_total_mD``, ``axis_deg`` and the uncertainty
         maps in reflective power (:func:`power_from_strain`); ``mm_per_px`` and ``sigma_mm``
         in pane mm (board / m); ``distance_m`` = D; the incidence at each sample from its offset
-        from the image centre (pane mm = pixels x ``mm_per_px`` / m, :meth:`ReflectionGeometry.incidence`); ``displacement_mm`` stays the measured
-        board displacement; ``optics`` names the geometry.
+        from the image centre (pane mm = pixels x ``mm_per_px`` / m, :meth:`ReflectionGeometry.incidence`);
+        ``displacement_mm`` stays the measured board displacement; ``optics`` names the geometry.
     """
     if not math.isclose(result.distance_m, geometry.effective_distance_m, rel_tol=1e-9):
         raise ValueError("reflect_result needs the result of a run at distance_m = geometry.effective_distance_m")

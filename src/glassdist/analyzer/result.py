@@ -54,8 +54,10 @@ class FieldSpec:
 #: The result's fields, in file order. A field listed here and present in the analysis
 #: (``AnalysisResult.field_specs()``) is written by every output of a run.
 FIELDS: tuple[FieldSpec, ...] = (
-    FieldSpec("displacement_mm", "mm", "delta: landing point on the backdrop with glass minus without; [...,0]=x (columns), [...,1]=y (rows)", 2),
-    FieldSpec("displacement_detrended_mm", "mm", "delta after the A2 detrend and metric smoothing (the field A3 differentiates)", 2),
+    FieldSpec("displacement_mm", "mm",
+              "delta: landing point on the backdrop with glass minus without; [...,0]=x (columns), [...,1]=y (rows)", 2),
+    FieldSpec("displacement_detrended_mm", "mm",
+              "delta after the A2 detrend and metric smoothing (the field A3 differentiates)", 2),
     FieldSpec("phi_eff_mD", "mD", "sphere-equivalent power tr(eps)/L; converging lens < 0"),
     FieldSpec("phi_shear_mD", "mD", "cylinder-equivalent astigmatism (2/L) sqrt(((eps_xx - eps_yy)/2)^2 + eps_xy^2)"),
     FieldSpec("phi_total_mD", "mD", "total power ||eps||_F / L"),
@@ -391,7 +393,8 @@ class AnalysisResult:
             "warnings": list(self.warnings),
             **({"captures": list(self.captures)} if self.captures else {}),
             "conventions": {
-                "displacement": "landing point on the backdrop with glass minus without, mm; [...,0]=x (columns), [...,1]=y (rows)",
+                "displacement": ("landing point on the backdrop with glass minus without, mm; "
+                                 "[...,0]=x (columns), [...,1]=y (rows)"),
                 "phi_eff": "tr(sym grad delta)/L in mD, gradients w.r.t. backdrop mm; converging lens -> phi_eff < 0",
                 "axis_deg": "astigmatism principal axis, degrees from +x towards +y (down)",
             } if self.optics is None else {
