@@ -151,7 +151,7 @@ def bulk_channel(delta_mm: np.ndarray, valid: np.ndarray, labels: np.ndarray, *,
         ok = inner if inner.sum() >= 16 else ok
     if ok.any():  # the pane: the largest part of the region (a frame or mullion splits it)
         ok &= labels == np.argmax(np.bincount(labels[ok].ravel()))
-    region = {"samples": int(ok.sum()), "share_of_grid": float(ok.mean()), "guard_px": float(guard_px)}
+    region: dict[str, object] = {"samples": int(ok.sum()), "share_of_grid": float(ok.mean()), "guard_px": float(guard_px)}
     if ok.sum() < 16:
         return BulkChannel(None, None, None, None, None, degree, region, "too few samples")
     region.update({"x_px": [float(xx[ok].min()), float(xx[ok].max())], "y_px": [float(yy[ok].min()), float(yy[ok].max())]})

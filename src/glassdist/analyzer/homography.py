@@ -335,6 +335,7 @@ def refit_undistorted(
     avg = None if S is None else _trimmed_lsq(S, period_px)
     if avg is None:
         return fit
+    assert S is not None
     best, share = None, 0.0
     # RANSAC's fit as it is competes too: on a coarse grid (few, noisy samples) a refit on its
     # clean samples can drift to a homography that leaves less of the view clean
@@ -496,7 +497,7 @@ class _JointFit:
     """The joint homography-and-lens fit :func:`_joint_fit` keeps: model, its sigma, the samples it leaves unstrained."""
 
     H: np.ndarray
-    lens: LensModel
+    lens: LensModel | None
     sigma: Any
     unstrained: np.ndarray
     share: float

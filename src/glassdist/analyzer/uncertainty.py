@@ -207,8 +207,10 @@ def channel_uncertainty(
         L, m.
     """
     W = np.asarray(W, float)
-    var_tr = 0.0
-    c_aa = c_bb = c_ab = 0.0
+    var_tr: np.ndarray | float = 0.0
+    c_aa: np.ndarray | float = 0.0
+    c_bb: np.ndarray | float = 0.0
+    c_ab: np.ndarray | float = 0.0
     for i, Q in enumerate(grad_cov):
         # x^T Cg y with Cg = W^T Q W the covariance of g_i = W^T grad phi_i (rad^2/mm^2): (W x)^T Q (W y),
         # elementwise (a stack of 2 x 2 matrix products costs several times more)
@@ -397,9 +399,9 @@ def field_uncertainty(report: np.ndarray, transfer, noise: PhaseNoise, strain: n
             metric = (V * np.clip(ev, 0.0, None)) @ V.T
         white = photo[i] if ref is None else photo[i] + ref[i] * np.float32(g_chan)
         grad_cov.append(gradient_covariance(white, blur[i] + metric))
-    disp = displacement_sigma(tuple(var), a1.T, a1.R)
+    disp = displacement_sigma((var[0], var[1]), a1.T, a1.R)
     strain = strain if a1.R is None else a1.R @ strain @ a1.R.T  # back to the component frame
-    unc = channel_uncertainty(tuple(grad_cov), a1.T, a1.W, strain, distance_m)
+    unc = channel_uncertainty((grad_cov[0], grad_cov[1]), a1.T, a1.W, strain, distance_m)
     out = {"phi_eff_sigma_mD": unc.phi_eff_sigma_mD, "phi_shear_sigma_mD": unc.phi_shear_sigma_mD,
            "displacement_sigma_mm": disp}
     for f_ in out.values():
