@@ -161,7 +161,7 @@ def bulk_channel(delta_mm: np.ndarray, valid: np.ndarray, labels: np.ndarray, *,
     removed = np.where(ok[..., None], d - resid, np.nan)
     sy, sx = step_px
     # (h, w, comp, px)
-    g = np.stack([np.stack(np.gradient(removed[..., c], sy, sx, edge_order=2)[::-1], -1) for c in range(2)], -2)
+    g = np.stack([np.stack(list(np.gradient(removed[..., c], sy, sx, edge_order=2))[::-1], -1) for c in range(2)], -2)
     Jinv = np.linalg.inv(np.where(ok[..., None, None], jacobian, np.eye(2)))
     G = g @ Jinv  # d delta_a / dX_b, per backdrop mm
     gok = ok & np.all(np.isfinite(G), axis=(-2, -1))

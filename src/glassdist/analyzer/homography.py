@@ -550,6 +550,7 @@ def _judged_lens(fit: HomographyFit, best: _JointFit, S: _StrainSamples, g: Logi
     by at most ``_LENS_CENTRED`` (inner disc) and ``_LENS_OFF_AXIS`` (quadrant).
     """
     H, lens, sig, m, share = best.H, best.lens, best.sigma, best.unstrained, best.share
+    assert lens is not None  # the joint fit's starts each return a lens
     period_px = g.period_px
 
     def bare(cal: LensCalibration, *warn: str) -> LensRefit:  # the lens reported, not applied

@@ -81,7 +81,7 @@ Heat-Treated Flat Glass* (roll wave in mD of reflective power).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -178,7 +178,7 @@ class ReflectionGeometry:
         """The camera-to-pane distance C, mm (D with the camera in the board plane)."""
         return 1000.0 * (self.distance_m if self.camera_distance_m is None else self.camera_distance_m)
 
-    def foot_offset_mm(self, dx_mm, dy_mm):
+    def foot_offset_mm(self, dx_mm: np.ndarray | float, dy_mm: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
         """In-plane vector ``v`` (pane mm) from the camera's foot on the pane to the points offset by ``(dx, dy)``
         from the one seen at the view's centre: ``v = C tan(theta_0) t_0 + (dx, dy)``."""
         r0 = self.camera_distance_mm * math.tan(math.radians(self.incidence_deg))
@@ -362,7 +362,7 @@ def reflect_result(result, geometry: ReflectionGeometry):
     """
     if not math.isclose(result.distance_m, geometry.effective_distance_m, rel_tol=1e-9):
         raise ValueError("reflect_result needs the result of a run at distance_m = geometry.effective_distance_m")
-    fields = dict(result._deferred["fields"])
+    fields = result.grid_fields()
     m = geometry.magnification
     yy, xx = result.analysis_grid.coords()
     H, W = result.valid.shape
@@ -389,9 +389,9 @@ def reflect_result(result, geometry: ReflectionGeometry):
     if result.method == "direct":
         optics["notes"].append(UNIFORM_POWER_NOTE)
     eff_sigma = None if result.effective_sigma_mm is None else result.effective_sigma_mm / m
-    return replace(
-        result, distance_m=geometry.distance_m, mm_per_px=result.mm_per_px / m, sigma_mm=result.sigma_mm / m,
-        effective_sigma_mm=eff_sigma, optics=optics, _deferred={**result._deferred, "fields": fields},
+    return result.with_grid_fields(
+        fields, distance_m=geometry.distance_m, mm_per_px=result.mm_per_px / m, sigma_mm=result.sigma_mm / m,
+        effective_sigma_mm=eff_sigma, optics=optics,
     )
 
 

@@ -8,8 +8,9 @@ fields: writers, figures and exports iterate it rather than naming fields themse
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 
@@ -230,6 +231,16 @@ class AnalysisResult:
         if self._deferred is None or name not in self._deferred["fields"]:
             raise AttributeError(name)
         return self._deferred["fields"][name]
+
+    def grid_fields(self) -> dict[str, np.ndarray]:
+        """Every field on :attr:`analysis_grid`, by name (a new mapping; the arrays are the result's own)."""
+        return dict(self._deferred["fields"]) if self._deferred else {}
+
+    def with_grid_fields(self, fields: dict[str, np.ndarray], **changes: Any) -> AnalysisResult:
+        """A copy of the result whose fields on :attr:`analysis_grid` are ``fields`` (and ``changes`` applied, as
+        :func:`dataclasses.replace`): a later stage re-expresses the fields without reaching into the result."""
+        held = self._deferred or {}
+        return replace(self, **changes, _deferred={**held, "fields": fields})
 
     def pixel_field(self, name: str) -> np.ndarray:
         """Field ``name`` brought to the input's pixel grid (not cached; the attribute is)."""
