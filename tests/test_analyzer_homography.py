@@ -148,7 +148,9 @@ def _fit_grid(U, V, yy, xx, labels, n, grid, warn):
     from glassdist.analyzer.params import AnalyzerParams
 
     carriers = F.CarrierPair(F.Carrier(1 / 8.0, 0.0, 50.0), F.Carrier(0.0, 1 / 8.2, 50.0))
-    return fit_grid_homography((U, V), yy, xx, labels, n, carriers, grid, AnalyzerParams(lens_model="none"), warn)
+    gf = fit_grid_homography((U, V), yy, xx, labels, n, carriers, grid, AnalyzerParams(lens_model="none"))
+    warn.extend(gf.warnings)
+    return gf.fit, gf.offsets
 
 
 def test_each_region_joins_the_fit_by_its_own_integer_offsets():

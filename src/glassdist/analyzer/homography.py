@@ -26,6 +26,7 @@ from .params import AnalyzerParams
 from .region import erode
 
 __all__ = [
+    "GridFit",
     "LensFitOptions",
     "LensRefit",
     "LogicalGrid",
@@ -707,8 +708,8 @@ _INTERIOR_PERIODS = 1.5
 _AMBIGUOUS_SPREAD_PERIODS = 1.0
 
 
-def _ambiguous_offsets(spread: float, n: int, offsets: np.ndarray, warn: list[str]) -> bool:
-    """Whether the parts' whole-period offsets cannot be told from the glass's displacement (Block I), said in ``warn``.
+def _ambiguous_offsets(spread: float, n: int, offsets: np.ndarray) -> str | None:
+    """The warning when the parts' whole-period offsets cannot be told from the glass's displacement (Block I), else None.
 
     Measured: on the ray-traced 0.75 mm roller wave (the accuracy experiment, Direct) the region
     falls into five parts and the grid moves by up to 3.1 periods within them; refitted over every
@@ -718,20 +719,31 @@ def _ambiguous_offsets(spread: float, n: int, offsets: np.ndarray, warn: list[st
     ray-traced scene of the experiment has more than one part but the pillowed IGU (0.05 period).
     """
     if spread < _AMBIGUOUS_SPREAD_PERIODS:
-        return False
+        return None
     taken = ", ".join(f"({u:+.0f}, {v:+.0f})" for u, v in offsets[2:])
-    warn.append(
+    return (
         f"Direct Method: the analysed region falls into {n} parts and the glass moves the grid by up to "
         f"{spread:.1f} carrier periods within them, so Block I cannot tell the parts' whole-period offsets "
         f"(taken as {taken} periods from the largest part's homography) from the glass's own displacement "
         "and fits the baseline on the largest part alone: its scale, and every phi with it, may still be off "
         "by far more than the stated uncertainty - use the Comparative Method (a glass-less reference)"
     )
-    return True
 
 
-def fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParams, warn: list[str],
-                        lens: LensCalibration | None = None):
+@dataclass(frozen=True)
+class GridFit:
+    """:func:`fit_grid_homography`'s outcome: the fit, the offsets removed per region and Block I's warnings.
+
+    ``offsets``: per region label (index 0 unused), the integer offsets (periods) subtracted from U and V.
+    """
+
+    fit: HomographyFit
+    offsets: np.ndarray
+    warnings: tuple[str, ...] = ()
+
+
+def fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParams,
+                        lens: LensCalibration | None = None) -> GridFit:
     """I1 + I2 over all regions, aligning each region's free integer grid offset to the largest.
 
     Where those offsets are ambiguous (:func:`_ambiguous_offsets`) the baseline is fitted
@@ -743,9 +755,10 @@ def fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParams
     ``labels``/``n``: the valid region's parts (:class:`~glassdist.analyzer.region.Region`);
     ``lens``: a camera lens known beforehand (else fitted per ``p.lens_model``, :func:`refit_with_lens`).
 
-    Returns the fit and, per region label (index 0 unused), the integer offsets (periods)
-    subtracted from U and V.
+    Returns a :class:`GridFit`: the fit, per region label (index 0 unused) the integer offsets
+    (periods) subtracted from U and V, and the warnings.
     """
+    warn: list[str] = []
     U, V = UV
     spacing = _points_spacing(carriers, grid)
     period = max(carriers.k1.period_px, carriers.k2.period_px)
@@ -773,7 +786,9 @@ def fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParams
                 offsets[r] = np.round(np.median(du)), np.round(np.median(dv))
                 U[sel] -= offsets[r, 0]
                 V[sel] -= offsets[r, 1]
-        if _ambiguous_offsets(spread, n, offsets, warn):
+        ambiguous = _ambiguous_offsets(spread, n, offsets)
+        if ambiguous:
+            warn.append(ambiguous)
             fitted = labels == 1
         else:
             src, dst = logical_grid_points(U, V, yy, xx, (labels > 0) & interior, spacing)
@@ -793,4 +808,4 @@ def fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParams
             f"only {100 * fit.inlier_fraction:.0f}% of grid points fit the homography; strong distortion or "
             "lens distortion may bias the Direct Method's baseline"
         )
-    return fit, offsets
+    return GridFit(fit, offsets, tuple(warn))

@@ -248,8 +248,8 @@ def _direct_baseline(phases: np.ndarray, demod: Demodulation, reg: Region, p: An
     yy, xx = demod.grid.coords()
     U = carriers.k1.fx * xx + carriers.k1.fy * yy + phases[..., 0] / (2 * np.pi)
     V = carriers.k2.fx * xx + carriers.k2.fy * yy + phases[..., 1] / (2 * np.pi)
-    warn: list[str] = []
-    fit, offsets = fit_grid_homography((U, V), yy, xx, reg.labels, reg.n, carriers, demod.grid, p, warn, lens=lens)
+    gf = fit_grid_homography((U, V), yy, xx, reg.labels, reg.n, carriers, demod.grid, p, lens=lens)
+    fit, offsets, warn = gf.fit, gf.offsets, list(gf.warnings)
     if 0.1 <= fit.inlier_fraction < _MIN_INLIERS:
         warn.append(
             f"Direct Method: only {100 * fit.inlier_fraction:.0f}% of the grid points lie within "
@@ -462,7 +462,7 @@ def prepare_reference(reference: np.ndarray, *, params: AnalyzerParams | dict[st
         psi = [unwrap(w, reg.valid, reg.labels, reg.n, seed=p.ransac_seed) for w in wrapped]
         U = carriers.k1.fx * xx + carriers.k1.fy * yy + psi[0] / (2 * np.pi)
         V = carriers.k2.fx * xx + carriers.k2.fy * yy + psi[1] / (2 * np.pi)
-        fit, _ = fit_grid_homography((U, V), yy, xx, reg.labels, reg.n, carriers, grid, p, [])
+        fit = fit_grid_homography((U, V), yy, xx, reg.labels, reg.n, carriers, grid, p).fit
         noise = noise_std(spec, carriers)
     return ReferenceModel(ref.shape, carriers, covs, grid, bb, mods, fit, p, warn + tuple(numerical), noise)
 
