@@ -126,7 +126,7 @@ def matched(u: np.ndarray, res) -> np.ndarray:
     import scipy.fft as sfft
 
     from glassdist.analyzer import deform as D
-    from glassdist.analyzer.pipeline import _covariances, _demodulation_blur_px2
+    from glassdist.analyzer.demodulate import covariances as _covariances, demodulation_blur_px2 as _demodulation_blur_px2
     from glassdist.analyzer.transfer import InstrumentTransfer
 
     ks = res.carriers

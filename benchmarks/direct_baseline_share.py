@@ -48,7 +48,7 @@ def main(argv=None) -> int:
     names = [n for n in a.scenes.split(",") if n]
     also = [x for x in a.also.split(",") if x]
     opts = RunOptions()
-    measure = pipeline._measure
+    measure = pipeline.measure
     held = {}
 
     def keep(*args, **kwargs):  # the Comparative Method's measurement: its reference's homography
@@ -65,13 +65,13 @@ def main(argv=None) -> int:
         runs, baselines = {}, {}
         try:
             for method in ("comparative", "direct"):
-                pipeline._measure = keep
+                pipeline.measure = keep
                 runs[method] = accuracy.measure(inputs, method, params, kind)
                 baselines[method] = held["m"].baseline
-            pipeline._measure = lambda *a, **k: replace(measure(*a, **k), baseline=baselines["comparative"])
+            pipeline.measure = lambda *a, **k: replace(measure(*a, **k), baseline=baselines["comparative"])
             runs["direct, the reference's A1 Jacobian"] = accuracy.measure(inputs, "direct", params, kind)
         finally:
-            pipeline._measure = measure
+            pipeline.measure = measure
         for what in also:  # "a+b": both replaced at once
             with ExitStack() as stack:
                 for part in what.split("+"):
@@ -99,11 +99,11 @@ def main(argv=None) -> int:
                 if m.fit is None:
                     held["comparative"] = m.baseline
                 return replace(m, baseline=held["comparative"]) if swap and m.fit is not None else m
-            pipeline._measure = one
+            pipeline.measure = one
             try:
                 rows = ripples.run_case(scene, [sp], 2, None)
             finally:
-                pipeline._measure = measure
+                pipeline.measure = measure
             for r in rows if not swap else rows[1:]:
                 what = r["method"] + (", the reference's A1 Jacobian" if swap else "")
                 print(f"| {n:g} | {sp:g} | {what} | {r['ratio_stack']:.4f} | {r['ratio_independent']:.4f} |")

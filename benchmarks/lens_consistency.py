@@ -60,8 +60,9 @@ def through_block_i() -> None:
         vx, vy = xu - 400.0, yu - 100.0  # the bump 174 px off the centre, towards a corner
         g = amp * np.exp(-(vx**2 + vy**2) / (2 * width**2)) / width
         U, V = hm.apply_inverse(H, xu - g * vx, yu - g * vy)
-        fit = hm.refit_with_lens(hm.HomographyFit(H, 1.0, U.size, 0.0), U, V, y, x, np.ones(U.shape, bool), 1,
-                                 period_px=8.0, step_px=(step, step), threshold_px=0.8, image_shape=(h, w), warn=[])
+        fit = hm.refit_with_lens(hm.HomographyFit(H, 1.0, U.size, 0.0),
+                                 hm.LogicalGrid(U, V, y, x, np.ones(U.shape, bool), 1, 8.0, (step, step)),
+                                 hm.LensFitOptions(0.8, (h, w))).fit
         cal = fit.lens
         d = cal.consistency or {}
         verdict = "applied" if cal.identifiable else "refused: " + cal.note.split(" (")[0]

@@ -41,10 +41,10 @@ BUGS = {
          "det = polynomial_detrend(displacement_mm, labels, max(detrend_degree - 1, 0), step_px)"),
     ],
     "displacement 1.5 % too large": [
-        ("analyzer/pipeline.py", "return ag.phases * (p_c / (2 * np.pi)), p_c * logical_jacobian(",
-         "return ag.phases * (1.015 * p_c / (2 * np.pi)), p_c * logical_jacobian("),
-        ("analyzer/pipeline.py", "return (proj_px @ np.linalg.inv(M)) * mm_per_px, None",
-         "return (proj_px @ np.linalg.inv(M)) * (1.015 * mm_per_px), None"),
+        ("analyzer/components.py", "return Components(ag.phases * (p_c / (2 * np.pi)), J,",
+         "return Components(ag.phases * (1.015 * p_c / (2 * np.pi)), J,"),
+        ("analyzer/components.py", "return Components((proj_px @ np.linalg.inv(M)) * mm_per_px, None, None)",
+         "return Components((proj_px @ np.linalg.inv(M)) * (1.015 * mm_per_px), None, None)"),
     ],
     "reporting smoothing 25 % wider": [
         ("analyzer/metrics.py", "outs = _smoothed_components(det, labels, sigma_mm / mm_per_px,",

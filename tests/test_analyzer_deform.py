@@ -2,7 +2,7 @@
 
 The truth is the synthetic displacement through the documented linear transfer of the
 displacement output (:mod:`~glassdist.analyzer.transfer`): Block F's Gaussian ``G`` per
-carrier (:func:`~glassdist.analyzer.pipeline._demodulation_blur_px2`) after one pass, and
+carrier (:func:`~glassdist.analyzer.demodulate.demodulation_blur_px2`) after one pass, and
 ``(1 - (1 - G B)^n) / B`` after ``n`` demodulations (``B`` the bilinear interpolation from the
 demodulation grid), written out here in the spectrum (a line grid: each carrier's kernel
 is axis-aligned and reads one displacement component).
@@ -15,7 +15,7 @@ from scipy import ndimage
 from glassdist import analyze
 from glassdist.analyzer import deform as D
 from glassdist.analyzer import fourier as F
-from glassdist.analyzer.pipeline import _covariances, _demodulation_blur_px2
+from glassdist.analyzer.demodulate import covariances as _covariances, demodulation_blur_px2 as _demodulation_blur_px2
 from glassdist.synthetic import synthetic_capture, wave_displacement
 
 PITCH = 8.0  # mm, 1 mm/px: carrier period 8 px
@@ -99,7 +99,7 @@ def test_deformation_reads_a_strong_wave_through_the_linear_transfer(strong_wave
     assert np.sqrt(np.mean(f5**2)) < 0.0021
     assert np.abs(f5).max() < 0.011
     assert runs[3].valid.mean() >= runs[0].valid.mean() - 0.005
-    # By default Block A keeps F5's resolution (2 x 2 means: pipeline.BLOCK_MIN_RESPONSE). Those pass what 4 x 4
+    # By default Block A keeps F5's resolution (2 x 2 means: analysis_grid.BLOCK_MIN_RESPONSE). Those pass what 4 x 4
     # means removed, the passes' remainder at the carrier frequency (two thirds of the error power lies at
     # 0.09-0.16 cycles/px, the carrier's 0.125; 2 % with 4 x 4 means): 0.0032 period RMS, 0.0165 at most
     # (Comparative), 0.0033, 0.0165 (Direct); without noise 0.0029 and 0.0031.
@@ -226,7 +226,7 @@ def test_own_shift_is_the_references_phase_across_the_displacement():
     # displacement u the Comparative phase differs from -2 pi f u by own(r - u) - own(r) = -2 pi 0.02 f u_x.
     from types import SimpleNamespace
 
-    from glassdist.analyzer.pipeline import _own_phasors, _own_shift
+    from glassdist.analyzer.deform import own_phasors as _own_phasors, own_shift as _own_shift
 
     ks = F.CarrierPair(F.Carrier(0.125, 0.0), F.Carrier(0.0, 0.125))
     grid = F.SamplingGrid((128, 160), (64, 80))

@@ -121,8 +121,8 @@ def test_a_known_lens_is_applied_from_a_hundred_strain_samples():
     assert valid.sum() == 100
     fit0 = hm.HomographyFit(H @ np.diag([1.01, 0.99, 1.0]), 1.0, 100, 0.0)
     known = LensCalibration(lens, "file")
-    fit = hm.refit_with_lens(fit0, U, V, y, x, valid, 1, period_px=8.0, step_px=(32.0, 32.0), threshold_px=0.8,
-                             image_shape=(320, 320), known=known)
+    fit = hm.refit_with_lens(fit0, hm.LogicalGrid(U, V, y, x, valid, 1, 8.0, (32.0, 32.0)),
+                             hm.LensFitOptions(0.8, (320, 320)), known=known).fit
     assert fit.lens is known
     q = np.c_[U[valid], V[valid], np.ones(100)] @ fit.matrix.T
     px = np.stack(lens.distort_px(q[:, 0] / q[:, 2], q[:, 1] / q[:, 2]), 1)
@@ -148,7 +148,9 @@ def _fit_grid(U, V, yy, xx, labels, n, grid, warn):
     from glassdist.analyzer.params import AnalyzerParams
 
     carriers = F.CarrierPair(F.Carrier(1 / 8.0, 0.0, 50.0), F.Carrier(0.0, 1 / 8.2, 50.0))
-    return fit_grid_homography((U, V), yy, xx, labels, n, carriers, grid, AnalyzerParams(lens_model="none"), warn)
+    gf = fit_grid_homography((U, V), yy, xx, labels, n, carriers, grid, AnalyzerParams(lens_model="none"))
+    warn.extend(gf.warnings)
+    return gf.fit, gf.offsets
 
 
 def test_each_region_joins_the_fit_by_its_own_integer_offsets():

@@ -202,7 +202,7 @@ def test_direct_warns_when_the_result_depends_on_n(real_data):
     # (mean |phi_eff| 3.98 -> 2.46 mD at L = 0.5 m), and the warning says by how much.
     ref = real_data["reference"]
     two = analyze(ref, pitch_mm=5.0, distance_m=0.5, pattern="checkerboard", params={"detrend_degree": 2})
-    said = [w for w in two.warnings if "the result depends on N" in w and "--detrend-degree 3" in w]
+    said = [w for w in two.warnings if "the result depends on N" in w and "detrend_degree 3" in w]
     assert said, two.warnings
     three = analyze(ref, pitch_mm=5.0, distance_m=0.5, pattern="checkerboard", params={"detrend_degree": 3})
     t2, t3 = (np.mean(np.abs(r.phi_eff_mD[r.trusted])) for r in (two, three))

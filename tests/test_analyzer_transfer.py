@@ -59,7 +59,7 @@ def test_block_means_keep_what_the_demodulation_resolves(step_px, passes, expect
 
     from glassdist.analyzer.fourier import SamplingGrid
     from glassdist.analyzer.params import AnalyzerParams
-    from glassdist.analyzer.pipeline import _analysis_block
+    from glassdist.analyzer.analysis_grid import analysis_block as _analysis_block
 
     c = 16.0
 

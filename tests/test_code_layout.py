@@ -287,11 +287,48 @@ def test_layering_check_finds_an_upward_import():
     assert _layering_violations(graph) == ["glassdist.report.maps (rendering) imports glassdist.storage.writer (storage)"]
 
 
-@pytest.mark.parametrize("path", sorted(p for sub in ("acceptance", "storage", "report", "jobs") for p in (SRC / sub).glob("*.py"))
+@pytest.mark.parametrize("path", sorted(p for sub in ("acceptance", "storage", "report", "jobs", "analyzer")
+                                        for p in (SRC / sub).glob("*.py"))
                          + [SRC / "fs.py", SRC / "io.py", SRC / "measures.py", SRC / "cli.py", SRC / "_api.py"],
                          ids=lambda p: str(p.relative_to(SRC)))
 def test_output_floor_modules_stay_under_900_lines(path):
     assert len(path.read_text().splitlines()) <= 900
+
+
+def test_the_analyzer_pipeline_is_an_orchestrator():
+    """pipeline.py keeps the inputs, the straight sequence of stages and the public API; the stages live in their modules."""
+    assert len((SRC / "analyzer" / "pipeline.py").read_text().splitlines()) <= 600
+
+
+#: The longest function body (its docstring, the contract, not counted) an analyzer module may hold.
+MAX_FUNCTION_LINES = 80
+
+
+def _long_functions(path: Path, limit: int = MAX_FUNCTION_LINES) -> list[str]:
+    out = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            body = node.body
+            signature = body[0].lineno - node.lineno  # the def line(s) and decorators' own lines excluded
+            if body and isinstance(body[0], ast.Expr) and isinstance(getattr(body[0], "value", None), ast.Constant) \
+                    and isinstance(body[0].value.value, str):
+                body = body[1:]
+            lines = 0 if not body else body[-1].end_lineno - body[0].lineno + 1
+            lines += signature
+            if lines > limit:
+                out.append(f"{path.name}:{node.lineno} {node.name} ({lines} lines)")
+    return out
+
+
+def test_no_analyzer_function_is_over_80_lines():
+    found = [f for path in sorted((SRC / "analyzer").glob("*.py")) for f in _long_functions(path)]
+    assert found == []
+
+
+def test_the_function_length_check_finds_a_long_function(tmp_path):
+    long = tmp_path / "long.py"
+    long.write_text('def f():\n    """Doc."""\n' + "    x = 1\n" * 81)
+    assert _long_functions(long) == ["long.py:1 f (82 lines)"]
 
 
 @pytest.mark.parametrize("package", ["glassdist", *sorted(f"glassdist.{p.parent.name}" for p in SRC.glob("*/__init__.py"))])

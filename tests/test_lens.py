@@ -352,7 +352,7 @@ def test_calibration_photo_and_camera_file_agree(tmp_path):
     same model within 5% (measured: k1 0.2%, k2 0.05% apart), through the command line as well; a
     specification requiring a calibration source refuses a run without one (exit 2)."""
     from glassdist.analyzer.lens import calibration_from_camera_file
-    from glassdist.analyzer.pipeline import calibrate_from_photo
+    from glassdist.analyzer.calibrate import calibrate_from_photo
     from glassdist.io import write_png16
 
     sc = _render("lens_moustache_24mm").with_changes(render={"samples_per_pixel": 4})

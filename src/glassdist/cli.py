@@ -13,6 +13,7 @@ import difflib
 import importlib
 import logging
 import os
+import re
 import sys
 import traceback
 from pathlib import Path
@@ -307,7 +308,7 @@ def _lens_source(args, pinned, protocol, params, images):
     """The camera lens from ``--camera-file`` or ``--lens-photo`` (Direct Method), or None; ``pinned``: the spec's protocol."""
     from .acceptance.spec import check_lens_source
     from .analyzer.lens import calibration_from_camera_file
-    from .analyzer.pipeline import calibrate_from_photo
+    from .analyzer.calibrate import calibrate_from_photo
     from .io import read_image
 
     check_lens_source(pinned, lens_photo=args.lens_photo is not None,
@@ -329,6 +330,43 @@ def _lens_source(args, pinned, protocol, params, images):
                          "a photo of the grid taken without the glass")
     return calibrate_from_photo(photo, pitch_mm=protocol.pitch_mm, params=params, image_shape=images[0].shape,
                                 distance_m=protocol.distance_m)
+
+
+#: The analyzer speaks of its parameters; the command line of its options: each phrase of the analyzer's
+#: messages that names an input, and the same phrase naming the option (errors, warnings, the bulk's reason).
+_OPTION_WORDS = (
+    ("(lens: calibrate_from_photo, calibration_from_camera_file)", "(--lens-photo, --camera-file)"),
+    ("the Comparative Method (a reference photo)", "the Comparative Method (--reference)"),
+    ("assumed 'lines': give the pattern (", "assumed 'lines': give --pattern ("),
+    ("check the pattern, or leave it out", "check --pattern, or leave it out"),
+    (", lens, and the camera-to-pane distance, camera_distance_m, the camera",
+     ", --camera-file, and the camera-to-pane distance, --camera-distance-m, the camera"),
+    ("pitch_mm (the printed grid pitch)", "pitch_mm (--pitch-mm, the printed grid pitch)"),
+    ("distance_m (the glass-to-grid distance L)", "distance_m (--distance-m, the glass-to-grid distance L)"),
+    ("camera_distance_m (camera to pane)", "camera_distance_m (--camera-distance-m, camera to pane)"),
+    ("distance_m (the board-to-pane distance D)", "distance_m (--distance-m, the board-to-pane distance D)"),
+    ("camera_distance_m (the camera-to-pane distance C)",
+     "camera_distance_m (--camera-distance-m, the camera-to-pane distance C)"),
+    ("incidence_deg must be", "incidence_deg (--incidence-deg) must be"),
+)
+_DEGREE_WORDS = re.compile(r"with detrend_degree (\d+):")
+
+
+def option_words(text: str) -> str:
+    """An analyzer message with the options the command line names its parameters by (:data:`_OPTION_WORDS`)."""
+    for said, option in _OPTION_WORDS:
+        text = text.replace(said, option)
+    return _DEGREE_WORDS.sub(r"with --detrend-degree \1:", text)
+
+
+def _in_option_words(result):
+    """The result with its warnings and its bulk channel's reason in the command line's words."""
+    from dataclasses import replace
+
+    bulk = result.bulk
+    if bulk is not None and bulk.reason:
+        bulk = replace(bulk, reason=option_words(bulk.reason))
+    return replace(result, warnings=tuple(option_words(w) for w in result.warnings), bulk=bulk)
 
 
 def _run_analyze(args) -> int:
@@ -363,6 +401,7 @@ def _run_analyze(args) -> int:
             del images, reference, kw
             if optics is not None:
                 result = reflect_result(result, optics)
+            result = _in_option_words(result)
             # a capture outside the protocol is not judged (exit 2), nothing written
             record = build_record(request, inputs, result)
             step("writing the outputs")
@@ -465,7 +504,7 @@ def _main(argv: list[str] | None) -> int:
     except GlassdistError as exc:
         if args.debug:  # bad input stays bad input (exit 2); the traceback shows where it was found
             traceback.print_exc()
-        print(f"glassdist: error: {safe_text(exc, 2000)}", file=sys.stderr)
+        print(f"glassdist: error: {safe_text(option_words(str(exc)), 2000)}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print("glassdist: interrupted", file=sys.stderr)

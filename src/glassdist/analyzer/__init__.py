@@ -5,6 +5,7 @@ from .._lazy import lazy_exports
 # loaded on first use: checking a command's inputs needs the parameters, not the analysis stack
 __getattr__, __dir__ = lazy_exports(__name__, {
     "analyze_captures": ".captures",
+    "calibrate_from_photo": ".calibrate",
     "Carrier": ".fourier", "CarrierPair": ".fourier",
     "HomographyFit": ".homography",
     "Channels": ".metrics", "channel_statistics": ".metrics", "evaluate_displacement": ".metrics",
@@ -18,6 +19,7 @@ __getattr__, __dir__ = lazy_exports(__name__, {
 __all__ = [
     "analyze",
     "analyze_captures",
+    "calibrate_from_photo",
     "analyze_reflection",
     "ReflectionGeometry",
     "prepare_reference",

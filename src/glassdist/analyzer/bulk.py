@@ -51,13 +51,13 @@ import numpy as np
 
 from .metrics import polynomial_detrend
 
-__all__ = ["BulkChannel", "bulk_channel", "pinned_strain", "DIRECT_BULK_REASON"]
+__all__ = ["BulkChannel", "bulk_channel", "measured_bulk", "pinned_strain", "DIRECT_BULK_REASON"]
 
 #: Why the Direct Method does not report the bulk channel.
 DIRECT_BULK_REASON = (
     "not identifiable with the Direct Method: a uniform power is a change of scale, which the homography "
     "absorbs (and a linear change of power a perspective term); it needs a capture that pins the magnification "
-    "(a camera file's focal length, --camera-file, and the camera-to-pane distance, --camera-distance-m, the camera "
+    "(a camera file's focal length, lens, and the camera-to-pane distance, camera_distance_m, the camera "
     "facing the pane) or the Comparative Method"
 )
 
@@ -77,6 +77,7 @@ class BulkChannel:
     pinned: dict | None = None
 
     def to_dict(self) -> dict:
+        """The channel as a JSON-ready mapping (summary.json's ``bulk``)."""
         d = {"phi_eff_mD": self.phi_eff_mD, "phi_shear_mD": self.phi_shear_mD, "axis_deg": self.axis_deg,
              "phi_eff_sigma_mD": self.phi_eff_sigma_mD, "phi_shear_sigma_mD": self.phi_shear_sigma_mD,
              "detrend_degree": self.degree, "region": self.region, "reason": self.reason}
@@ -150,7 +151,7 @@ def bulk_channel(delta_mm: np.ndarray, valid: np.ndarray, labels: np.ndarray, *,
         ok = inner if inner.sum() >= 16 else ok
     if ok.any():  # the pane: the largest part of the region (a frame or mullion splits it)
         ok &= labels == np.argmax(np.bincount(labels[ok].ravel()))
-    region = {"samples": int(ok.sum()), "share_of_grid": float(ok.mean()), "guard_px": float(guard_px)}
+    region: dict[str, object] = {"samples": int(ok.sum()), "share_of_grid": float(ok.mean()), "guard_px": float(guard_px)}
     if ok.sum() < 16:
         return BulkChannel(None, None, None, None, None, degree, region, "too few samples")
     region.update({"x_px": [float(xx[ok].min()), float(xx[ok].max())], "y_px": [float(yy[ok].min()), float(yy[ok].max())]})
@@ -159,7 +160,8 @@ def bulk_channel(delta_mm: np.ndarray, valid: np.ndarray, labels: np.ndarray, *,
     resid = polynomial_detrend(d, lab, degree, step_px)
     removed = np.where(ok[..., None], d - resid, np.nan)
     sy, sx = step_px
-    g = np.stack([np.stack(np.gradient(removed[..., c], sy, sx, edge_order=2)[::-1], -1) for c in range(2)], -2)  # (h, w, comp, px)
+    # (h, w, comp, px)
+    g = np.stack([np.stack(list(np.gradient(removed[..., c], sy, sx, edge_order=2))[::-1], -1) for c in range(2)], -2)
     Jinv = np.linalg.inv(np.where(ok[..., None, None], jacobian, np.eye(2)))
     G = g @ Jinv  # d delta_a / dX_b, per backdrop mm
     gok = ok & np.all(np.isfinite(G), axis=(-2, -1))
@@ -184,3 +186,47 @@ def bulk_channel(delta_mm: np.ndarray, valid: np.ndarray, labels: np.ndarray, *,
     s_slope = s_r / np.sqrt(max(n_eff, 1.0) * max(var_x, 1e-30))
     return BulkChannel(eff, shear, axis, float(np.sqrt(2.0) * s_slope * k), float(2.0 * s_slope * k), degree, region,
                        pinned=pinned)
+
+
+def measured_bulk(delta_cam: np.ndarray, ag, comp, *, fit, params, distance_m: float, mm_per_px: float,
+                  sigma_mm: float, guard_px: float, camera_distance_m: float | None = None) -> BulkChannel:
+    """The bulk channel of one analysis, from its camera-frame displacement ``delta_cam`` (mm) on the analysis grid.
+
+    Comparative Method (``fit`` None): measured. Direct Method (``fit``, a
+    :class:`~glassdist.analyzer.homography.HomographyFit`): only where the magnification is
+    pinned (a camera file's focal length, and ``camera_distance_m``, the camera facing the
+    pane): the baseline's own strain (:func:`pinned_strain`) plus what the degree-N polynomial
+    of the Direct displacement holds; otherwise why it is not identifiable. ``ag``: the
+    :class:`~glassdist.analyzer.analysis_grid.AnalysisGrid`; ``comp``: A1's
+    :class:`~glassdist.analyzer.components.Components` (its Jacobian and frame rotation).
+    """
+    p = params
+    base = pinned = None
+    if fit is not None:
+        cal = fit.lens
+        focal = None if cal is None or not cal.identifiable else cal.focal_px
+        if camera_distance_m is None or focal is None:
+            missing = [w for w, gone in (("the camera's focal length (a camera file)", focal is None),
+                                         ("the camera-to-pane distance", camera_distance_m is None)) if gone]
+            return BulkChannel(None, None, None, None, None, p.detrend_degree, {},
+                               f"{DIRECT_BULK_REASON}; missing here: {' and '.join(missing)}")
+        if p.a1_mode != "projective":
+            return BulkChannel(None, None, None, None, None, p.detrend_degree, {},
+                               "the pinned Direct bulk channel needs the projective A1 (a1_mode 'projective')")
+        board_mm = (camera_distance_m + distance_m) * 1000.0
+        k = 1000.0 / distance_m
+        pinned = {"camera_distance_m": float(camera_distance_m), "focal_px": float(focal),
+                  "phi_eff_mD_per_cm_of_distance": float(2.0 * 10.0 / board_mm * k),
+                  "phi_eff_mD_per_percent_of_focal_length": float(2.0 * 0.01 * k)}
+    yy, xx = ag.grid.coords()
+    delta = delta_cam
+    if p.a1_mode == "projective":
+        J, R = comp.jacobian, comp.frame_rotation  # the Direct baseline seen through the lens
+        if pinned is not None:
+            base = pinned_strain(J, focal_px=pinned["focal_px"], board_distance_mm=board_mm)
+        delta = delta @ R.T  # back to the component frame
+    else:
+        J, R = np.broadcast_to(mm_per_px * np.eye(2), xx.shape + (2, 2)), None
+    return bulk_channel(delta, ag.valid, ag.labels, degree=p.detrend_degree, step_px=ag.grid.step, jacobian=J,
+                        frame_rotation=R, distance_m=distance_m, sigma_px=sigma_mm / mm_per_px, xx=xx, yy=yy,
+                        guard_px=guard_px, base_strain=base, pinned=pinned)

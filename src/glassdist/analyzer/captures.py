@@ -41,20 +41,20 @@ from scipy import ndimage
 
 from ..errors import InputError
 from ..plausibility import review_measurement
+from .analysis_grid import AnalysisGrid
 from .homography import apply_inverse, fit_homography, logical_coordinates, logical_grid_points
 from .metrics import masked_gaussian, polynomial_detrend
 from .params import AnalyzerParams
 from .pipeline import (
+    Measurement,
     ReferenceModel,
-    _AnalysisGrid,
-    _evaluate,
-    _measure,
-    _Measurement,
-    _resolve_params,
-    _result,
-    _routed_warnings,
     analyze,
+    evaluate,
+    measure,
     prepare_reference,
+    resolve_params,
+    result_of,
+    routed_warnings,
 )
 from .region import min_region_samples, trusted_on
 from .result import AnalysisResult
@@ -123,19 +123,19 @@ def _sample_ready(coef, invalid_weight, rows, cols, max_invalid_weight):
     return np.where(invalid_weight > max(max_invalid_weight, 1e-9), np.nan, v)
 
 
-def _phases(m: _Measurement) -> np.ndarray:
+def _phases(m: Measurement) -> np.ndarray:
     """The capture's phases (h, w, 2) on its analysis grid, NaN outside its valid region (whole blocks)."""
     return np.where(m.ag.valid[..., None], m.ag.phases, np.nan)
 
 
-def _logical(m: _Measurement):
+def _logical(m: Measurement):
     """``U_k`` (h, w, 2) on the capture's analysis grid, carrier periods (NaN where invalid)."""
     yy, xx = m.ag.grid.coords()
     u0, v0 = logical_coordinates(m.baseline, None if m.fit is None else m.fit.lens_model, xx, yy)
     return np.stack([u0, v0], axis=-1) + _phases(m) / (2 * np.pi)
 
 
-def _grid_homography(m: _Measurement, U: np.ndarray) -> np.ndarray:
+def _grid_homography(m: Measurement, U: np.ndarray) -> np.ndarray:
     """``G``: logical grid -> pixels of the capture's own grid (Direct: Block I's fit; Comparative: fitted alike)."""
     if m.fit is not None:
         return m.fit.matrix
@@ -149,7 +149,7 @@ def _grid_homography(m: _Measurement, U: np.ndarray) -> np.ndarray:
     return fit_homography(src, dst, threshold_px=thr, max_trials=p.ransac_max_trials, seed=p.ransac_seed).matrix
 
 
-def _carrier_permutation(m1: _Measurement, mk: _Measurement) -> np.ndarray:
+def _carrier_permutation(m1: Measurement, mk: Measurement) -> np.ndarray:
     """Signed permutation ``P`` with ``U_1 ~ P U_k + o`` (the captures may label their carriers differently)."""
     A1 = np.array([[m1.carriers.k1.fx, m1.carriers.k1.fy], [m1.carriers.k2.fx, m1.carriers.k2.fy]])
     Ak = np.array([[mk.carriers.k1.fx, mk.carriers.k1.fy], [mk.carriers.k2.fx, mk.carriers.k2.fy]])
@@ -163,7 +163,7 @@ def _carrier_permutation(m1: _Measurement, mk: _Measurement) -> np.ndarray:
     return P
 
 
-def _registered(m1: _Measurement, U1_base: np.ndarray, G1: np.ndarray, mk: _Measurement, Gk, offset, P, ready,
+def _registered(m1: Measurement, U1_base: np.ndarray, G1: np.ndarray, mk: Measurement, Gk, offset, P, ready,
                 sl=(slice(None), slice(None))) -> tuple:
     """Capture k's phases on capture 1's grid (rad, NaN where not covered) and the shift of each sample (px).
 
@@ -213,7 +213,7 @@ def _detrended(phases: np.ndarray, degree: int, step) -> np.ndarray:
     return polynomial_detrend(phases, ok.astype(np.int32), degree, step)
 
 
-def _register_capture(m1: _Measurement, U1_base, G1, mk: _Measurement, degree: int):
+def _register_capture(m1: Measurement, U1_base, G1, mk: Measurement, degree: int):
     """Capture k on capture 1's grid, with the grid offset that best matches capture 1's field.
 
     A periodic grid fixes the offset between two captures only modulo one period. Starting
@@ -317,18 +317,19 @@ def analyze_captures(
         return analyze(images[0], pitch_mm=pitch_mm, distance_m=distance_m, reference=reference, params=params,
                        mask=mask, pattern=pattern)
     _check_same_camera(images)
-    warn: list[str] = []
-    with _routed_warnings(warn):
-        meas = _measured_captures(images, pitch_mm, distance_m, reference, params, mask, pattern, warn)
+    with routed_warnings() as numerical:
+        meas, warn = _measured_captures(images, pitch_mm, distance_m, reference, params, mask, pattern)
         refm = meas[0].inputs.reference  # the slips are the run's: checked on the first capture, as analyze does
-        warn.extend(review_measurement(images[0], None if refm is None else refm.grid_spread, meas[0].carriers,
-                                       mm_per_px=meas[0].mm_per_px, distance_m=distance_m, pitch_mm=pitch_mm))
+        warn += tuple(review_measurement(images[0], None if refm is None else refm.grid_spread, meas[0].carriers,
+                                         mm_per_px=meas[0].mm_per_px, distance_m=distance_m, pitch_mm=pitch_mm))
         total, count, records = _registered_sums(meas)
-        ag, n = _averaged_grid(meas[0], total, count, len(meas), warn)
-        evaluated = _evaluate(meas[0], ag, warn)
+        ag, n, w_avg = _averaged_grid(meas[0], total, count, len(meas))
+        warn += w_avg
+        ev = evaluate(meas[0], ag, warn)
     for r in records:
         log.info("capture %(capture)d: grid offset %(grid_offset)s, largest shift %(max_shift_px).2f px", r)
-    res = _result(meas[0], evaluated, warn, extra_fields={"capture_count": count.astype(np.int16)}, n_regions=n)
+    res = result_of(meas[0], ev, warn + ev.warnings + tuple(numerical),
+                    extra_fields={"capture_count": count.astype(np.int16)}, n_regions=n)
     return replace(res, captures=tuple(records))
 
 
@@ -349,8 +350,8 @@ def _check_same_camera(images: list) -> None:
             )
 
 
-def _measured_captures(images: list, pitch_mm: float, distance_m: float, reference, params, mask, pattern,
-                       warn: list[str]) -> list[_Measurement]:
+def _measured_captures(images: list, pitch_mm: float, distance_m: float, reference, params, mask,
+                       pattern) -> tuple[list[Measurement], tuple[str, ...]]:
     """Every capture measured up to its analysis grid (F1-F4, Block I), the reference prepared once.
 
     Parameters
@@ -359,31 +360,31 @@ def _measured_captures(images: list, pitch_mm: float, distance_m: float, referen
         Grey photos in [0, 1].
     pitch_mm, distance_m, reference, params, mask, pattern
         As for :func:`analyze_captures`.
-    warn : list of str
-        Receives the warnings: the first capture's as they are, a later capture's prefixed
-        with its number and only when the first did not give the same one.
-
     Returns
     -------
-    list of _Measurement
+    list of Measurement
         One per capture, in order.
+    tuple of str
+        The warnings: the first capture's as they are, a later capture's prefixed with its
+        number and only when the first did not give the same one.
     """
     if reference is not None and not isinstance(reference, ReferenceModel):
-        reference = prepare_reference(reference, params=_resolve_params(params, pattern))
+        reference = prepare_reference(reference, params=resolve_params(params, pattern))
     meas = []
+    warn: list[str] = []
     for i, img in enumerate(images, start=1):
-        w_i: list[str] = []
-        meas.append(_measure(img, pitch_mm, distance_m, reference, params, mask, pattern, w_i))
-        warn.extend(w if i == 1 else f"capture {i}: {w}" for w in w_i if i == 1 or w not in warn)
-    return meas
+        m = measure(img, pitch_mm, distance_m, reference, params, mask, pattern)
+        meas.append(m)
+        warn.extend(w if i == 1 else f"capture {i}: {w}" for w in m.warnings if i == 1 or w not in warn)
+    return meas, tuple(warn)
 
 
-def _registered_sums(meas: list[_Measurement]) -> tuple[np.ndarray, np.ndarray, list[dict]]:
+def _registered_sums(meas: list[Measurement]) -> tuple[np.ndarray, np.ndarray, list[dict]]:
     """Every capture's phases carried onto the first capture's grid and summed where valid.
 
     Parameters
     ----------
-    meas : list of _Measurement
+    meas : list of Measurement
         The captures, the first defining the frame.
 
     Returns
@@ -422,27 +423,26 @@ def _registered_sums(meas: list[_Measurement]) -> tuple[np.ndarray, np.ndarray, 
     return total, count, records
 
 
-def _averaged_grid(m1: _Measurement, total: np.ndarray, count: np.ndarray, n_captures: int,
-                   warn: list[str]) -> tuple[_AnalysisGrid, int]:
+def _averaged_grid(m1: Measurement, total: np.ndarray, count: np.ndarray,
+                   n_captures: int) -> tuple[AnalysisGrid, int, tuple[str, ...]]:
     """The first capture's analysis grid carrying the average of the registered phases.
 
     Parameters
     ----------
-    m1 : _Measurement
+    m1 : Measurement
         The first capture.
     total, count : ndarray
         As returned by :func:`_registered_sums`.
     n_captures : int
         How many captures were summed.
-    warn : list of str
-        Receives a warning when more than 5% of the averaged region misses a capture.
-
     Returns
     -------
-    ag : _AnalysisGrid
+    ag : AnalysisGrid
         Average phases (rad, float32, NaN outside the region), its regions and the report mask.
     n : int
         Number of regions kept.
+    warnings : tuple of str
+        A warning when more than 5% of the averaged region misses a capture.
     """
     valid = count > 0
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -455,9 +455,9 @@ def _averaged_grid(m1: _Measurement, total: np.ndarray, count: np.ndarray, n_cap
     # Reported: the averaged region and the first capture's partial border blocks around it
     # (smoothly extended, as for one capture).
     report = valid | (m1.ag.report & ndimage.binary_dilation(valid))
-    ag = _AnalysisGrid(m1.ag.grid, avg, valid, labels, report, None, m1.ag.transfer, m1.ag.passes, m1.ag.photo)
+    ag = AnalysisGrid(m1.ag.grid, avg, valid, labels, report, None, m1.ag.transfer, m1.ag.passes, m1.ag.photo)
     partial = float(np.mean(count[valid] < n_captures)) if valid.any() else 0.0
     if partial > 0.05:
-        warn.append(f"{100 * partial:.0f}% of the averaged region is covered by fewer than all "
-                    f"{n_captures} captures (capture_count shows where)")
-    return ag, n
+        return ag, n, (f"{100 * partial:.0f}% of the averaged region is covered by fewer than all "
+                       f"{n_captures} captures (capture_count shows where)",)
+    return ag, n, ()

@@ -51,15 +51,35 @@ Huang, Fang & Seah (1993); Wildeman (2018), Exp. Fluids 59, 97 (checkerboard dem
 
 from __future__ import annotations
 
+import functools
+import logging
+from dataclasses import dataclass
+from typing import Callable
+
 import numpy as np
 from scipy import ndimage
 
 from . import fourier as F
+from .demodulate import (
+    Demodulation,
+    ReferenceModel,
+    basebands,
+    demodulation_blur_px2,
+    frequency_deviation,
+    modulation,
+    smooth_with_coherence,
+)
+from .metrics import masked_gaussian
+from .params import AnalyzerParams
+from .region import PHASE_RESIDUE, Region, grid_seen
 
 __all__ = [
-    "deformation_grid", "deformed_photo", "displacement_to_phase", "fill_nearest", "grow", "off_frame",
-    "phase_to_displacement_px", "photo_spline", "to_frame", "to_grid", "warped_reference",
+    "F5Result", "deformation_grid", "deformed_photo", "displacement_to_phase", "fill_nearest", "follow_local_grid",
+    "grow", "low_passed", "off_frame", "own_phasors", "own_shift", "phase_to_displacement_px", "photo_passes",
+    "photo_spline", "rms_update_periods", "to_frame", "to_grid", "warped_heterodyne", "warped_reference",
 ]
+
+log = logging.getLogger(__name__)
 
 # A sample joins the measured region only where its wrapped residual is the true one with a
 # margin for noise (|residual| well below pi, per carrier), rad.
@@ -99,7 +119,8 @@ def fill_nearest(a: np.ndarray, valid: np.ndarray) -> np.ndarray:
     return a[idx[0], idx[1]]
 
 
-def deformation_grid(grid: F.SamplingGrid, max_deviation: float, period_px: float, decimation) -> F.SamplingGrid:
+def deformation_grid(grid: F.SamplingGrid, max_deviation: float, period_px: float,
+                     decimation: int | str) -> F.SamplingGrid:
     """The demodulation grid F5 works on: ``grid``, or one with twice its samples along each axis where the reach needs it.
 
     A local frequency ``max_deviation * |f|`` off the carrier turns the phase by
@@ -193,7 +214,7 @@ def warped_reference(pred: np.ndarray, own: np.ndarray | None, grid: F.SamplingG
     x = np.arange(W, dtype=np.float32)[None, :]
     out = np.zeros((H, W), np.float32)
 
-    def up(a):
+    def up(a: np.ndarray) -> np.ndarray:
         return cv2.resize(np.ascontiguousarray(a, np.float32), (W, H), interpolation=cv2.INTER_LINEAR)
 
     for i, c in enumerate((carriers.k1, carriers.k2)):
@@ -233,7 +254,10 @@ def _remap(a: np.ndarray, mx: np.ndarray, my: np.ndarray) -> np.ndarray:
 
 
 def photo_spline(img: np.ndarray) -> np.ndarray:
-    """The photo's cubic B-spline coefficients (float32, mirrored edges) for :func:`deformed_photo`, computed once per analysis."""
+    """The photo's cubic B-spline coefficients (float32, mirrored edges) for :func:`deformed_photo`.
+
+    Computed once per analysis.
+    """
     return ndimage.spline_filter(np.asarray(img, np.float32), order=3, output=np.float32, mode="mirror")
 
 
@@ -273,8 +297,8 @@ def deformed_photo(spline: np.ndarray, pred: np.ndarray, grid: F.SamplingGrid, c
     yy, xx = grid.coords()
     tx, ty = xx + w[..., 0], yy + w[..., 1]
     outside = (tx < 0) | (tx > W - 1) | (ty < 0) | (ty > H - 1)
-    wx = cv2.resize(np.ascontiguousarray(w[..., 0]), (W, H), interpolation=cv2.INTER_LINEAR)
-    wy = cv2.resize(np.ascontiguousarray(w[..., 1]), (W, H), interpolation=cv2.INTER_LINEAR)
+    wx: np.ndarray = cv2.resize(np.ascontiguousarray(w[..., 0]), (W, H), interpolation=cv2.INTER_LINEAR)
+    wy: np.ndarray = cv2.resize(np.ascontiguousarray(w[..., 1]), (W, H), interpolation=cv2.INTER_LINEAR)
     wx += np.arange(W, dtype=np.float32)[None, :]
     wy += np.arange(H, dtype=np.float32)[:, None]
     out = ndimage.map_coordinates(spline, [wy, wx], order=3, mode="mirror", prefilter=False, output=np.float32)
@@ -307,3 +331,304 @@ def to_frame(z: np.ndarray, src: F.SamplingGrid, pred: np.ndarray, grid: F.Sampl
         return _remap(z, mx, my)
     return (_remap(z.real, mx, my) + 1j * _remap(z.imag, mx, my)).astype(np.complex64)
 
+
+
+# --------------------------------------------------------------------------- the F5 loop
+
+
+@dataclass(frozen=True)
+class F5Result:
+    """F5's outcome, all on ``demod.grid``.
+
+    Attributes
+    ----------
+    demod : Demodulation
+        The demodulation whose phase is ``predictor + residual`` (``passes``: the demodulations
+        summed, the one pass included; ``photo_passes`` and ``restart_sigma_px``: the photo passes).
+    residual : list of ndarray (h, w)
+        The last residual phases per carrier, rad (the local-frequency test of F4).
+    region_mods : list of ndarray (h, w)
+        The modulations over the bandpass's gain at the local frequency (photo's, then reference's).
+    beyond : ndarray of bool (h, w)
+        Samples whose local frequency is beyond the bandpass's reach.
+    measured : Region
+        The region the predictor was measured on (one-pass labels elsewhere).
+    grown : ndarray of bool (h, w)
+        The samples F5 grew into.
+    """
+
+    demod: Demodulation
+    residual: list[np.ndarray]
+    region_mods: list[np.ndarray]
+    beyond: np.ndarray
+    measured: Region
+    grown: np.ndarray
+
+
+@dataclass(frozen=True)
+class _Warped:
+    """The warped reference's passes (:func:`_converge`): the predictor, the last residual and what it was read from."""
+
+    pred: np.ndarray
+    residual: np.ndarray
+    signals: tuple[np.ndarray, ...]
+    coherences: tuple[np.ndarray, ...]
+    reference_basebands: tuple[np.ndarray, ...]
+    measured: np.ndarray
+    grown: np.ndarray
+    passes: int
+
+
+def follow_local_grid(spectrum: F.Spectrum, img: np.ndarray, refm: ReferenceModel | None, demod: Demodulation,
+                      region: Region, phases: np.ndarray, p: AnalyzerParams,
+                      contrast: Callable[[F.SamplingGrid], np.ndarray]) -> F5Result | None:
+    """F5: iterative deformation of the reference (module docstring).
+
+    ``spectrum``: the photo's spectrum (:attr:`Demodulation.spectrum`, the one FFT of the photo);
+    ``img``: the photo (its photo passes deform it). Returns None when no pass is needed
+    (``deformation_passes`` 0, or the one-pass local frequency within ``deformation_min_deviation``
+    of the carrier), else an :class:`F5Result`: the demodulation whose phase is ``predictor +
+    residual`` (transfer in :mod:`~glassdist.analyzer.transfer`), on a grid fine enough for the
+    reach (:func:`deformation_grid`), and the region the predictor was measured on: the one-pass
+    region grown by up to ``deformation_growth_passes`` passes (:func:`grow`), then up to
+    ``deformation_passes`` passes to converge. ``contrast(grid)``: the photo's local contrast on
+    ``grid`` (:func:`~glassdist.analyzer.region.local_contrast`); the growth enters only where it
+    shows a grid (:func:`~glassdist.analyzer.region.grid_seen`).
+    """
+    ks = demod.carriers
+    if p.deformation_passes == 0 or img is None or region.n == 0:
+        return None
+    if frequency_deviation(phases, region.valid, (ks.k1, ks.k2), demod.grid.step) <= p.deformation_min_deviation:
+        return None
+    covs = demod.covariances
+    period = max(ks.k1.period_px, ks.k2.period_px)
+    grid = deformation_grid(demod.grid, p.deformation_max_deviation, min(ks.k1.period_px, ks.k2.period_px), p.decimation)
+    own = None if refm is None else np.stack(refm.baseband, axis=-1)  # the reference's own phase (its lens, its print)
+    bb_img = basebands(spectrum, ks, covs, grid)
+    assert region.quality is not None
+    first = to_grid(region.quality, demod.grid, grid, nearest=True)
+    w = _converge(bb_img, own, demod, region, phases, grid, first, p, contrast)
+    pred, res = w.pred, w.residual
+    # A grown sample started from its neighbours' prediction, not from the one pass's G-smoothed phase, so the
+    # documented transfer holds for it only once it has converged: kept where its last update is small.
+    late = w.grown & (np.sqrt(np.sum(phase_to_displacement_px(res, ks) ** 2, axis=-1)) / period
+                      > GROWTH_MAX_LAST_UPDATE_PERIODS)
+    measured = w.measured & ~late
+    grown = w.grown & ~late
+    # The last residual was measured against the reference warped by pred: phi = pred + residual,
+    # the converged field (the filters' Gaussian acts on the residual only; after n demodulations
+    # the linear transfer is (1 - (1 - G B)^n) / B, transfer.InstrumentTransfer).
+    phase = pred + res
+    n_photo, restart_px = 0, 0.0
+    # the photo's modulation on F5's grid, computed once, only where something needs it
+    img_mods = functools.cache(lambda: tuple(modulation(b, c.period_px, grid, p) for b, c in zip(bb_img, (ks.k1, ks.k2))))
+    photo_max = p.photo_passes_for(refm is not None)
+    photo_mods: list[np.ndarray] = []
+    if photo_max > 0:
+        # The photo passes start from the field low-passed: what it carries beyond the filters' passband
+        # no pass can see, and the deformation would fold it into what they do see.
+        restart_px = p.deformation_photo_restart_periods * period
+        phase, n_photo, photo_mods = photo_passes(img, refm, demod, bb_img, own, low_passed(phase, measured, grid, restart_px),
+                                                  measured, grid, p, photo_max, img_mods)
+    total = tuple((np.abs(z) * np.exp(1j * phase[..., i])).astype(np.complex64) for i, z in enumerate(w.signals))
+    if grid is demod.grid:
+        mods = list(demod.mods)
+    else:  # the photo's on F5's grid, the reference's brought to it
+        mods = list(img_mods()) + [to_grid(m_, demod.grid, grid) for m_ in demod.mods[2:]]
+    # The bandpass's gain at the local frequency, read off the warped reference (a uniform grid
+    # of amplitude 1/2 per carrier): the photo's modulation is judged against it (a faint grid where the gain
+    # explains it is not occluded), and where the gain is below its value at
+    # deformation_max_deviation off the carrier the signal is beyond reach.
+    gain = [modulation(r, c.period_px, grid, p) / np.float32(0.5) for r, c in zip(w.reference_basebands, (ks.k1, ks.k2))]
+    floor = float(np.exp(-0.5 * (p.deformation_max_deviation / p.bandpass_sigma_along) ** 2))
+    beyond = np.any([g_ < floor for g_ in gain], axis=0)
+    region_mods = [m_ / np.maximum(g_, floor) for m_, g_ in zip(mods[:2], gain)] + mods[2:]
+    if n_photo:  # the noise goes as one over the modulation the last pass measured at (photo_passes)
+        mods = photo_mods + mods[2:]
+    out = Demodulation(demod.method, ks, covs, grid, total, w.coherences, tuple(mods), demod.noise_std,
+                       passes=w.passes + 1, photo_passes=n_photo, restart_sigma_px=restart_px)
+    return F5Result(out, list(res.transpose(2, 0, 1)), region_mods, beyond,
+                    Region(measured, measured.astype(np.int32), 1, first), grown)
+
+
+def _converge(bb_img: tuple[np.ndarray, ...], own: np.ndarray | None, demod: Demodulation, region: Region,
+              phases: np.ndarray, grid: F.SamplingGrid, first: np.ndarray, p: AnalyzerParams,
+              contrast: Callable[[F.SamplingGrid], np.ndarray]) -> _Warped:
+    """F5's passes against the warped reference: the growth, then the passes to converge (:func:`follow_local_grid`)."""
+    ks, covs = demod.carriers, demod.covariances
+    period = max(ks.k1.period_px, ks.k2.period_px)
+    pred = to_grid(fill_nearest(np.nan_to_num(phases), region.valid), demod.grid, grid)
+    measured = to_grid(region.valid, demod.grid, grid, nearest=True)
+    # A phase residue of the one pass is a singularity of the grid itself (a dislocation, a tear), not a
+    # frequency the bandpass clipped: no continuous prediction crosses it, so the growth goes around it.
+    growable = first != PHASE_RESIDUE
+    if p.deformation_growth_passes > 0:
+        growable &= grid_seen(contrast(grid), measured, period, grid)
+    # the one pass's connected parts: the growth never merges two (grow)
+    parts = np.where(measured, to_grid(region.labels, demod.grid, grid, nearest=True), 0).astype(np.int32)
+    grown = np.zeros_like(measured)
+    growth_left, converging, k = p.deformation_growth_passes, 0, 0
+    while True:
+        k += 1
+        het, bb_ref = warped_heterodyne(bb_img, pred, own, grid, ks, covs)
+        zs, cohs = smooth_with_coherence(het, (ks.k1, ks.k2), grid, p)
+        del het
+        res = np.stack([np.angle(z) for z in zs], axis=-1)
+        coherent = np.all([c_ > p.coherence_threshold for c_ in cohs], axis=0)
+        ok = coherent & measured
+        step = rms_update_periods(res, ok, ks, period)
+        new = grow(measured, coherent & growable, res, grid, period, parts) if growth_left > 0 else np.zeros_like(measured)
+        growth_left = growth_left - 1 if new.any() else 0
+        converging += 0 if new.any() else 1
+        log.debug("F5 pass %d: RMS update %.4f period, %d samples grown", k, step, int(new.sum()))
+        if not new.any() and (step < p.deformation_tolerance_periods or converging >= p.deformation_passes):
+            break
+        upd = ok | new
+        measured |= new
+        grown |= new
+        pred = pred + fill_nearest(np.where(upd[..., None], res, 0.0), upd)
+    return _Warped(pred, res, zs, cohs, bb_ref, measured, grown, k)
+
+
+def warped_heterodyne(bb_img: tuple[np.ndarray, ...], pred: np.ndarray, own: np.ndarray | None, grid: F.SamplingGrid,
+                      ks: F.CarrierPair, covs: tuple[np.ndarray, np.ndarray],
+                      ) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
+    """F5's heterodyne of the photo's basebands ``bb_img`` against the reference warped by ``pred``.
+
+    Returns the heterodynes and that reference's basebands.
+    """
+    bb_ref = basebands(F.compute_spectrum(warped_reference(pred, own, grid, ks)), ks, covs, grid)
+    return tuple(b * np.conj(r) for b, r in zip(bb_img, bb_ref)), bb_ref
+
+
+def rms_update_periods(res: np.ndarray, where: np.ndarray, ks: F.CarrierPair, period: float) -> float:
+    """RMS displacement of the residual phases ``res`` (h, w, 2) over ``where``, carrier periods (0 where empty)."""
+    if not where.any():
+        return 0.0
+    return float(np.sqrt(np.mean(np.sum(phase_to_displacement_px(res[where], ks) ** 2, axis=-1)))) / period
+
+
+def low_passed(phase: np.ndarray, measured: np.ndarray, grid: F.SamplingGrid, sigma_px: float) -> np.ndarray:
+    """``phase`` (h, w, 2) smoothed by a Gaussian of ``sigma_px`` over the measured samples (normalised), filled beyond them."""
+    w = measured.astype(float)
+    out = np.stack([masked_gaussian(phase[..., i], w, sigma_px**2 * np.eye(2), grid.step, order=0) for i in range(2)],
+                   axis=-1)
+    return fill_nearest(np.where(measured[..., None], out, 0.0), measured)
+
+
+_OwnPhasors = tuple[list[np.ndarray], list[np.ndarray]]
+
+
+def own_phasors(refm: ReferenceModel | None, src: F.SamplingGrid, grid: F.SamplingGrid,
+                ks: F.CarrierPair) -> _OwnPhasors | None:
+    """The reference's own phasors: ``(on src, at grid's samples)``, each per carrier; None in the Direct Method."""
+    if refm is None:
+        return None
+    unit = [b / np.maximum(np.abs(b), 1e-30) for b in refm.baseband]
+    return unit, [to_frame(o, src, np.zeros(grid.shape + (2,), np.float32), grid, ks) for o in unit]
+
+
+def own_shift(own: _OwnPhasors | None, src: F.SamplingGrid, q: np.ndarray, grid: F.SamplingGrid,
+              ks: F.CarrierPair) -> np.ndarray | float:
+    """``own(r - u(r)) - own(r)`` (rad, (h, w, 2) on ``grid``): the reference's own phase across the displacement.
+
+    ``own``: :func:`own_phasors` (its phasors on ``src`` and at ``grid``'s samples); ``q = -2 pi F u``
+    (rad), the displacement in phase units. The Comparative phase at ``r`` is the photo's there less the
+    reference's there, ``own(r - u) - own(r) - 2 pi F u``: it differs from ``q`` wherever the
+    reference's own grid is not uniform (its perspective, its lens), by this. 0 in the Direct Method.
+    """
+    if own is None:
+        return 0.0
+    unit, here = own
+    return np.stack([np.angle(to_frame(o, src, q, grid, ks) * np.conj(h)) for o, h in zip(unit, here)], axis=-1)
+
+
+# Fixed-point iterations from the Comparative phase to the displacement: each multiplies the error by
+# the reference's relative frequency deviation across the displacement (a few percent).
+_OWN_ITERATIONS = 4
+
+
+def photo_passes(img: np.ndarray, refm: ReferenceModel | None, demod: Demodulation, bb_img: tuple[np.ndarray, ...],
+                 own: np.ndarray | None, pred: np.ndarray, measured: np.ndarray, grid: F.SamplingGrid,
+                 p: AnalyzerParams, max_passes: int, img_mods: Callable[[], tuple[np.ndarray, ...]],
+                 ) -> tuple[np.ndarray, int, list[np.ndarray]]:
+    """F5's last passes: the photo deformed back to the reference's frame (:func:`deformed_photo`).
+
+    ``pred``: the warped reference's field, low-passed (:func:`low_passed`). Each pass
+    demodulates the deformed photo on F5's grid with the same filters, against the reference's own
+    basebands brought to that grid (Comparative; the flat carrier in the Direct Method), and reads
+    the residual at the photo's samples (:func:`to_frame`). The deformation needs the displacement
+    itself, ``q = -2 pi F u``; the Comparative phase ``pred`` carries the reference's own phase
+    across it as well (:func:`own_shift`), so ``q`` is solved from ``pred`` first and ``pred``
+    rebuilt from ``q`` at the end. Near where the deformed photo draws from off the photo, and
+    near the photo's samples that show what the reference does not (:func:`off_frame`), the
+    residual is the warped reference's (:func:`_edge_residual`).
+
+    Returns ``(phase, passes, mods)``: the output phase ``pred + residual`` (rad, (h, w, 2) on
+    ``grid``, the Comparative phase as F4 unwraps it), the passes run (up to ``max_passes``,
+    :meth:`~glassdist.analyzer.params.AnalyzerParams.photo_passes_for`, fewer once the RMS update is
+    below ``deformation_tolerance_periods``) and the modulation the last pass measured at, per
+    carrier, read at the photo's samples: the deformed photo's (its grid at the carrier, so the
+    bandpass's whole amplitude), the photo's own (``img_mods()``) where the residual is the warped
+    reference's. The phase noise goes as one over it, not over the photo's at its local frequency.
+    """
+    ks = demod.carriers
+    covs = demod.covariances
+    period = max(ks.k1.period_px, ks.k2.period_px)
+    reach_px = 3.0 * float(np.sqrt(np.max(np.linalg.eigvalsh(demodulation_blur_px2(ks, covs, p)))))
+    own_ph = own_phasors(refm, demod.grid, grid, ks)
+    q = pred
+    for _ in range(_OWN_ITERATIONS if refm is not None else 0):
+        q = pred - own_shift(own_ph, demod.grid, q, grid, ks)
+    ref_bb = None if refm is None else [to_grid(r, demod.grid, grid) for r in refm.baseband]
+    spline = photo_spline(img)
+
+    def smoothed(zs: tuple[np.ndarray, ...]) -> list[np.ndarray]:  # F3 on the heterodynes (no coherence needed)
+        return [F.smooth_complex(z, p.smoothing_periods * c.period_px, grid) for z, c in zip(zs, (ks.k1, ks.k2))]
+
+    n = 0
+    while True:
+        n += 1
+        deformed, outside = deformed_photo(spline, q, grid, ks)
+        bb = basebands(F.compute_spectrum(deformed), ks, covs, grid)
+        del deformed
+        zs = smoothed(bb if ref_bb is None else tuple(b * np.conj(r) for b, r in zip(bb, ref_bb)))
+        res = np.stack([np.angle(to_frame(z, grid, q, grid, ks)) for z in zs], axis=-1)
+        share: np.ndarray | float = 1.0
+        off = off_frame(q, grid, ks)
+        if outside.any() or off.any():
+            share = _edge_share(outside, off, q, grid, ks, reach_px)
+            het, _ = warped_heterodyne(bb_img, q + own_shift(own_ph, demod.grid, q, grid, ks), own, grid, ks, covs)
+            res = share * res + (1.0 - share) * np.stack([np.angle(z) for z in smoothed(het)], axis=-1)
+        step = rms_update_periods(res, measured, ks, period)
+        log.debug("F5 photo pass %d: RMS update %.4f period", n, step)
+        if n >= max_passes or step < p.deformation_tolerance_periods:
+            mods = [to_frame(modulation(b, c.period_px, grid, p), grid, q, grid, ks) for b, c in zip(bb, (ks.k1, ks.k2))]
+            if np.ndim(share):  # blended with the photo's own where the residual is the warped reference's
+                w_ = np.squeeze(share, -1)
+                mods = [w_ * m_ + (1.0 - w_) * m0 for m_, m0 in zip(mods, img_mods())]
+            mods = [m_.astype(np.float32) for m_ in mods]
+            q = q + res
+            return q + own_shift(own_ph, demod.grid, q, grid, ks), n, mods
+        q = q + fill_nearest(np.where(measured[..., None], res, 0.0), measured)
+
+
+def _edge_share(outside: np.ndarray, off: np.ndarray, q: np.ndarray, grid: F.SamplingGrid, ks: F.CarrierPair,
+                reach_px: float) -> np.ndarray:
+    """The deformed photo's share of a photo pass's residual, (h, w, 1) in [0, 1].
+
+    None within ``reach_px`` (three of Block F's kernel widths) of where it draws from off the photo
+    (reference frame, ``outside``) or of where the photo shows what the reference does not (photo
+    frame, ``off``), all beyond twice that. Elsewhere the residual is the warped reference's: both
+    measure ``G (true - B pred)``, so every sample's transfer counts the same passes (without it,
+    each pass added the edge's residual there).
+    """
+    def ramp(mask: np.ndarray) -> np.ndarray:
+        return np.clip(ndimage.distance_transform_edt(~mask, sampling=grid.step) / reach_px - 1.0, 0.0, 1.0)
+
+    share = np.ones(grid.shape, np.float32)
+    if outside.any():
+        share = to_frame(ramp(outside).astype(np.float32), grid, q, grid, ks)
+    if off.any():
+        share = np.minimum(share, ramp(off).astype(np.float32))
+    return share[..., None]

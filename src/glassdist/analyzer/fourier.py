@@ -90,9 +90,11 @@ class Carrier:
         return float(np.degrees(np.arctan2(self.fy, self.fx)))
 
     def negated(self) -> "Carrier":
+        """The same carrier of opposite sign (frequency and phase negated)."""
         return Carrier(-self.fx, -self.fy, self.strength)
 
     def to_dict(self) -> dict:
+        """The record as a JSON-ready mapping."""
         return {
             "fx_cycles_per_px": self.fx,
             "fy_cycles_per_px": self.fy,
@@ -120,6 +122,7 @@ class CarrierPair:
         return np.array([self.k1.f, self.k2.f])
 
     def to_dict(self) -> dict:
+        """The record as a JSON-ready mapping."""
         a = abs(self.k1.angle_deg - self.k2.angle_deg) % 180.0
         return {"k1": self.k1.to_dict(), "k2": self.k2.to_dict(), "angle_between_deg": min(a, 180.0 - a)}
 
@@ -160,6 +163,7 @@ class SamplingGrid:
 
     @property
     def is_full(self) -> bool:
+        """Whether the grid samples every pixel (no decimation)."""
         return self.shape == self.full_shape
 
 
@@ -190,7 +194,7 @@ class Spectrum:
             return self.rfft[:, kx0 : kx0 + w][rows]
         return self.full(np.arange(ky0, ky0 + h)[:, None], np.arange(kx0, kx0 + w)[None, :])
 
-    def full(self, ky: np.ndarray, kx: np.ndarray) -> np.ndarray:
+    def full(self, ky: np.ndarray | float, kx: np.ndarray | float) -> np.ndarray:
         """Full complex spectrum at integer bins ``(ky, kx)`` (any sign), via Hermitian symmetry."""
         H, W = self.shape
         ky = np.asarray(ky).astype(np.int64)
@@ -216,7 +220,7 @@ def compute_spectrum(image: np.ndarray) -> Spectrum:
     return Spectrum(rfft, img.shape)
 
 
-def _jacobsen(xm: complex, x0: complex, xp: complex) -> float:
+def _jacobsen(xm: complex | np.ndarray, x0: complex | np.ndarray, xp: complex | np.ndarray) -> float:
     """Fractional bin offset of a spectral peak from three complex bins (Jacobsen 2007)."""
     den = 2.0 * x0 - xm - xp
     if abs(den) == 0:
@@ -290,8 +294,8 @@ def _check_no_finer_grid(spectrum: Spectrum, min_period_px: float, carrier_magni
         )
 
 
-def _carrier_band(spectrum: Spectrum, min_period_px: float) -> tuple[np.ndarray, np.ndarray]:
-    """Whitened magnitude of the band that can hold a carrier, and the signed row frequencies (bins).
+def _carrier_band(spectrum: Spectrum, min_period_px: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Whitened magnitude of the band that can hold a carrier, the signed row frequencies (bins), and the band.
 
     Only bins below 1/min_period_px can hold a carrier: that block is cut out first (rows
     fftshifted when cut, so that row r holds the signed frequency ky[r]); DC/illumination

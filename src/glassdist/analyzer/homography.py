@@ -15,6 +15,7 @@ Multiple View Geometry, ch. 4 (homography estimation). Paper §2.2, Block I.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -25,6 +26,10 @@ from .params import AnalyzerParams
 from .region import erode
 
 __all__ = [
+    "GridFit",
+    "LensFitOptions",
+    "LensRefit",
+    "LogicalGrid",
     "HomographyFit",
     "logical_grid_points",
     "fit_homography",
@@ -71,6 +76,7 @@ class HomographyFit:
         return None if self.lens is None or not self.lens.identifiable else self.lens.model
 
     def to_dict(self) -> dict:
+        """The record as a JSON-ready mapping."""
         return {
             "matrix": self.matrix.tolist(),
             "inlier_fraction": self.inlier_fraction,
@@ -138,7 +144,7 @@ def fit_homography(
     if len(src) < 8:
         raise AnalysisError(
             f"only {len(src)} reliable grid points for the homography; the valid region is too small - "
-            "photograph more of the grid through the pane or use the Comparative Method (--reference)"
+            "photograph more of the grid through the pane or use the Comparative Method (a reference photo)"
         )
     import cv2
 
@@ -154,7 +160,7 @@ def fit_homography(
     if H is None or inl is None or int(inl.sum()) < 4:
         raise AnalysisError(
             "RANSAC found no homography consistent with the grid; the pattern may be too distorted or "
-            "occluded - use the Comparative Method (--reference) or a larger ransac_threshold_periods"
+            "occluded - use the Comparative Method (a reference photo) or a larger ransac_threshold_periods"
         )
     inliers = inl.ravel().astype(bool)
     # Tighten: least-squares refits on the points closest to the consensus plane, so the
@@ -330,6 +336,7 @@ def refit_undistorted(
     avg = None if S is None else _trimmed_lsq(S, period_px)
     if avg is None:
         return fit
+    assert S is not None
     best, share = None, 0.0
     # RANSAC's fit as it is competes too: on a coarse grid (few, noisy samples) a refit on its
     # clean samples can drift to a homography that leaves less of the view clean
@@ -412,12 +419,47 @@ def _thin(m: np.ndarray) -> np.ndarray:
     return out
 
 
-def refit_with_lens(
-    fit: HomographyFit, U: np.ndarray, V: np.ndarray, y: np.ndarray, x: np.ndarray, valid: np.ndarray, spacing: int, *,
-    period_px: float, step_px: tuple[float, float], threshold_px: float, image_shape: tuple[int, int],
-    tangential: bool = False, principal_point: bool = False, warn: list[str] | None = None,
-    known: LensCalibration | None = None,
-) -> HomographyFit:
+@dataclass(frozen=True)
+class LogicalGrid:
+    """The logical grid Block I fits: coordinates ``U, V`` (carrier periods) at the samples ``(y, x)`` (px).
+
+    ``valid``: the samples fitted on; ``spacing``: the grid points' spacing (samples);
+    ``period_px``: the carrier period; ``step_px``: the sample grid's step ``(dy, dx)``.
+    """
+
+    U: np.ndarray
+    V: np.ndarray
+    y: np.ndarray
+    x: np.ndarray
+    valid: np.ndarray
+    spacing: int
+    period_px: float
+    step_px: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class LensFitOptions:
+    """How :func:`refit_with_lens` fits the lens: inlier threshold (px), image shape, and the optional terms."""
+
+    threshold_px: float
+    image_shape: tuple[int, int]
+    tangential: bool = False
+    principal_point: bool = False
+
+
+@dataclass(frozen=True)
+class LensRefit:
+    """:func:`refit_with_lens`'s outcome: the fit and its warnings.
+
+    The fit's ``lens`` is a :class:`~glassdist.analyzer.lens.LensCalibration`.
+    """
+
+    fit: HomographyFit
+    warnings: tuple[str, ...] = ()
+
+
+def refit_with_lens(fit: HomographyFit, g: LogicalGrid, opts: LensFitOptions, *,
+                    known: LensCalibration | None = None) -> LensRefit:
     """Block I with the camera lens: homography and Brown distortion fitted jointly on the unstrained view.
 
     As :func:`refit_undistorted`, with the model of :mod:`glassdist.analyzer.lens` in place of
@@ -427,39 +469,47 @@ def refit_with_lens(
     undistorted and the model is refitted to them, three times; the start leaving the larger
     share of the view unstrained (at least ``_MIN_CLEAN``) wins, else the fit of every sample.
     The lens is normalised by half the image diagonal about the image centre (the principal
-    point, fitted too with ``principal_point``).
+    point, fitted too with ``opts.principal_point``).
 
     With a ``known`` lens (a calibration photo, a camera file) only the homography is fitted,
     through it, on the samples it leaves unstrained.
 
-    The result carries a :class:`~glassdist.analyzer.lens.LensCalibration`. When the fitted
-    samples do not reach ``_LENS_MIN_REACH`` of the view's radius the lens is not identifiable
-    (a radial term is then a change of scale the homography takes): it is reported, not
-    applied, and ``fit`` is returned with a warning. When the residual the model leaves is
-    radially symmetric about the principal point (``_RADIAL_AMBIGUITY`` of its energy, above
-    the fit's own residual and ``_AMBIGUITY_FLOOR_PERIODS``), a warning says that a centred
-    radially symmetric feature cannot be told from the lens: it is kept as glass and the lens
-    is not applied. The lens is applied only where it removes ``_LENS_MIN_GAIN`` of the
-    mean squared residual a bare homography leaves on the same samples, and where it is
-    global: refitted without the inner disc of the view or without any quadrant about the
-    principal point (:func:`~glassdist.analyzer.lens.radial_consistency`), its radial profile
-    moves by at most ``_LENS_CENTRED`` (inner disc) and ``_LENS_OFF_AXIS`` (quadrant); otherwise a
-    warning says that a centred radially symmetric feature cannot be told from the lens, or that
-    a local feature carries the radial term, and the lens is not applied.
+    The result carries a :class:`~glassdist.analyzer.lens.LensCalibration`; the lens is
+    applied only where it passes :func:`_judged_lens`'s checks (identifiable, significant,
+    global, not ambiguous with a centred feature), else ``fit`` is returned with a warning.
     """
-    warn = [] if warn is None else warn
-    S = _strain_samples(U, V, y, x, valid, step_px, period_px)
+    S = _strain_samples(g.U, g.V, g.y, g.x, g.valid, g.step_px, g.period_px)
     if S is None or len(S.src) < 2 * _LENS_MIN_POINTS:
-        return fit
+        return LensRefit(fit)
     if known is not None:
-        return _refit_through(fit, known, S, U, V, y, x, valid, spacing, period_px, threshold_px)
-    h, w = image_shape
+        return LensRefit(_refit_through(fit, known, S, g.U, g.V, g.y, g.x, g.valid, g.spacing, g.period_px,
+                                        opts.threshold_px))
+    h, w = opts.image_shape
     center, scale = ((w - 1) / 2.0, (h - 1) / 2.0), float(np.hypot(w, h) / 2.0)
-    opts = dict(center_px=center, scale_px=scale, tangential=tangential, principal_point=principal_point)
+    kw = dict(center_px=center, scale_px=scale, tangential=opts.tangential, principal_point=opts.principal_point)
+    best = _joint_fit(fit, S, g.period_px, kw)
+    if best is None:
+        return LensRefit(fit)
+    return _judged_lens(fit, best, S, g, opts, center, scale)
 
-    def fit_on(m, H, lens):
+
+@dataclass(frozen=True)
+class _JointFit:
+    """The joint homography-and-lens fit :func:`_joint_fit` keeps: model, its sigma, the samples it leaves unstrained."""
+
+    H: np.ndarray
+    lens: LensModel | None
+    sigma: Any
+    unstrained: np.ndarray
+    share: float
+
+
+def _joint_fit(fit: HomographyFit, S: _StrainSamples, period_px: float, kw: dict[str, Any]) -> _JointFit | None:
+    """The two starts of :func:`refit_with_lens` (bare ``fit``, and the fit of every sample), refitted on the unstrained view."""
+
+    def fit_on(m: np.ndarray, H: np.ndarray, lens: LensModel | None) -> Any:
         m = _thin(m)
-        return fit_lens_homography(S.src[m], S.dst[m], H, start=None if lens is None else lens.distortion, **opts)
+        return fit_lens_homography(S.src[m], S.dst[m], H, start=None if lens is None else lens.distortion, **kw)
 
     keep = np.ones(len(S.src), bool)
     H, lens = fit.matrix, None
@@ -467,9 +517,9 @@ def refit_with_lens(
         H, lens, sig, _ = fit_on(keep, H, lens)
         keep = np.linalg.norm(_lens_reproj(H, lens, S.src, S.dst), axis=1) < _GROSS_PERIODS * period_px
         if keep.sum() < _LENS_MIN_POINTS:
-            return fit
-    best = (H, lens, sig, keep, 0.0)
-    for H, lens in ((fit.matrix, None), (best[0], best[1])):
+            return None
+    best = _JointFit(H, lens, sig, keep, 0.0)
+    for H, lens in ((fit.matrix, None), (best.H, best.lens)):
         m = _lens_strain(H, lens, S, period_px) < S.tol
         for _ in range(3):
             if m.sum() < _LENS_MIN_POINTS:
@@ -477,12 +527,36 @@ def refit_with_lens(
             H, lens, sig, _ = fit_on(m, H, lens)
             m = _lens_strain(H, lens, S, period_px) < S.tol
         share = float(m.mean())
-        if lens is not None and share >= _MIN_CLEAN and share > best[4] and m.sum() >= _LENS_MIN_POINTS:
-            best = (H, lens, sig, m, share)
-    H, lens, sig, m, share = best
+        if lens is not None and share >= _MIN_CLEAN and share > best.share and m.sum() >= _LENS_MIN_POINTS:
+            best = _JointFit(H, lens, sig, m, share)
+    return best
 
-    def bare(cal: LensCalibration) -> HomographyFit:  # the lens reported, not applied
-        return HomographyFit(fit.matrix, fit.inlier_fraction, fit.n_points, fit.rms_inlier_px, fit.excluded_fraction, cal)
+
+_LENS_ADVICE = ("confirm with a calibration photo or a camera file (lens: calibrate_from_photo, calibration_from_camera_file), "
+                "or use the Comparative Method")
+
+
+def _judged_lens(fit: HomographyFit, best: _JointFit, S: _StrainSamples, g: LogicalGrid, opts: LensFitOptions,
+                 center: tuple[float, float], scale: float) -> LensRefit:
+    """The joint fit applied, or reported and not applied with a warning.
+
+    Not identifiable when its fitted samples do not reach ``_LENS_MIN_REACH`` of the view's
+    radius (a radial term is then a change of scale the homography takes). Ambiguous when the
+    residual it leaves is radially symmetric about the principal point (``_RADIAL_AMBIGUITY`` of
+    its energy, above the fit's own residual and ``_AMBIGUITY_FLOOR_PERIODS``): a centred
+    radially symmetric feature cannot be told from the lens. Applied only where it removes
+    ``_LENS_MIN_GAIN`` of the mean squared residual a bare homography leaves on the same
+    samples, and where it is global: refitted without the inner disc of the view or without
+    any quadrant (:func:`~glassdist.analyzer.lens.radial_consistency`), its radial profile moves
+    by at most ``_LENS_CENTRED`` (inner disc) and ``_LENS_OFF_AXIS`` (quadrant).
+    """
+    H, lens, sig, m, share = best.H, best.lens, best.sigma, best.unstrained, best.share
+    assert lens is not None  # the joint fit's starts each return a lens
+    period_px = g.period_px
+
+    def bare(cal: LensCalibration, *warn: str) -> LensRefit:  # the lens reported, not applied
+        return LensRefit(HomographyFit(fit.matrix, fit.inlier_fraction, fit.n_points, fit.rms_inlier_px,
+                                       fit.excluded_fraction, cal), warn)
 
     e = _lens_reproj(H, lens, S.src, S.dst)
     e2 = np.sum(e[m] ** 2, axis=1)
@@ -495,21 +569,21 @@ def refit_with_lens(
         f"a radially symmetric distortion centred on the optical axis ({sym_rms:.2g} px RMS, {100 * sym:.0f}% of what the "
         "lens model leaves) has the form of a camera lens's own distortion, and the Direct Method cannot tell the two "
         "apart" if sym >= _RADIAL_AMBIGUITY else "")
-    advice = "confirm with a calibration photo or a camera file (--lens-photo, --camera-file), or use the Comparative Method"
     # Significance: the lens must explain most of what a bare homography leaves on the same samples
     # (a glass distortion over the whole view projects only partly on the lens's radial form).
     H0 = _lsq(S.src[m], S.dst[m])
-    gain = 0.0 if H0 is None else 1.0 - float(np.mean(e2)) / max(float(np.mean(_reproj_error(H0, S.src[m], S.dst[m]) ** 2)), 1e-30)
+    bare_ms = 0.0 if H0 is None else float(np.mean(_reproj_error(H0, S.src[m], S.dst[m]) ** 2))
+    gain = 0.0 if H0 is None else 1.0 - float(np.mean(e2)) / max(bare_ms, 1e-30)
     if gain < _LENS_MIN_GAIN:
-        if ambiguous:
-            warn.append(f"{ambiguous}: it was kept as glass (no lens distortion stands out of it) - {advice}")
-        return bare(LensCalibration(lens, "self", sig, False, float(m.mean()), rms, None, (
+        cal = LensCalibration(lens, "self", sig, False, float(m.mean()), rms, None, (
             f"the lens terms explain {100 * max(gain, 0.0):.0f}% of what a bare homography leaves (needs "
-            f"{100 * _LENS_MIN_GAIN:.0f}%): no lens distortion stands out of the glass's own")))
+            f"{100 * _LENS_MIN_GAIN:.0f}%): no lens distortion stands out of the glass's own"))
+        return bare(cal, *([f"{ambiguous}: it was kept as glass (no lens distortion stands out of it) - {_LENS_ADVICE}"]
+                           if ambiguous else []))
     # Global form: the same radial profile must come out with the inner disc, or any quadrant, left out.
     mt = _thin(m)
-    cons = radial_consistency(S.src[mt], S.dst[mt], H, lens, scale_px=scale, tangential=tangential,
-                              principal_point=principal_point)
+    cons = radial_consistency(S.src[mt], S.dst[mt], H, lens, scale_px=scale, tangential=opts.tangential,
+                              principal_point=opts.principal_point)
     bounds = {"inner": _LENS_CENTRED, "quadrants": _LENS_OFF_AXIS}
     key = max(bounds, key=lambda k: cons[k] / bounds[k])  # the check exceeded by the wider margin (ties: inner)
     if cons[key] > bounds[key]:
@@ -520,26 +594,27 @@ def refit_with_lens(
         note = (f"the lens fitted without the {'inner disc' if centred else 'worst quadrant'} of the view differs by "
                 f"{100 * cons[key]:.0f}% (at most {100 * bound:.0f}% for a camera lens, whose distortion is global): "
                 + what)
-        warn.append(f"Block I did not apply the lens model fitted from the photo: {note}; it was kept as glass - {advice}")
-        return bare(LensCalibration(lens, "self", sig, False, float(m.mean()), rms, None, note, dict(cons)))
+        return bare(LensCalibration(lens, "self", sig, False, float(m.mean()), rms, None, note, dict(cons)),
+                    f"Block I did not apply the lens model fitted from the photo: {note}; it was kept as glass - {_LENS_ADVICE}")
     radius = np.linalg.norm(S.dst - np.asarray(center), axis=1)
     reach = float(np.percentile(radius[m], 95) / max(np.percentile(radius, 95), 1e-9))
     if reach < _LENS_MIN_REACH:
         note = (f"the unstrained part of the view reaches {100 * reach:.0f}% of the view's radius (needs "
                 f"{100 * _LENS_MIN_REACH:.0f}%): the lens's growth with radius is not pinned")
-        warn.append(f"Block I could not calibrate the camera lens from the photo: {note}; the baseline is a bare "
-                    "homography - give a calibration photo or a camera file (--lens-photo, --camera-file)")
-        return bare(LensCalibration(lens, "self", sig, False, float(m.mean()), rms, None, note))
+        return bare(LensCalibration(lens, "self", sig, False, float(m.mean()), rms, None, note),
+                    f"Block I could not calibrate the camera lens from the photo: {note}; the baseline is a bare "
+                    "homography - give a calibration photo or a camera file "
+                    "(lens: calibrate_from_photo, calibration_from_camera_file)")
     if ambiguous:  # the lens fit may hold part of it (its tail reaches the unstrained part): not applied
         note = "a centred radially symmetric feature and the camera lens cannot be separated from the photo alone"
-        warn.append(f"{ambiguous}: it was kept as glass and the lens model was not applied - {advice}")
-        return bare(LensCalibration(lens, "self", sig, False, float(m.mean()), rms, None, note))
+        return bare(LensCalibration(lens, "self", sig, False, float(m.mean()), rms, None, note),
+                    f"{ambiguous}: it was kept as glass and the lens model was not applied - {_LENS_ADVICE}")
     cal = LensCalibration(lens, "self", sig, True, float(m.mean()), rms, None, "", dict(cons))
-    src, dst = logical_grid_points(U, V, y, x, valid, spacing)
+    src, dst = logical_grid_points(g.U, g.V, g.y, g.x, g.valid, g.spacing)
     err = np.linalg.norm(_lens_reproj(H, lens, src, dst), axis=1)
-    inl = err < threshold_px
+    inl = err < opts.threshold_px
     rms_inl = float(np.sqrt(np.mean(err[inl] ** 2))) if inl.any() else float("nan")
-    return HomographyFit(H, float(inl.mean()), int(len(src)), rms_inl, 1.0 - float(m.mean()), cal)
+    return LensRefit(HomographyFit(H, float(inl.mean()), int(len(src)), rms_inl, 1.0 - float(m.mean()), cal))
 
 
 def _refit_through(fit: HomographyFit, known: LensCalibration, S: _StrainSamples, U, V, y, x, valid, spacing,
@@ -633,8 +708,8 @@ _INTERIOR_PERIODS = 1.5
 _AMBIGUOUS_SPREAD_PERIODS = 1.0
 
 
-def _ambiguous_offsets(spread: float, n: int, offsets: np.ndarray, warn: list[str]) -> bool:
-    """Whether the parts' whole-period offsets cannot be told from the glass's displacement (Block I), said in ``warn``.
+def _ambiguous_offsets(spread: float, n: int, offsets: np.ndarray) -> str | None:
+    """The warning when the parts' whole-period offsets cannot be told from the glass's displacement (Block I), else None.
 
     Measured: on the ray-traced 0.75 mm roller wave (the accuracy experiment, Direct) the region
     falls into five parts and the grid moves by up to 3.1 periods within them; refitted over every
@@ -644,21 +719,32 @@ def _ambiguous_offsets(spread: float, n: int, offsets: np.ndarray, warn: list[st
     ray-traced scene of the experiment has more than one part but the pillowed IGU (0.05 period).
     """
     if spread < _AMBIGUOUS_SPREAD_PERIODS:
-        return False
+        return None
     # whole periods, as integers: a float -0.0 would print '-0'
     taken = ", ".join(f"({round(float(u)):d}, {round(float(v)):d})" for u, v in offsets[2:])
-    warn.append(
+    return (
         f"Direct Method: the analysed region falls into {n} parts and the glass moves the grid by up to "
         f"{spread:.1f} carrier periods within them, so Block I cannot tell the parts' whole-period offsets "
         f"(taken as {taken} periods from the largest part's homography) from the glass's own displacement "
         "and fits the baseline on the largest part alone: its scale, and every phi with it, may still be off "
         "by far more than the stated uncertainty - use the Comparative Method (a glass-less reference)"
     )
-    return True
 
 
-def fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParams, warn: list[str],
-                        lens: LensCalibration | None = None):
+@dataclass(frozen=True)
+class GridFit:
+    """:func:`fit_grid_homography`'s outcome: the fit, the offsets removed per region and Block I's warnings.
+
+    ``offsets``: per region label (index 0 unused), the integer offsets (periods) subtracted from U and V.
+    """
+
+    fit: HomographyFit
+    offsets: np.ndarray
+    warnings: tuple[str, ...] = ()
+
+
+def fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParams,
+                        lens: LensCalibration | None = None) -> GridFit:
     """I1 + I2 over all regions, aligning each region's free integer grid offset to the largest.
 
     Where those offsets are ambiguous (:func:`_ambiguous_offsets`) the baseline is fitted
@@ -670,9 +756,10 @@ def fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParams
     ``labels``/``n``: the valid region's parts (:class:`~glassdist.analyzer.region.Region`);
     ``lens``: a camera lens known beforehand (else fitted per ``p.lens_model``, :func:`refit_with_lens`).
 
-    Returns the fit and, per region label (index 0 unused), the integer offsets (periods)
-    subtracted from U and V.
+    Returns a :class:`GridFit`: the fit, per region label (index 0 unused) the integer offsets
+    (periods) subtracted from U and V, and the warnings.
     """
+    warn: list[str] = []
     U, V = UV
     spacing = _points_spacing(carriers, grid)
     period = max(carriers.k1.period_px, carriers.k2.period_px)
@@ -700,7 +787,9 @@ def fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParams
                 offsets[r] = np.round(np.median(du)), np.round(np.median(dv))
                 U[sel] -= offsets[r, 0]
                 V[sel] -= offsets[r, 1]
-        if _ambiguous_offsets(spread, n, offsets, warn):
+        ambiguous = _ambiguous_offsets(spread, n, offsets)
+        if ambiguous:
+            warn.append(ambiguous)
             fitted = labels == 1
         else:
             src, dst = logical_grid_points(U, V, yy, xx, (labels > 0) & interior, spacing)
@@ -709,14 +798,15 @@ def fit_grid_homography(UV, yy, xx, labels, n, carriers, grid, p: AnalyzerParams
         fit, U, V, yy, xx, fitted & interior, spacing, period_px=period, step_px=grid.step, threshold_px=thr,
     )
     if p.lens_model != "none" or lens is not None:
-        fit = refit_with_lens(
-            fit, U, V, yy, xx, fitted & interior, spacing, period_px=period, step_px=grid.step, threshold_px=thr,
-            image_shape=grid.full_shape, tangential="tangential" in p.lens_model, principal_point="center" in p.lens_model,
-            warn=warn, known=lens,
+        refit = refit_with_lens(
+            fit, LogicalGrid(U, V, yy, xx, fitted & interior, spacing, period, grid.step),
+            LensFitOptions(thr, grid.full_shape, "tangential" in p.lens_model, "center" in p.lens_model), known=lens,
         )
+        fit = refit.fit
+        warn.extend(refit.warnings)
     if fit.inlier_fraction < 0.1:
         warn.append(
             f"only {100 * fit.inlier_fraction:.0f}% of grid points fit the homography; strong distortion or "
             "lens distortion may bias the Direct Method's baseline"
         )
-    return fit, offsets
+    return GridFit(fit, offsets, tuple(warn))

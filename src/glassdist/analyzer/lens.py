@@ -96,6 +96,7 @@ class LensModel:
         return abs(self.scale_px * (self.distortion.k1 + self.distortion.k2))
 
     def to_dict(self) -> dict:
+        """The record as a JSON-ready mapping."""
         return {**self.distortion.to_dict(), "center_px": list(self.center_px), "scale_px": self.scale_px}
 
 
@@ -133,7 +134,7 @@ class LensCalibration:
         ``mean_abs_phi_eff_mD`` and ``p95_abs_phi_eff_mD`` over its trusted pixels, with
         ``phi_eff_sigma_mD`` (its median noise) and ``detrend_degree``, ``distance_m``. What the
         board and the camera leave against the perfect grid and the lens model, glass aside:
-        the Direct Method's floor on that rig (:func:`glassdist.analyzer.pipeline.calibrate_from_photo`).
+        the Direct Method's floor on that rig (:func:`glassdist.analyzer.calibrate.calibrate_from_photo`).
     """
 
     model: LensModel
@@ -148,6 +149,7 @@ class LensCalibration:
     floor: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
+        """The record as a JSON-ready mapping."""
         d = {"source": self.source, "model": self.model.to_dict(), "sigma": dict(self.sigma),
              "identifiable": self.identifiable, "fit_fraction": self.fit_fraction, "rms_px": self.rms_px,
              "corner_shift_px": self.model.corner_shift_px(), "note": self.note}
@@ -453,7 +455,8 @@ def read_camera_file(path) -> tuple[np.ndarray, BrownDistortion, tuple[int, int]
     try:
         text = p.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read the camera file {p.name}: {exc.__class__.__name__}; give a readable UTF-8 JSON/YAML file") from None
+        raise InputError(f"cannot read the camera file {p.name}: {exc.__class__.__name__}; "
+                         "give a readable UTF-8 JSON/YAML file") from None
     if text.lstrip().startswith("%YAML"):  # OpenCV's FileStorage: drop its header and matrix tags
         import yaml
 

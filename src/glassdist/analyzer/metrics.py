@@ -35,6 +35,7 @@ Paper §2.2.2-2.2.3 (A2, metric-anchored smoothing, A3).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any, Callable
 
 import numpy as np
 import scipy.fft as sfft
@@ -457,7 +458,7 @@ def _stencil_kernels(sigma_px: float, step_px) -> dict:
     """
     sy, sx = step_px
     w_max = 2.0 * np.pi * np.sqrt(np.log(1e3) / (2.0 * np.pi**2)) / max(sigma_px, 1e-9) * max(sy, sx)
-    kernels = {"field": None}
+    kernels: dict[str, Callable[[Any, Any], Any] | None] = {"field": None}
     if 1e-4 < w_max**4 / 30.0 and w_max < 2.0:
         kernels["x"] = lambda fy, fx: 1.0 / np.maximum(difference_response(sx, fx), MIN_RESPONSE)
         kernels["y"] = lambda fy, fx: 1.0 / np.maximum(difference_response(sy, fy), MIN_RESPONSE)
@@ -672,13 +673,13 @@ def channel_statistics(field: np.ndarray, valid: np.ndarray | None = None, *, ov
     limits = sorted(set(float(t) for t in over_limits))
     if x.size == 0:
         nan = float("nan")
-        out = {"mean_abs": nan, "mean": nan, "std": nan, "p95_abs": nan, "max_abs": nan, "n_valid": 0}
+        out: dict[str, Any] = {"mean_abs": nan, "mean": nan, "std": nan, "p95_abs": nan, "max_abs": nan, "n_valid": 0}
         return {**out, "over_percent": {t: nan for t in limits}} if limits else out
     # In the field's own precision (numpy's pairwise sums keep float32 means to ~1e-6):
     # float64 copies of a 24 Mpx field cost more than the statistics themselves.
     a = np.abs(x)
-    out = {"mean_abs": float(a.mean()), "mean": float(x.mean()), "std": float(x.std()), "max_abs": float(a.max()),
-           "n_valid": int(x.size)}
+    out = {"mean_abs": float(a.mean()), "mean": float(x.mean()), "std": float(x.std()),
+           "max_abs": float(a.max()), "n_valid": int(x.size)}
     if limits:
         out["over_percent"] = {t: float(100.0 * np.count_nonzero(a > t) / a.size) for t in limits}
     out["p95_abs"] = percentile(a, 95.0)
@@ -738,7 +739,8 @@ class _Running:
     def statistics(self, q: float):
         if self.n == 0:
             nan = float("nan")
-            out = {"mean_abs": nan, "mean": nan, "std": nan, "p95_abs": nan, "max_abs": nan, "n_valid": 0}
+            out: dict[str, Any] = {"mean_abs": nan, "mean": nan, "std": nan, "p95_abs": nan, "max_abs": nan,
+                                   "n_valid": 0}
             return {**out, "over_percent": {t: nan for t in self.limits}} if self.limits else out
         out = {"mean_abs": self.sum_abs / self.n, "mean": self.mean, "std": float(np.sqrt(self.m2 / self.n)),
                "max_abs": self.max_abs, "n_valid": int(self.n)}
@@ -779,7 +781,7 @@ def streamed_statistics(blocks, regions: dict, *, over_limits: dict | None = Non
         where its bracket missed (the caller takes it from the whole field).
     """
     over_limits, brackets = over_limits or {}, brackets or {}
-    run = {}
+    run: dict[tuple[Any, Any], _Running] = {}
     for rows, fields in blocks:
         for key, region in regions.items():
             r = np.asarray(region[rows], bool)
@@ -789,7 +791,7 @@ def streamed_statistics(blocks, regions: dict, *, over_limits: dict | None = Non
                     limits = sorted(set(float(t) for t in over_limits.get(ch, ())))
                     acc = run[(key, ch)] = _Running(limits, brackets.get((key, ch), (-np.inf, np.inf)))
                 acc.add(block[r & np.isfinite(block)])
-    out = {key: {} for key in regions}
+    out: dict[Any, dict[Any, Any]] = {key: {} for key in regions}
     for (key, ch), acc in run.items():
         out[key][ch] = acc.statistics(q)
     return out
@@ -826,7 +828,11 @@ def percentile(values: np.ndarray, q: float) -> float:
     lo = s[max(int(j - margin), 0)]
     hi = s[min(int(np.ceil(j + margin)), s.size - 1)]
     found = _bracketed_percentile(a[(a >= lo) & (a <= hi)], int(np.count_nonzero(a < lo)), n, q)
-    return found if found is not None else _bracketed_percentile(a, 0, n, q)  # the sample misled: every value
+    if found is not None:
+        return found
+    whole = _bracketed_percentile(a, 0, n, q)  # the sample misled: every value
+    assert whole is not None  # every value is inside
+    return whole
 
 
 def _bracketed_percentile(inside: np.ndarray, below: int, n: int, q: float) -> float | None:

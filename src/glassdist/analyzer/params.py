@@ -11,6 +11,7 @@ carrier period :math:`\\lambda_i^{px}` or of the carrier frequency :math:`|f_i|`
 
 from __future__ import annotations
 
+import os
 from importlib import resources
 from pathlib import Path
 from typing import Literal
@@ -159,8 +160,9 @@ class AnalyzerParams(BaseModel):
         0.002, gt=0, le=0.5,
         description="F5: the passes stop when the RMS update of the displacement is below this, carrier periods",
     )
-    min_region_fraction: float = Field(0.01, ge=0, lt=1, description="valid region: drop connected regions smaller than this fraction of the image "
-                                       "and than 2 x 2 carrier periods (analyzer.region.min_region_samples)")
+    min_region_fraction: float = Field(
+        0.01, ge=0, lt=1, description="valid region: drop connected regions smaller than this fraction of the image "
+        "and than 2 x 2 carrier periods (analyzer.region.min_region_samples)")
     ransac_threshold_periods: float = Field(0.1, gt=0, le=10, description="I2: RANSAC inlier threshold, carrier periods")
     ransac_max_trials: int = Field(2000, ge=10, le=1_000_000)
     ransac_seed: int = Field(0, ge=0, le=2**32 - 1, description="I2: seed of the RANSAC sampler (results are reproducible)")
@@ -204,7 +206,7 @@ def default_params_path() -> Path:
     return Path(str(resources.files("glassdist") / "data" / "analyzer_defaults.json"))
 
 
-def load_params(source: str | Path | dict | None = None, **overrides) -> AnalyzerParams:
+def load_params(source: str | os.PathLike[str] | dict | None = None, **overrides) -> AnalyzerParams:
     """Load and validate analyzer parameters.
 
     Parameters

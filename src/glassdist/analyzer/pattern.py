@@ -27,13 +27,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import InputError
 from . import fourier as F
 
-__all__ = ["PatternEvidence", "detect_pattern", "settle_pattern", "DECISIVE_RATIO"]
+if TYPE_CHECKING:
+    from .params import AnalyzerParams
+
+__all__ = ["PatternEvidence", "SettledPattern", "detect_pattern", "settle_pattern", "DECISIVE_RATIO"]
 
 #: ``along / mixed`` energy ratio (or its inverse) from which the spectrum decides the pattern.
 #: Measured: line grids 10-15, checkerboards 0.02-0.06 (synthetic, the bundled photos), up to 0.27
@@ -75,11 +79,13 @@ class PatternEvidence:
 
     def describe(self) -> str:
         """One phrase for messages: what the harmonics show."""
-        shown = {"lines": "harmonics along each carrier", "checkerboard": "harmonics only at odd mixed combinations of the carriers"}
-        what = shown.get(self.pattern, "no decisive harmonics")
+        shown = {"lines": "harmonics along each carrier",
+                 "checkerboard": "harmonics only at odd mixed combinations of the carriers"}
+        what = shown.get(self.pattern or "", "no decisive harmonics")
         return f"{what}, energy along/mixed {self.along:.3g}/{self.mixed:.3g} of the fundamentals"
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, object]:
+        """The evidence as a JSON-ready mapping."""
         return {"pattern": self.pattern, "along": self.along, "mixed": self.mixed, "noise": self.noise}
 
 
@@ -154,7 +160,7 @@ def detect_pattern(image: np.ndarray, *, max_px: int = 1024, min_period_px: floa
     if not fundamental > 0:
         return PatternEvidence(None, 0.0, 0.0, math.inf)
 
-    def strongest(terms) -> tuple[float, float]:
+    def strongest(terms: tuple[tuple[int, int], ...]) -> tuple[float, float]:
         """The strongest present term's energy (0 if none) and the energy a term needs to be present."""
         found = [energy(a, b) for a, b in terms]
         need = max(_SIGNIFICANCE * min(noise for _, noise in found), _FLOOR * fundamental)
@@ -172,7 +178,20 @@ def detect_pattern(image: np.ndarray, *, max_px: int = 1024, min_period_px: floa
     return PatternEvidence(pattern, along / fundamental, mixed / fundamental, noise / fundamental)
 
 
-def settle_pattern(params, image: np.ndarray, warn: list[str]):
+@dataclass(frozen=True)
+class SettledPattern:
+    """:func:`settle_pattern`'s outcome: the parameters with ``pattern`` decided, the warnings, and whether a grid was seen.
+
+    ``no_grid``: F1's message when the photo's crop shows no grid at all (else None); the
+    Comparative Method, which takes its carriers from the reference, raises it.
+    """
+
+    params: AnalyzerParams
+    warnings: tuple[str, ...] = ()
+    no_grid: str | None = None
+
+
+def settle_pattern(params: AnalyzerParams, image: np.ndarray) -> SettledPattern:
     """The parameters with ``pattern`` decided: ``'auto'`` from the spectrum, a given one checked against it.
 
     Parameters
@@ -180,26 +199,28 @@ def settle_pattern(params, image: np.ndarray, warn: list[str]):
     params : AnalyzerParams
     image : ndarray (H, W)
         The photo (or the glass-less reference) the pattern is read from.
-    warn : list of str
-        Receives a warning when a given pattern is contradicted by the spectrum, or when
-        ``'auto'`` cannot decide (then ``'lines'`` is used).
 
     Returns
     -------
-    AnalyzerParams
-        ``pattern`` is ``'lines'`` or ``'checkerboard'``.
+    SettledPattern
+        ``params.pattern`` is ``'lines'`` or ``'checkerboard'``; a warning when a given pattern
+        is contradicted by the spectrum, or when ``'auto'`` cannot decide (then ``'lines'`` is used).
     """
+    no_grid = None
     try:
         evidence = detect_pattern(image, min_period_px=params.min_period_px)
-    except InputError:  # no grid at all: F1 says so on the full photo
-        evidence = PatternEvidence(None, 0.0, 0.0, math.inf)
+    except InputError as exc:  # no grid at all: F1 says so on the full photo (or, Comparative, from here)
+        evidence, no_grid = PatternEvidence(None, 0.0, 0.0, math.inf), str(exc)
     if params.pattern == "auto":
+        warn: tuple[str, ...] = ()
         if evidence.pattern is None:
-            warn.append(f"the photo's spectrum does not tell a line grid from a checkerboard ({evidence.describe()}); "
-                        "assumed 'lines': give --pattern (lengths in mm differ by sqrt(2) between the two)")
-        return params.model_copy(update={"pattern": evidence.pattern or "lines"})
+            warn = (f"the photo's spectrum does not tell a line grid from a checkerboard ({evidence.describe()}); "
+                    "assumed 'lines': give the pattern (lengths in mm differ by sqrt(2) between the two)",)
+        return SettledPattern(params.model_copy(update={"pattern": evidence.pattern or "lines"}), warn, no_grid)
     if evidence.pattern is not None and evidence.pattern != params.pattern:
-        warn.append(f"the pattern '{params.pattern}' was given but the photo's spectrum shows a {evidence.pattern} "
-                    f"({evidence.describe()}); lengths in mm (mm_per_px, displacements, sigma) are off by sqrt(2) "
-                    f"if the backdrop is a {evidence.pattern}: check --pattern, or leave it out to decide from the photo")
-    return params
+        return SettledPattern(params, (
+            f"the pattern '{params.pattern}' was given but the photo's spectrum shows a {evidence.pattern} "
+            f"({evidence.describe()}); lengths in mm (mm_per_px, displacements, sigma) are off by sqrt(2) "
+            f"if the backdrop is a {evidence.pattern}: check the pattern, or leave it out to decide from the photo",),
+            no_grid)
+    return SettledPattern(params, (), no_grid)

@@ -81,7 +81,7 @@ Heat-Treated Flat Glass* (roll wave in mD of reflective power).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -133,12 +133,12 @@ class ReflectionGeometry:
     plane_deg: float = 0.0
 
     def __post_init__(self):
-        check_number(self.distance_m, "distance_m (--distance-m, the board-to-pane distance D)", DISTANCE_M)
+        check_number(self.distance_m, "distance_m (the board-to-pane distance D)", DISTANCE_M)
         if self.camera_distance_m is not None:
-            check_number(self.camera_distance_m, "camera_distance_m (--camera-distance-m, the camera-to-pane distance C)",
+            check_number(self.camera_distance_m, "camera_distance_m (the camera-to-pane distance C)",
                          DISTANCE_M)
         if not (math.isfinite(self.incidence_deg) and 0.0 <= self.incidence_deg < 80.0):
-            raise InputError(f"incidence_deg (--incidence-deg) must be in [0, 80) deg, got {self.incidence_deg!r}; "
+            raise InputError(f"incidence_deg must be in [0, 80) deg, got {self.incidence_deg!r}; "
                              "give the angle between the line of sight and the pane normal")
         if not math.isfinite(self.plane_deg):
             raise InputError(f"plane_deg must be a finite angle in deg, got {self.plane_deg!r}")
@@ -178,7 +178,7 @@ class ReflectionGeometry:
         """The camera-to-pane distance C, mm (D with the camera in the board plane)."""
         return 1000.0 * (self.distance_m if self.camera_distance_m is None else self.camera_distance_m)
 
-    def foot_offset_mm(self, dx_mm, dy_mm):
+    def foot_offset_mm(self, dx_mm: np.ndarray | float, dy_mm: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
         """In-plane vector ``v`` (pane mm) from the camera's foot on the pane to the points offset by ``(dx, dy)``
         from the one seen at the view's centre: ``v = C tan(theta_0) t_0 + (dx, dy)``."""
         r0 = self.camera_distance_mm * math.tan(math.radians(self.incidence_deg))
@@ -357,12 +357,12 @@ def reflect_result(result, geometry: ReflectionGeometry):
         ``phi_eff_mD``, ``phi_shear_mD``, ``phi_total_mD``, ``axis_deg`` and the uncertainty
         maps in reflective power (:func:`power_from_strain`); ``mm_per_px`` and ``sigma_mm``
         in pane mm (board / m); ``distance_m`` = D; the incidence at each sample from its offset
-        from the image centre (pane mm = pixels x ``mm_per_px`` / m, :meth:`ReflectionGeometry.incidence`); ``displacement_mm`` stays the measured
-        board displacement; ``optics`` names the geometry.
+        from the image centre (pane mm = pixels x ``mm_per_px`` / m, :meth:`ReflectionGeometry.incidence`);
+        ``displacement_mm`` stays the measured board displacement; ``optics`` names the geometry.
     """
     if not math.isclose(result.distance_m, geometry.effective_distance_m, rel_tol=1e-9):
         raise ValueError("reflect_result needs the result of a run at distance_m = geometry.effective_distance_m")
-    fields = dict(result._deferred["fields"])
+    fields = result.grid_fields()
     m = geometry.magnification
     yy, xx = result.analysis_grid.coords()
     H, W = result.valid.shape
@@ -389,9 +389,9 @@ def reflect_result(result, geometry: ReflectionGeometry):
     if result.method == "direct":
         optics["notes"].append(UNIFORM_POWER_NOTE)
     eff_sigma = None if result.effective_sigma_mm is None else result.effective_sigma_mm / m
-    return replace(
-        result, distance_m=geometry.distance_m, mm_per_px=result.mm_per_px / m, sigma_mm=result.sigma_mm / m,
-        effective_sigma_mm=eff_sigma, optics=optics, _deferred={**result._deferred, "fields": fields},
+    return result.with_grid_fields(
+        fields, distance_m=geometry.distance_m, mm_per_px=result.mm_per_px / m, sigma_mm=result.sigma_mm / m,
+        effective_sigma_mm=eff_sigma, optics=optics,
     )
 
 

@@ -8,8 +8,9 @@ fields: writers, figures and exports iterate it rather than naming fields themse
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 
@@ -54,8 +55,10 @@ class FieldSpec:
 #: The result's fields, in file order. A field listed here and present in the analysis
 #: (``AnalysisResult.field_specs()``) is written by every output of a run.
 FIELDS: tuple[FieldSpec, ...] = (
-    FieldSpec("displacement_mm", "mm", "delta: landing point on the backdrop with glass minus without; [...,0]=x (columns), [...,1]=y (rows)", 2),
-    FieldSpec("displacement_detrended_mm", "mm", "delta after the A2 detrend and metric smoothing (the field A3 differentiates)", 2),
+    FieldSpec("displacement_mm", "mm",
+              "delta: landing point on the backdrop with glass minus without; [...,0]=x (columns), [...,1]=y (rows)", 2),
+    FieldSpec("displacement_detrended_mm", "mm",
+              "delta after the A2 detrend and metric smoothing (the field A3 differentiates)", 2),
     FieldSpec("phi_eff_mD", "mD", "sphere-equivalent power tr(eps)/L; converging lens < 0"),
     FieldSpec("phi_shear_mD", "mD", "cylinder-equivalent astigmatism (2/L) sqrt(((eps_xx - eps_yy)/2)^2 + eps_xy^2)"),
     FieldSpec("phi_total_mD", "mD", "total power ||eps||_F / L"),
@@ -236,6 +239,16 @@ class AnalysisResult:
             raise AttributeError(name)
         return self._deferred["fields"][name]
 
+    def grid_fields(self) -> dict[str, np.ndarray]:
+        """Every field on :attr:`analysis_grid`, by name (a new mapping; the arrays are the result's own)."""
+        return dict(self._deferred["fields"]) if self._deferred else {}
+
+    def with_grid_fields(self, fields: dict[str, np.ndarray], **changes: Any) -> AnalysisResult:
+        """A copy of the result whose fields on :attr:`analysis_grid` are ``fields`` (and ``changes`` applied, as
+        :func:`dataclasses.replace`): a later stage re-expresses the fields without reaching into the result."""
+        held = self._deferred or {}
+        return replace(self, **changes, _deferred={**held, "fields": fields})
+
     def pixel_field(self, name: str) -> np.ndarray:
         """Field ``name`` brought to the input's pixel grid (not cached; the attribute is)."""
         f = self.grid_field(name)
@@ -398,7 +411,8 @@ class AnalysisResult:
             "warnings": list(self.warnings),
             **({"captures": list(self.captures)} if self.captures else {}),
             "conventions": {
-                "displacement": "landing point on the backdrop with glass minus without, mm; [...,0]=x (columns), [...,1]=y (rows)",
+                "displacement": ("landing point on the backdrop with glass minus without, mm; "
+                                 "[...,0]=x (columns), [...,1]=y (rows)"),
                 "phi_eff": "tr(sym grad delta)/L in mD, gradients w.r.t. backdrop mm; converging lens -> phi_eff < 0",
                 "axis_deg": "astigmatism principal axis, degrees from +x towards +y (down)",
             } if self.optics is None else {

@@ -141,7 +141,10 @@ class InstrumentTransfer:
         return r
 
     def prediction_interpolation(self, fy: np.ndarray, fx: np.ndarray) -> np.ndarray:
-        """``B``: the bilinear interpolation by which F5's synthesised reference receives the prediction from the demodulation grid."""
+        """``B``: the bilinear interpolation by which F5's synthesised reference receives the prediction.
+
+        The prediction comes from the demodulation grid.
+        """
         sy, sx = self.fine_step_px
         return np.sinc(sy * fy) ** 2 * np.sinc(sx * fx) ** 2
 
@@ -202,6 +205,7 @@ class InstrumentTransfer:
         return max(float(sigma_px), self.resolution_px())
 
     def to_dict(self) -> dict:
+        """The record as a JSON-ready mapping."""
         return {
             "gaussian_px2": np.asarray(self.gaussian_px2).tolist(),
             "fine_step_px": list(self.fine_step_px),

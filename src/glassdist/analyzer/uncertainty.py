@@ -82,6 +82,9 @@ from . import fourier as F
 from .metrics import inverse_2x2
 
 __all__ = [
+    "PhaseNoise",
+    "phase_noise",
+    "field_uncertainty",
     "noise_std",
     "phase_variance",
     "gradient_covariance",
@@ -204,8 +207,10 @@ def channel_uncertainty(
         L, m.
     """
     W = np.asarray(W, float)
-    var_tr = 0.0
-    c_aa = c_bb = c_ab = 0.0
+    var_tr: np.ndarray | float = 0.0
+    c_aa: np.ndarray | float = 0.0
+    c_bb: np.ndarray | float = 0.0
+    c_ab: np.ndarray | float = 0.0
     for i, Q in enumerate(grad_cov):
         # x^T Cg y with Cg = W^T Q W the covariance of g_i = W^T grad phi_i (rad^2/mm^2): (W x)^T Q (W y),
         # elementwise (a stack of 2 x 2 matrix products costs several times more)
@@ -323,3 +328,82 @@ def _pass_responses(transfer, component: int, bandpass_px2, fy, fx):
         L = gaussian_response(float(transfer.restart_sigma_px) ** 2 * np.eye(2), fy, fx)
         r = B1 / B + (L * r - B1 / B) * (1.0 - C * B) ** int(transfer.photo_passes)
     return C, transfer.demodulation(component, fy, fx), r
+
+
+# --------------------------------------------------------------------------- the analysis's fields
+
+
+@dataclass(frozen=True)
+class PhaseNoise:
+    """Phase noise levels ``s^2 / (2 |b|^2)`` per carrier on the Block A grid (rad^2 px^2), and the filters they went through."""
+
+    photo: tuple[np.ndarray, ...]
+    reference: tuple[np.ndarray, ...] | None  # independent of the photo's; None: Direct Method
+    blur: np.ndarray  # (2, 2, 2): per carrier, spatial covariance (px^2) of the low-pass up to that grid
+    bandpass: np.ndarray  # (2, 2, 2): that of the bandpass alone (F5's reference term)
+
+
+def phase_noise(mods: tuple[np.ndarray, ...], noise: tuple[float, float | None], fine: F.SamplingGrid,
+                agrid: F.SamplingGrid, blur_px2: np.ndarray, bandpass_px2: np.ndarray) -> PhaseNoise:
+    """The photo's and the reference's phase noise levels on the Block A grid and Block F's filters.
+
+    ``mods``: the modulations on the demodulation grid ``fine`` (the photo's two, then the
+    reference's in the Comparative Method); ``noise``: the photo's and the reference's
+    white-noise standard deviations (None: Direct Method); ``blur_px2`` and ``bandpass_px2``:
+    Block F's low-pass and its bandpass alone, per carrier (px^2). The block means of the
+    Block A grid ``agrid`` add their own variance (a box of ``m`` samples: ``(m step)^2 / 12``).
+    """
+    m = fine.shape[0] // agrid.shape[0]
+    ones = np.ones(fine.shape, np.float32)
+
+    def level(s: float, ms: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
+        out = []
+        for mod in ms:
+            w_ = (s**2 / (2 * np.maximum(mod.astype(np.float64), 1e-12) ** 2)).astype(np.float32)
+            out.append(F.block_mean(w_, ones, m)[0] if m > 1 else w_)
+        return tuple(out)
+
+    blur = blur_px2
+    if m > 1:
+        blur = blur + (m * max(fine.step)) ** 2 / 12.0 * np.eye(2)
+    ref_noise = noise[1]
+    return PhaseNoise(level(noise[0], mods[:2]), None if ref_noise is None else level(ref_noise, mods[2:4]),
+                      blur, bandpass_px2)
+
+
+def field_uncertainty(report: np.ndarray, transfer, noise: PhaseNoise, strain: np.ndarray, a1,
+                      sigma_px: float, distance_m: float) -> dict[str, np.ndarray]:
+    """Standard uncertainties of the displacement and the channels from the image noise (registered fields).
+
+    The phase noise (:func:`phase_noise`) through Block F's kernel (and the block means),
+    times F5's gains when its passes ran (``transfer``, an
+    :class:`~glassdist.analyzer.transfer.InstrumentTransfer` or None), gives the displacement's;
+    through the whole chain, the metric smoothing included, and the differentiation, the
+    channels'. ``a1``: the :class:`~glassdist.analyzer.components.A1Map` (mm per rad, px per mm,
+    frame rotation, compensated blur); ``strain``: the channels' strain (camera frame). NaN
+    outside ``report``. Returns ``phi_eff_sigma_mD``, ``phi_shear_sigma_mD`` and
+    ``displacement_sigma_mm``.
+    """
+    blur, photo, ref, bandpass = noise.blur, noise.photo, noise.reference, noise.bandpass
+    tr = transfer
+    var, grad_cov = [], []
+    for i in range(2):
+        g_photo, g_ref = (1.0, 1.0) if tr is None else deformation_noise_gains(tr, i, bandpass[i])
+        g_chan = 1.0 if tr is None or ref is None else deformation_channel_gain(tr, i, bandpass[i],
+                                                                                tr.effective_sigma_px(sigma_px))
+        var.append(phase_variance(photo[i] * np.float32(g_photo) + (0.0 if ref is None else ref[i] * np.float32(g_ref)),
+                                  blur[i]))
+        metric = sigma_px**2 * np.eye(2)
+        if a1.blur is not None:  # the metric smoothing tops the demodulation blur up to sigma
+            ev, V = np.linalg.eigh(metric - a1.blur[i])
+            metric = (V * np.clip(ev, 0.0, None)) @ V.T
+        white = photo[i] if ref is None else photo[i] + ref[i] * np.float32(g_chan)
+        grad_cov.append(gradient_covariance(white, blur[i] + metric))
+    disp = displacement_sigma((var[0], var[1]), a1.T, a1.R)
+    strain = strain if a1.R is None else a1.R @ strain @ a1.R.T  # back to the component frame
+    unc = channel_uncertainty((grad_cov[0], grad_cov[1]), a1.T, a1.W, strain, distance_m)
+    out = {"phi_eff_sigma_mD": unc.phi_eff_sigma_mD, "phi_shear_sigma_mD": unc.phi_shear_sigma_mD,
+           "displacement_sigma_mm": disp}
+    for f_ in out.values():
+        f_[~report] = np.nan
+    return out

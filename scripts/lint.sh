@@ -1,0 +1,12 @@
+#!/usr/bin/env bash
+# Lint and type-check: ruff (pyflakes, pycodestyle, isort, pydocstyle for public names) and mypy (strict on
+# the analyzer), as configured in pyproject.toml. Exit status non-zero on any finding.
+#   scripts/lint.sh            the analyzer (the scope CI holds clean)
+#   scripts/lint.sh PATH...    ruff on other paths too (mypy's files stay those of pyproject.toml)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+PY=${PYTHON:-python}
+paths=("$@")
+[ ${#paths[@]} -eq 0 ] && paths=(src/glassdist/analyzer tests/test_analyzer_work_once.py tests/test_code_layout.py)
+"$PY" -m ruff check "${paths[@]}"
+"$PY" -m mypy

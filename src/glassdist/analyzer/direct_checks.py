@@ -1,0 +1,217 @@
+"""The Direct Method's checks of its own baseline: pure functions of the measured fields returning warnings.
+
+The Direct Method takes the glass against a baseline fitted from the photo itself (Block I:
+a homography and the camera lens model), so what the camera and the glass share with that
+baseline is ambiguous. Each check here reads, from the fields Block A produced, how much the
+reading rests on that baseline and returns a warning (a string) when it matters, or None:
+
+* :func:`n_dependence_warning`: the trusted-region statistics move between detrend degree N
+  and N + 1;
+* :func:`rig_floor_warning`: the calibration photo's own reading is a sizeable share of the pane's;
+* :func:`lens_power_warning`: the lens fitted from the photo holds more centred power than the pane reads.
+
+They all look at the analysis-grid samples beyond the guard band from the region's border
+(:func:`beyond_guard`, computed once by the caller and handed to each).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from .analysis_grid import AnalysisGrid
+from .components import Components
+from .homography import HomographyFit, logical_coordinates
+from .metrics import detrend_increment, masked_gaussian, polynomial_detrend, strain_tensor
+from .params import AnalyzerParams
+
+__all__ = ["DirectReading", "beyond_guard", "lens_power_warning", "n_dependence_warning", "n_move", "plain_phi_eff",
+           "rig_floor_warning"]
+
+
+@dataclass(frozen=True)
+class DirectReading:
+    """What the checks read: the Direct Method's measurement and its channels on the analysis grid.
+
+    ``phi_eff_mD``: Block A's phi_eff; ``trusted``: the samples beyond the guard band
+    (:func:`beyond_guard`); ``components``: A1's displacement and Jacobian (computed once).
+    """
+
+    params: AnalyzerParams
+    fit: HomographyFit
+    baseline: np.ndarray
+    carrier_period_mm: float
+    mm_per_px: float
+    sigma_mm: float
+    distance_m: float
+    ag: AnalysisGrid
+    phi_eff_mD: np.ndarray
+    trusted: np.ndarray
+    components: Components
+
+
+def beyond_guard(ag: AnalysisGrid, guard_px: float) -> np.ndarray:
+    """Analysis-grid samples farther than the guard band from the region's border (the trusted pixels' rule)."""
+    return ndimage.distance_transform_edt(np.pad(ag.valid, 1), sampling=ag.grid.step)[1:-1, 1:-1] > guard_px
+
+
+# The Direct Method's statistics are called N-dependent when mean or p95 |phi_eff| over the trusted
+# region moves by more than this share between degree N and N + 1 (the bundled photos' Direct-Comparative
+# agreement target).
+_N_MOVE_WARN = 0.05
+
+
+def n_dependence_warning(r: DirectReading) -> str | None:
+    """Warn when the trusted-region statistics move between detrend degree N and N + 1.
+
+    The Direct Method's baseline (Block I) leaves whatever the camera and the glass share
+    with a homography and the lens model to the degree-N detrend; where that matters, raising
+    N changes the result. Block A is linear, and A2 at N + 1 removes exactly
+    ``Q = P_{N+1} delta - P_N delta`` more than at N (:func:`~glassdist.analyzer.metrics.detrend_increment`,
+    a polynomial of degree N + 1 per region), so ``phi_eff(N + 1) = phi_eff(N) - phi_eff[G * Q]``.
+    The second term is the trace of Q's strain smoothed by a plain Gaussian of the reporting
+    sigma (order-0 normalised convolution, :func:`plain_phi_eff`), not by Block A's whole
+    kernel (the instrument transfer's inverse and the stencil corrections act on a
+    polynomial's high derivatives only): the estimate costs a polynomial fit and one
+    smoothing instead of a second Block A. Mean and p95 |phi_eff| over the samples beyond
+    the guard band are compared (``_N_MOVE_WARN``, and at least 0.01 mD).
+    """
+    n = r.params.detrend_degree
+    move = n_move(r)
+    if move is None:
+        return None
+    s0, s1, what = move
+    if abs(s1 - s0) > _N_MOVE_WARN * s0 and abs(s1 - s0) > 0.01:
+        return (
+            f"Direct Method with detrend degree {n}: the result depends on N - {what} |phi_eff| moves from "
+            f"{s0:.3g} to {s1:.3g} mD ({100 * (s1 - s0) / s0:+.0f}%) with detrend_degree {n + 1}: a distortion the "
+            "homography and the lens model leave (an uncalibrated camera lens, or glass curved over the whole view) - "
+            "calibrate the lens (lens: calibrate_from_photo, calibration_from_camera_file) or use the Comparative Method"
+        )
+    return None
+
+
+def n_move(r: DirectReading) -> tuple[float, float, str] | None:
+    """``(s0, s1, what)``: the statistic (mean or p95 |phi_eff|, mD) that moves most from N to N + 1, or None.
+
+    See :func:`n_dependence_warning`; None where fewer than 64 samples take part or N >= 8.
+    """
+    n = r.params.detrend_degree
+    ag = r.ag
+    if n >= 8 or ag.valid.sum() < 64:
+        return None
+    a = r.phi_eff_mD
+    ok = r.trusted & np.isfinite(a)
+    if ok.sum() < 64:
+        return None
+    labels = np.where(ag.valid, ag.labels, 0)
+    b = a - plain_phi_eff(detrend_increment(r.components.delta_mm, labels, n, ag.grid.step), r.components.jacobian, r)
+    ok &= np.isfinite(b)
+    if ok.sum() < 64:
+        return None
+    a, b = np.abs(a[ok]), np.abs(b[ok])
+    stats = [(float(np.mean(a)), float(np.mean(b)), "mean"), (float(np.percentile(a, 95)), float(np.percentile(b, 95)), "p95")]
+    return max(stats, key=lambda t: abs(t[1] - t[0]) / max(t[0], 1e-12))
+
+
+def plain_phi_eff(delta_mm: np.ndarray, jacobian: np.ndarray | None, r: DirectReading) -> np.ndarray:
+    """phi_eff (mD) of a displacement on the analysis grid by Block A's rule without its transfer.
+
+    The strain through ``jacobian`` (None: ``mm_per_px``), its trace over L, smoothed by a plain
+    Gaussian of the reporting sigma (order-0 normalised convolution). What the checks read a
+    trend with; NaN where the strain is.
+    """
+    eps = strain_tensor(delta_mm, r.ag.grid.step, mm_per_px=r.mm_per_px, jacobian=jacobian)
+    phi = (eps[..., 0, 0] + eps[..., 1, 1]) * (1000.0 / r.distance_m)  # phi_eff is the trace (metrics)
+    sigma_px = r.sigma_mm / r.mm_per_px
+    return masked_gaussian(phi, np.isfinite(phi).astype(float), sigma_px**2 * np.eye(2), r.ag.grid.step, order=0)
+
+
+# The Direct Method's reading is compared with its floor on the rig (the calibration photo read the same
+# way) when the floor's mean |phi_eff| reaches this share of the pane's: above it the board and the camera
+# move the pane's statistics by a visible amount.
+_FLOOR_SHARE_WARN = 0.1
+
+
+def rig_floor_warning(r: DirectReading) -> str | None:
+    """Warn when the calibration photo's own reading is a sizeable share of the pane's.
+
+    :attr:`~glassdist.analyzer.lens.LensCalibration.floor` holds the calibration photo (no
+    glass) read by the Direct Method at the same detrend degree, smoothing and L; it is
+    compared, as mean |phi_eff|, with the pane's over the samples beyond the guard band,
+    where the floor stands above the calibration photo's own noise (twice its median
+    ``phi_eff_sigma_mD``) and only where the detrend degrees match (another degree reads
+    another floor; L is scaled, phi ~ 1 / L).
+    """
+    cal = r.fit.lens
+    floor = {} if cal is None else cal.floor
+    if not floor or floor["detrend_degree"] != r.params.detrend_degree:
+        return None
+    scale = floor["distance_m"] / r.distance_m  # phi scales as 1 / L
+    f = floor["mean_abs_phi_eff_mD"] * scale
+    a = np.abs(r.phi_eff_mD[r.trusted & np.isfinite(r.phi_eff_mD)])
+    if a.size < 64:
+        return None
+    m = float(np.mean(a))
+    # A floor at the photo's own noise (mean |noise| is 0.8 of its sigma) says nothing about the rig.
+    if f > _FLOOR_SHARE_WARN * m and floor["mean_abs_phi_eff_mD"] > 2.0 * floor["phi_eff_sigma_mD"]:
+        return (
+            f"Direct Method: the calibration photo (no glass), read the same way, shows mean |phi_eff| {f:.3g} mD "
+            f"(p95 {floor['p95_abs_phi_eff_mD'] * scale:.3g} mD, noise "
+            f"{floor['phi_eff_sigma_mD'] * scale:.2g} mD), {100 * f / m:.0f}% of this "
+            f"pane's {m:.3g} mD: the board (its print, its flatness) or the camera departs from the perfect grid and "
+            "the lens model by that much, and the Direct Method reads it as glass - use the Comparative Method, or a "
+            "flatter, finer-printed board"
+        )
+    return None
+
+
+# The Direct Method says what the camera lens fitted from the photo takes for itself when, read as glass,
+# it would reach this share of the pane's own reading (mean |phi_eff|), and at least 0.01 mD.
+_LENS_SHARE_WARN = 1.0
+
+
+def lens_power_warning(r: DirectReading) -> str | None:
+    """Warn when the lens fitted from the photo holds more centred power than the pane reads.
+
+    A camera lens's distortion and glass power centred on the optical axis have one form
+    (docs/lens_calibration.md); Block I's checks (:func:`~glassdist.analyzer.homography.refit_with_lens`)
+    say so when the residual shows it, but a centred feature that fills the view passes them and
+    is taken whole for the lens. The photo cannot tell the two; what it can tell is how much is
+    at stake: the lens's own displacement relative to the bare homography,
+    ``p_c (H^-1(L^-1(r)) - H^-1(r))`` (what Direct pass 2 removed with the lens), read as glass by
+    Block A's rule (degree-N detrend per region, then :func:`plain_phi_eff` through the
+    baseline's Jacobian). Where its mean |phi_eff| reaches the pane's (over the samples beyond
+    the guard band), the reading rests on the lens being the camera's, and a warning gives both
+    figures. Only for a lens fitted from the photo and applied: a calibration photo or a
+    camera file pins the lens.
+    """
+    fit, p, ag = r.fit, r.params, r.ag
+    lens = fit.lens_model
+    if lens is None or fit.lens is None or fit.lens.source != "self" or p.a1_mode != "projective":
+        return None
+    ok = r.trusted & np.isfinite(r.phi_eff_mD)
+    if ok.sum() < 64:
+        return None
+    p_c = r.carrier_period_mm
+    yy, xx = ag.grid.coords()
+    u1, v1 = logical_coordinates(fit.matrix, lens, xx, yy)
+    u0, v0 = logical_coordinates(fit.matrix, None, xx, yy)
+    d = np.stack([u1 - u0, v1 - v0], axis=-1) * p_c
+    d = polynomial_detrend(d, np.where(ag.valid, ag.labels, 0), p.detrend_degree, ag.grid.step)
+    phi = plain_phi_eff(d, r.components.jacobian, r)  # the baseline's Jacobian through the lens (A1, projective)
+    ok &= np.isfinite(phi)
+    if ok.sum() < 64:
+        return None
+    held, m = float(np.mean(np.abs(phi[ok]))), float(np.mean(np.abs(r.phi_eff_mD[ok])))
+    if held >= _LENS_SHARE_WARN * m and held > 0.01:
+        return (
+            f"Direct Method: the camera lens fitted from the photo holds a radial distortion centred on the optical axis "
+            f"that, read as glass, is mean |phi_eff| {held:.3g} mD, against this pane's {m:.3g} mD: the photo cannot tell "
+            "a camera lens from glass power centred on the optical axis, and this reading takes it for the lens's - "
+            "confirm with a calibration photo or a camera file (lens: calibrate_from_photo, calibration_from_camera_file), "
+            "or use the Comparative Method"
+        )
+    return None
