@@ -31,9 +31,9 @@ from .store import (HistoryUnavailable, Location, Recorded, Recording, SpoolFlus
 __getattr__, __dir__ = lazy_exports(__name__, dict.fromkeys(
     ("COLUMNS", "HistoryFilter", "Trend", "plot_trends", "query_runs", "trends"), ".query"))
 
-__all__ = ["history", "COLUMNS", "HistoryFilter", "HistoryUnavailable", "Location", "Recorded", "Recording", "SpoolFlush",
-           "Trend", "data_dir", "flush_spool", "locate", "open_store", "plot_trends", "query_runs", "record", "record_run",
-           "read_records", "spool_dir", "trends"]
+__all__ = ["history", "COLUMNS", "HistoryFilter", "HistoryUnavailable", "Location", "Recorded", "Recording",
+           "SpoolFlush", "Trend", "data_dir", "flush_spool", "locate", "open_store", "plot_trends", "query_runs",
+           "record", "record_run", "read_records", "spool_dir", "trends"]
 
 
 def history(db=None, *, as_frame=None, **filters):
