@@ -178,6 +178,11 @@ def test_the_default_database_is_in_the_data_folder_of_xdg_data_home(tmp_path, m
     monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "xdg"))
     assert record_run(summary, exit_code=3, out_dir=tmp_path) == 1
     assert [r["pane_id"] for r in _rows(tmp_path / "xdg" / "glassdist" / "history.sqlite")] == ["S-1"]
+    from glassdist.history import record
+
+    line = record(summary, exit_code=3, out_dir=tmp_path).line()  # the console names the default file
+    assert line == (f"history: recorded as run 2 in '{tmp_path / 'xdg' / 'glassdist' / 'history.sqlite'}' (the default "
+                    "history file; --db PATH|URL or GLASSDIST_DB chooses another)")
 
 
 def _read_only(path, monkeypatch):

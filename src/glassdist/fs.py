@@ -241,7 +241,7 @@ def csv_cell(value):
 
 
 def csv_text(rows, columns=None) -> str:
-    """CSV text of ``rows`` (dicts; header ``columns``, default the first row's keys), formula-like cells neutralised."""
+    """CSV text of ``rows`` (dicts; header ``columns``, default the first row's keys); formula-like cells defused."""
     import csv
     import io
 

@@ -31,9 +31,9 @@ from .store import (HistoryUnavailable, Location, Recorded, Recording, SpoolFlus
 __getattr__, __dir__ = lazy_exports(__name__, dict.fromkeys(
     ("COLUMNS", "HistoryFilter", "Trend", "plot_trends", "query_runs", "trends"), ".query"))
 
-__all__ = ["history", "COLUMNS", "HistoryFilter", "HistoryUnavailable", "Location", "Recorded", "Recording", "SpoolFlush",
-           "Trend", "data_dir", "flush_spool", "locate", "open_store", "plot_trends", "query_runs", "record", "record_run",
-           "spool_dir", "trends"]
+__all__ = ["history", "COLUMNS", "HistoryFilter", "HistoryUnavailable", "Location", "Recorded", "Recording",
+           "SpoolFlush", "Trend", "data_dir", "flush_spool", "locate", "open_store", "plot_trends", "query_runs",
+           "record", "record_run", "read_records", "spool_dir", "trends"]
 
 
 def history(db=None, *, as_frame=None, **filters):
@@ -71,10 +71,29 @@ def history(db=None, *, as_frame=None, **filters):
     >>> [(r["pane_id"], r["value"]) for r in runs]                                        # doctest: +SKIP
     [('P-1', 38.4), ('P-2', 41.0)]
     """
-    from .query import COLUMNS, HistoryFilter, query_runs
+    from .query import COLUMNS
+
+    records, _ = read_records(db, filters)
+    if as_frame is False:
+        return records
+    try:
+        import pandas as pd
+    except ImportError:
+        if as_frame:
+            raise
+        return records
+    return pd.DataFrame.from_records(records, columns=list(COLUMNS))
+
+
+def read_records(db, filters: dict) -> tuple[list[dict], SpoolFlush]:
+    """The filtered runs as records, after writing what waited in the spool for ``db``; and what that wrote.
+
+    The one reader behind :func:`history`, ``glassdist history`` and the web app's History page.
+    """
+    from .query import HistoryFilter, query_runs
 
     flt = HistoryFilter.of(**filters)
-    flush_spool(db)  # a record kept while the database was unreachable is read with the others
+    flushed = flush_spool(db)  # a record kept while the database was unreachable is read with the others
     try:
         store = open_store(db)
         with store if store is not None else contextlib.nullcontext():
@@ -85,15 +104,7 @@ def history(db=None, *, as_frame=None, **filters):
         from .store import describe_failure
 
         raise HistoryUnavailable(f"cannot read the history '{locate(db)}': {describe_failure(exc)}") from None
-    if as_frame is False:
-        return records
-    try:
-        import pandas as pd
-    except ImportError:
-        if as_frame:
-            raise
-        return records
-    return pd.DataFrame.from_records(records, columns=list(COLUMNS))
+    return records, flushed
 
 
 class _CallableModule(types.ModuleType):

@@ -91,8 +91,7 @@ def run(args) -> int:
     """List / export / chart; exit 0, or 2 with one line (bad filter, unreadable database, existing file)."""
     from ..errors import InputError
     from ..fs import atomic_write_bytes, atomic_write_text
-    from . import COLUMNS, HistoryFilter, flush_spool, locate
-    from . import history as read_history
+    from . import COLUMNS, HistoryFilter, locate, read_records
 
     flt = {k: getattr(args, k) for k in ("pane_id", "lot", "site", "operator", "source", "verdict", "since", "until",
                                          "zone", "statistic", "above", "below", "failed_zone", "limit")}
@@ -108,10 +107,10 @@ def run(args) -> int:
     loc = locate(args.db)
     if loc is None:
         raise InputError("the history is off (GLASSDIST_DB=off); give --db PATH to read one")
-    flushed = flush_spool(args.db)  # records kept while the database could not be reached: written first
+    # records kept while the database could not be reached are written first
+    records, flushed = read_records(args.db, {k: v for k, v in flt.items() if v is not None})
     if flushed.line():
         print(flushed.line(), file=sys.stderr)
-    records = read_history(args.db, as_frame=False, **{k: v for k, v in flt.items() if v is not None})
     print(f"history: {len(records)} run(s) from '{loc}'" + (
         " (the default history file; --db PATH|URL or GLASSDIST_DB chooses another)" if loc.default else ""),
         file=sys.stderr)

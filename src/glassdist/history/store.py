@@ -47,9 +47,9 @@ from pathlib import Path
 
 from ..errors import InputError
 
-__all__ = ["HistoryUnavailable", "Location", "Recording", "Recorded", "SpoolFlush", "data_dir", "spool_dir", "locate",
-           "open_store", "record", "record_run", "flush_spool", "run_rows", "record_id", "insert_runs", "describe_failure",
-           "Store"]
+__all__ = ["HistoryUnavailable", "Location", "Recording", "Recorded", "SpoolFlush", "data_dir", "spool_dir",
+           "locate", "open_store", "record", "record_run", "flush_spool", "run_rows", "record_id", "insert_runs",
+           "describe_failure", "Store"]
 
 #: values of ``GLASSDIST_DB`` / ``--db`` that turn the history off
 OFF = ("off", "none", "0", "false", "no")
@@ -432,7 +432,8 @@ def insert_runs(store: Store, entries) -> list[int]:
         known: dict[str, int] = {}
         wanted = sorted({k for k in keys if k})
         for i in range(0, len(wanted), 500):
-            known.update(session.execute(select(Run.record_id, Run.id).where(Run.record_id.in_(wanted[i:i + 500]))).all())
+            chunk = wanted[i:i + 500]
+            known.update(session.execute(select(Run.record_id, Run.id).where(Run.record_id.in_(chunk))).all())
         new, seen = [], set(known)
         for k, entry in zip(keys, entries):
             if k is None or k not in seen:
