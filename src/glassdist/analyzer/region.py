@@ -621,8 +621,8 @@ def excluded_area_warning(labels: np.ndarray, user_mask, grid: F.SamplingGrid, p
         ext_y, ext_x = (box[0].stop - box[0].start) * sy, (box[1].stop - box[1].start) * sx  # px
         cy, cx = (box[0].start + rows.mean() + 0.5) * sy, (box[1].start + cols.mean() + 0.5) * sx
         lab = labels[box][part]
-        shares = ", ".join(f"{LABELS[c]} (label {c}) {100 * np.count_nonzero(lab == c) / lab.size:.0f}%"
-                           for c in causes if np.any(lab == c))
+        share = {c: 100 * np.count_nonzero(lab == c) / lab.size for c in causes if np.any(lab == c)}
+        shares = ", ".join(f"{LABELS[c]} (label {c}) {f'{v:.0f}' if v >= 0.5 else '<1'}%" for c, v in share.items())
         named.append(
             f"{sizes[k] * sy * sx / period_px**2:.1f} square periods ({ext_x / period_px:.1f} x {ext_y / period_px:.1f} "
             f"periods, {ext_x * mm_per_px:.0f} x {ext_y * mm_per_px:.0f} mm) around x {cx:.0f}, y {cy:.0f} px: {shares}"
