@@ -21,17 +21,19 @@ Every sample of the demodulation grid gets one integer label (:data:`LABELS`):
                          smoothing there reaches the border and the channels are biased,
                          so it is left out of statistics and specifications
 7    fragment            an isolated piece of region too small to unwrap and detrend alone
-                         (smaller than ``min_region_fraction`` of the grid and than a
-                         patch of :data:`MIN_REGION_PERIODS` x :data:`MIN_REGION_PERIODS`
-                         carrier periods)
+                         (smaller than ``min_region_fraction`` of the grid, and either
+                         smaller than :data:`MIN_REGION_PERIODS` x :data:`MIN_REGION_PERIODS`
+                         carrier periods or not continuing its surroundings)
 ===  ==================  ==============================================================
 
 ``valid`` (the reported region) is labels 0 and 6; statistics use label 0. Connected
 parts of the measured region are labelled: a frame or mullion splits the pane into regions
-unwrapped, detrended and smoothed independently. A part is kept when it holds a patch of
-:data:`MIN_REGION_PERIODS` x :data:`MIN_REGION_PERIODS` carrier periods, however small a share
-of the view that is: a coherent part the demodulation reads (the centre of a small strong
-lens inside the ring its rim makes unmeasurable) is analysed, not dropped as a fragment.
+unwrapped, detrended and smoothed independently. A part of ``min_region_fraction`` of the
+grid is kept; a smaller one that holds :data:`MIN_REGION_PERIODS` x :data:`MIN_REGION_PERIODS`
+carrier periods is kept where its whole-period count is fixed by continuity with the flat
+glass around it (:func:`_continues_surroundings`): a coherent part the demodulation reads, the
+centre of a small strong lens inside the ring its rim makes unmeasurable, is analysed, not
+dropped as a fragment.
 Every excluded area of that size or larger is named in a warning
 (:func:`excluded_area_warning`: its size in periods and mm, where, and why).
 
@@ -133,24 +135,92 @@ class Region:
         Number of parts kept (see :func:`min_region_samples`).
     quality : ndarray of uint8 (h, w)
         :data:`LABELS` per sample (the guard band is added later, see :func:`guard_band`).
-    min_size : int
-        The smallest part kept, samples (:func:`min_region_samples`).
+    parts : _PartRule or None
+        How its connected parts were kept (:func:`_kept_parts`), for a restriction of it
+        (:func:`within`).
     """
 
     valid: np.ndarray
     labels: np.ndarray
     n: int
     quality: np.ndarray | None = None
-    min_size: int = 16
+    parts: _PartRule | None = None
+
+
+@dataclass(frozen=True)
+class _PartRule:
+    """The sizes of :func:`_kept_parts`: parts of ``large`` samples or more are kept; of ``small`` or more, when
+    they continue their surroundings (``step``: the grid's step, ``period_px``: the longer carrier period)."""
+
+    small: int
+    large: int
+    step: tuple[float, float]
+    period_px: float
+
+
+def _part_rule(p, grid: F.SamplingGrid, period_px: float) -> _PartRule:
+    large = max(int(p.min_region_fraction * grid.shape[0] * grid.shape[1]), 16)
+    return _PartRule(min_region_samples(p, grid, period_px), large, tuple(grid.step), float(period_px))
+
+
+def _continues_surroundings(part: np.ndarray, large: np.ndarray, phases, rule: _PartRule) -> bool:
+    """Whether a small part's whole-period count is that of the large parts around it, by continuity.
+
+    The surroundings are the samples of the large parts within two carrier periods beyond the
+    nearest of them (across the excluded gap). They must be flat enough to carry their phase
+    across the gap (each wrapped phase's mean resultant length over them above 0.9: a spread
+    under about a tenth of a period), and the part must continue them: its circular mean phase
+    within a quarter period of theirs (and its own resultant above 0.5). The part is then
+    unwrapped on its own (its free multiple of 2 pi chosen as every region's) and lands on its
+    surroundings' count, as the centre of a small lens in flat glass does; the parts on the
+    steep flanks of strong waves, whose count nothing fixes, stay fragments.
+    """
+    if not large.any():
+        return True  # nothing to disagree with: the part is analysed as any region
+    dist = ndimage.distance_transform_edt(~part, sampling=rule.step)
+    near = dist[large].min()
+    collar = large & (dist <= near + 2.0 * rule.period_px)
+    for ph in phases[:2]:
+        zs = np.exp(1j * ph[part].astype(np.float64)).mean()
+        zk = np.exp(1j * ph[collar].astype(np.float64)).mean()
+        if abs(zk) < 0.9 or abs(zs) < 0.5 or abs(np.angle(zs * np.conj(zk))) > np.pi / 2:
+            return False
+    return True
+
+
+def _kept_parts(valid: np.ndarray, phases, rule: _PartRule) -> tuple[np.ndarray, int]:
+    """Connected parts of ``valid`` kept (:func:`~glassdist.analyzer.unwrap.label_regions`, 1..n by size).
+
+    Parts of ``rule.large`` samples (``min_region_fraction`` of the grid) or more are kept;
+    smaller ones of ``rule.small`` samples (:func:`min_region_samples`) or more where they
+    continue their surroundings (:func:`_continues_surroundings`, with the wrapped ``phases``;
+    without phases, where they are at least ``rule.large``).
+    """
+    regions, n = label_regions(valid, rule.small)
+    if n == 0 or rule.small >= rule.large:
+        return regions, n
+    sizes = np.bincount(regions.ravel(), minlength=n + 1)[1:]
+    small = [k + 1 for k in range(n) if sizes[k] < rule.large]
+    if not small:
+        return regions, n
+    large = regions > 0
+    large[np.isin(regions, small)] = False
+    keep = regions > 0
+    for k in small:
+        part = regions == k
+        if not len(phases) or not _continues_surroundings(part, large, phases, rule):
+            keep &= ~part
+    return label_regions(keep, rule.small)
 
 
 def min_region_samples(p, grid: F.SamplingGrid, period_px: float) -> int:
-    """The smallest connected part (samples of ``grid``) unwrapped, detrended and smoothed on its own.
+    """The smallest connected part (samples of ``grid``) that can be unwrapped, detrended and smoothed on its own.
 
     A part of ``min_region_fraction`` of the grid, or one holding a square of
     :data:`MIN_REGION_PERIODS` carrier periods (``period_px``: the longer period) where that is
-    smaller; 16 samples at least. Only the first made the rule before: a small strong lens's
-    centre, coherent and read by the demodulation but 0.3 % of the view, was dropped.
+    smaller; 16 samples at least. The smaller parts are kept where they continue their
+    surroundings (:func:`_kept_parts`); the fraction alone made the rule before, and a small
+    strong lens's centre, coherent and read by the demodulation but 0.3 % of the view, was dropped.
     """
     h, w = grid.shape
     sy, sx = grid.step
@@ -287,11 +357,11 @@ def valid_region(
     kept = _kept_beyond_margins(labels, ok, modulated, half, grid, margin_px, edge_margin_px)
     valid = _without_residues(list(phases) + ([] if deviation_phases is None else list(deviation_phases)), kept & in_mask,
                               labels, warn, unwrapped=phases if cuts else ())
-    min_size = min_region_samples(p, grid, period)
-    regions, n = label_regions(valid, min_size)
+    rule = _part_rule(p, grid, period)
+    regions, n = _kept_parts(valid, list(phases), rule)
     labels[valid & (regions == 0)] = FRAGMENT
     labels[~in_mask] = USER_MASK
-    return Region(regions > 0, regions, n, labels, min_size)
+    return Region(regions > 0, regions, n, labels, rule)
 
 
 def _signal_tests(phases, coherences, mods, carriers: F.CarrierPair, grid: F.SamplingGrid, p,
@@ -551,8 +621,8 @@ def excluded_area_warning(labels: np.ndarray, user_mask, grid: F.SamplingGrid, p
         ext_y, ext_x = (box[0].stop - box[0].start) * sy, (box[1].stop - box[1].start) * sx  # px
         cy, cx = (box[0].start + rows.mean() + 0.5) * sy, (box[1].start + cols.mean() + 0.5) * sx
         lab = labels[box][part]
-        shares = ", ".join(f"{LABELS[c]} (label {c}) {100 * np.count_nonzero(lab == c) / lab.size:.0f}%"
-                           for c in causes if np.any(lab == c))
+        share = {c: 100 * np.count_nonzero(lab == c) / lab.size for c in causes if np.any(lab == c)}
+        shares = ", ".join(f"{LABELS[c]} (label {c}) {f'{v:.0f}' if v >= 0.5 else '<1'}%" for c, v in share.items())
         named.append(
             f"{sizes[k] * sy * sx / period_px**2:.1f} square periods ({ext_x / period_px:.1f} x {ext_y / period_px:.1f} "
             f"periods, {ext_x * mm_per_px:.0f} x {ext_y * mm_per_px:.0f} mm) around x {cx:.0f}, y {cy:.0f} px: {shares}"
@@ -625,9 +695,13 @@ def within(region: Region, first: Region, p, phases=()) -> Region:
         cut = branch_cuts(phases, valid)
         quality[cut] = PHASE_RESIDUE
         valid &= ~cut
-    regions, n = label_regions(valid, region.min_size)
+    rule = region.parts or first.parts
+    if rule is None:
+        regions, n = label_regions(valid, max(int(p.min_region_fraction * valid.size), 16))
+    else:
+        regions, n = _kept_parts(valid, list(phases), rule)
     quality[valid & (regions == 0)] = FRAGMENT
-    return Region(regions > 0, regions, n, quality, region.min_size)
+    return Region(regions > 0, regions, n, quality, rule)
 
 
 def guard_band(labels: np.ndarray, grid: F.SamplingGrid, guard_px: float) -> np.ndarray:
