@@ -14,7 +14,7 @@ DOCS = Path(__file__).resolve().parent
 sys.path.insert(0, str(DOCS / "_ext"))
 sys.path.insert(0, str(DOCS.parent / "src"))
 
-import glassdist  # noqa: E402
+import glassdist
 
 os.environ.setdefault("MPLBACKEND", "Agg")
 
@@ -90,9 +90,9 @@ html_show_sourcelink = False
 nitpicky = True
 nitpick_ignore_regex = [
     # the standard library, NumPy, pydantic and typing: their inventories are on the web
-    ("py:.*", r"(numpy|np|scipy|skimage|cv2|pydantic|pydantic_core|typing|collections|pathlib|os|datetime|enum|"
-              r"argparse|io|concurrent|sqlalchemy|dask|distributed|matplotlib|tifffile|fastapi|starlette)\..*"),
-    ("py:class", r"(ndarray|array_like|ArrayLike|Path|PathLike|Generator|Callable|Iterable|Iterator|Sequence|"
-                 r"Mapping|BaseModel|Enum|Figure|Axes|Literal|Any|Self|NoneType|float64|float32|"
-                 r"int|float|str|bool|dict|list|tuple|bytes|None|object|type)"),
+    ("py:.*", (r"(numpy|np|scipy|skimage|cv2|pydantic|pydantic_core|typing|collections|pathlib|os|datetime|enum|"
+               r"argparse|io|concurrent|sqlalchemy|dask|distributed|matplotlib|tifffile|fastapi|starlette)\..*")),
+    ("py:class", (r"(ndarray|array_like|ArrayLike|Path|PathLike|Generator|Callable|Iterable|Iterator|Sequence|"
+                  r"Mapping|BaseModel|Enum|Figure|Axes|Literal|Any|Self|NoneType|float64|float32|"
+                  r"int|float|str|bool|dict|list|tuple|bytes|None|object|type)")),
 ]
