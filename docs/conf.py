@@ -38,6 +38,8 @@ extensions = [
 
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
 root_doc = "index"
+# option names stay as typed: no "--reference" turned into an en dash
+smartquotes = False
 # records/: the JSON records and the tables their scripts write; the validation pages are
 # generated from them (_generated/), never read as pages themselves
 exclude_patterns = ["_build", "_generated", "records", "_ext"]
@@ -83,7 +85,8 @@ html_theme_options = {
     "footer_start": ["copyright"],
     "footer_end": [],
 }
-html_static_path: list[str] = []
+html_static_path = ["_static"]
+html_css_files = ["glassdist.css"]
 html_show_sourcelink = False
 
 # --- nitpicky: names that have no target offline (no intersphinx without a network) --------
