@@ -14,6 +14,7 @@ The panes are synthetic captures (:mod:`glassdist.synthetic`: a line grid displa
 roller wave) so that the eight analyses are quick.
 """
 
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -55,3 +56,5 @@ ax.set_xlabel("pane of lot L-07, in recording order")
 ax.set_ylabel("p95 |φ_eff|, mD")
 ax.legend(loc="upper left", fontsize=8)
 plt.show()
+
+shutil.rmtree(folder)  # the panes' outputs and the throw-away history
