@@ -9,6 +9,7 @@ photo's own phase). The lens converges, so φ_eff < 0 at its centre in both; the
 Method's homography absorbs a small part of the slow field (paper §3.2).
 """
 
+import textwrap
 from pathlib import Path
 
 import matplotlib.pyplot as plt
@@ -49,6 +50,7 @@ axes[2].set_title(f"mean |φ_eff| Direct / Comparative {np.abs(d).mean() / np.ab
 plt.show()
 
 # %%
-# What the Direct Method says about its own run.
+# What the Direct Method says about its own run (the warnings ``summary.json`` holds and the
+# command prints): on this lens it cannot tell the glass's radial field from a camera lens's.
 for warning in direct.warnings:
-    print("-", warning)
+    print(textwrap.fill(warning, 100, initial_indent="- ", subsequent_indent="  "))
