@@ -95,8 +95,8 @@ def run_case(scene, sigma_periods, degree: int, overrides: dict | None = None) -
     return rows
 
 
-HEADER = ("| ripple, periods | sigma, periods | method | ratio (stack) | ratio (indep.) | p95 abs phi_eff, mD "
-          "(truth) | interior | valid |", "|---|---|---|---|---|---|---|---|")
+HEADER = (("| ripple, periods | sigma, periods | method | ratio (stack) | ratio (indep.) | p95 abs phi_eff, mD "
+           "(truth) | interior | valid |"), "|---|---|---|---|---|---|---|---|")
 
 
 def row(r: dict) -> str:

@@ -14,7 +14,7 @@ DOCS = Path(__file__).resolve().parent
 sys.path.insert(0, str(DOCS / "_ext"))
 sys.path.insert(0, str(DOCS.parent / "src"))
 
-import glassdist  # noqa: E402
+import glassdist
 
 os.environ.setdefault("MPLBACKEND", "Agg")
 
@@ -38,6 +38,8 @@ extensions = [
 
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
 root_doc = "index"
+# option names stay as typed: no "--reference" turned into an en dash
+smartquotes = False
 # records/: the JSON records and the tables their scripts write; the validation pages are
 # generated from them (_generated/), never read as pages themselves
 exclude_patterns = ["_build", "_generated", "records", "_ext"]
@@ -83,16 +85,17 @@ html_theme_options = {
     "footer_start": ["copyright"],
     "footer_end": [],
 }
-html_static_path: list[str] = []
+html_static_path = ["_static"]
+html_css_files = ["glassdist.css"]
 html_show_sourcelink = False
 
 # --- nitpicky: names that have no target offline (no intersphinx without a network) --------
 nitpicky = True
 nitpick_ignore_regex = [
     # the standard library, NumPy, pydantic and typing: their inventories are on the web
-    ("py:.*", r"(numpy|np|scipy|skimage|cv2|pydantic|pydantic_core|typing|collections|pathlib|os|datetime|enum|"
-              r"argparse|io|concurrent|sqlalchemy|dask|distributed|matplotlib|tifffile|fastapi|starlette)\..*"),
-    ("py:class", r"(ndarray|array_like|ArrayLike|Path|PathLike|Generator|Callable|Iterable|Iterator|Sequence|"
-                 r"Mapping|BaseModel|Enum|Figure|Axes|Literal|Any|Self|NoneType|float64|float32|"
-                 r"int|float|str|bool|dict|list|tuple|bytes|None|object|type)"),
+    ("py:.*", (r"(numpy|np|scipy|skimage|cv2|pydantic|pydantic_core|typing|collections|pathlib|os|datetime|enum|"
+               r"argparse|io|concurrent|sqlalchemy|dask|distributed|matplotlib|tifffile|fastapi|starlette)\..*")),
+    ("py:class", (r"(ndarray|array_like|ArrayLike|Path|PathLike|Generator|Callable|Iterable|Iterator|Sequence|"
+                  r"Mapping|BaseModel|Enum|Figure|Axes|Literal|Any|Self|NoneType|float64|float32|"
+                  r"int|float|str|bool|dict|list|tuple|bytes|None|object|type)")),
 ]

@@ -337,13 +337,13 @@ def performance_page() -> str:
     parts += ["## The command's floor: import and reading", cli.table(rec["rows"]), _source("performance/cli_floor.json")]
     rec = _record("performance/distributed_results.json")
     parts += ["## Dask: serial against two workers", _nested_table(rec["runs"]),
-              f"{rec['workers']} workers on {rec['cpu_count']} cores. "
-              "*Generated from* `docs/records/performance/distributed_results.json`."]
+              (f"{rec['workers']} workers on {rec['cpu_count']} cores. "
+               "*Generated from* `docs/records/performance/distributed_results.json`.")]
     rec = _record("performance/history_results.json")
     timed = {k: v for k, v in rec.items() if isinstance(v, dict)}
     parts += ["## The results history", _nested_table(timed),
-              f"{rec['runs']} runs in {rec['lots']} lots, database {rec['database_MB']} MB, filled in {rec['fill_s']} s. "
-              "*Generated from* `docs/records/performance/history_results.json`."]
+              (f"{rec['runs']} runs in {rec['lots']} lots, database {rec['database_MB']} MB, filled in {rec['fill_s']} s. "
+               "*Generated from* `docs/records/performance/history_results.json`.")]
     return "\n\n".join(parts) + "\n"
 
 
@@ -359,8 +359,8 @@ def mutation_page() -> str:
             share = f"{100 * killed / len(mutants):.0f} %" if mutants else "—"
             lines.append(f"| `{path.name}` | {module} | {len(mutants)} | {killed} | {survived} | {other} | {share} |")
             survivors += [(path.name, module, m) for m in mutants if m["outcome"] == "survived"]
-    parts = ["\n".join(lines), "*Generated from* `docs/records/mutation_*.json`, written by `scripts/mutation.py`. "
-             "*Other*: the mutant did not run (the source did not compile, or the tests timed out)."]
+    parts = ["\n".join(lines), ("*Generated from* `docs/records/mutation_*.json`, written by `scripts/mutation.py`. "
+                                 "*Killed* counts a mutant whose tests timed out; *other*: any other outcome a record holds.")]
     if survivors:
         rows = ["| record | module | line | source | mutant |", "|---|---|---|---|---|"]
         for name, module, m in survivors:
