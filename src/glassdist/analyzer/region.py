@@ -671,7 +671,8 @@ def _without_residues(phases, valid: np.ndarray, labels: np.ndarray, warn: list[
     valid &= ~cut
     frac = 1.0 - float(valid.sum()) / n0
     if frac > 0.01:
-        warn.append(f"{100 * frac:.1f}% of the region has phase residues (noise, occlusion or too strong distortion) and was excluded")
+        warn.append(f"{100 * frac:.1f}% of the region has phase residues (noise, occlusion or too strong distortion) "
+                    "and was excluded")
     return valid
 
 
@@ -747,7 +748,8 @@ def trusted_on(quality: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     return t
 
 
-def pixel_quality(quality: np.ndarray, grid: F.SamplingGrid, valid: np.ndarray, user_mask=None, edge_px: float = 0.0) -> np.ndarray:
+def pixel_quality(quality: np.ndarray, grid: F.SamplingGrid, valid: np.ndarray, user_mask=None,
+                  edge_px: float = 0.0) -> np.ndarray:
     """The quality labels on the image's pixel grid, consistent with the reported region ``valid``.
 
     Nearest-sample upsampling; unreported pixels within ``edge_px`` of the image edge are
@@ -776,6 +778,7 @@ def pixel_quality(quality: np.ndarray, grid: F.SamplingGrid, valid: np.ndarray, 
 
 
 def downsample_mask(mask: np.ndarray, grid: F.SamplingGrid) -> np.ndarray:
+    """A pixel mask on the sampling grid ``grid``: True where the whole sample's area is (area average > 0.999)."""
     import cv2
 
     if grid.is_full:
