@@ -15,11 +15,20 @@ def acceptance_lines(acc, report_path=None) -> list[str]:
     lines = list(acc.verdict.lines()) if acc.verdict is not None else []
     for name, z in acc.zones.items():
         eff, shear = z["statistics"].get("phi_eff", {}), z["statistics"].get("phi_shear", {})
-        lines.append(f"zone {name}: trusted {z['trusted_percent']:.4g} % of the zone, p95 |phi_eff| "
-                     f"{eff.get('p95_abs', float('nan')):.4g} mD, p95 |phi_shear| {shear.get('p95_abs', float('nan')):.4g} mD")
+        share = z["trusted_percent"]
+        if share is None or share != share:  # NaN: the zone has no pixel in the photo
+            lines.append(f"zone {name}: not in the photo, nothing of it judged")
+            continue
+        lines.append(f"zone {name}: trusted {share:.4g} % of the zone, p95 |phi_eff| "
+                     f"{_mD(eff.get('p95_abs'))}, p95 |phi_shear| {_mD(shear.get('p95_abs'))}")
     if report_path is not None:
         lines.append(f"report: {report_path}")
     return lines
+
+
+def _mD(v) -> str:
+    """A statistic for a console line: ``n/a`` where no pixel was trusted (None or NaN)."""
+    return "n/a" if v is None or v != v else f"{v:.4g} mD"
 
 
 def warning_lines(record, problems=()) -> list[str]:
