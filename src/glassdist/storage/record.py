@@ -203,6 +203,11 @@ class RunRecord:
             # with the shares the verdict judged (measured_percent, trusted_percent: one number each)
             **acc.summary(), "measures": self.measures,
         })
+        from ..flatness.measures import flatness_measures  # reflection: the front face in mm and µm
+
+        flat = flatness_measures(result)
+        if flat is not None:
+            summary["flatness"] = flat.to_dict()
         return summary
 
 
