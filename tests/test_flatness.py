@@ -12,10 +12,10 @@ from __future__ import annotations
 import json
 import math
 
+import _truth
 import numpy as np
 import pytest
 
-import _truth
 from glassdist.analyzer.reflection import ReflectionGeometry, analyze_reflection
 from glassdist.cli import main
 from glassdist.flatness import (
@@ -57,7 +57,7 @@ def _closed_form(step):
 
 def test_integrator_recovers_a_closed_form_height_on_a_region_with_a_hole():
     """The masked least squares on an annulus with a separate island: each part's height, less its mean, within
-    0.3 % of the height's range (the trapezoid's (k s)^2 / 12 at 50 samples per wavelength; measured 0.1 %)."""
+    0.1 % of the height's range (the trapezoid's (k s)^2 / 12 at 50 samples per wavelength; measured 0.05 %)."""
     step = (8.0, 7.0)
     mask, island = _holed_region()
     z, zx, zy = _closed_form(step)
@@ -66,7 +66,7 @@ def test_integrator_recovers_a_closed_form_height_on_a_region_with_a_hole():
     for part in (mask & ~island, island):
         want = z[part] - z[part].mean()
         assert abs(got[part].mean()) < 1e-9
-        assert np.abs(got[part] - want).max() <= 0.003 * np.ptp(z[mask])
+        assert np.abs(got[part] - want).max() <= 0.001 * np.ptp(z[mask])
 
 
 def test_integrator_is_second_order_and_ignores_the_outside():
@@ -173,7 +173,7 @@ def test_roller_wave_slope_within_five_percent(roller_wave_run):
     """The slope of a 0.1 mm, 300 mm roller wave against the scene's gradient (detrended at degree N - 1 = 0 over
     the result's region): RMS error of the slope vector <= 5 % of the truth's RMS, correlation >= 0.99 per
     component carrying the wave (measured 2.9 % / 0.9998 at normal incidence, 3.7 % / 0.9994 at 20 deg); the
-    component along the rollers, zero in truth, below 3 % of it."""
+    component along the rollers, zero in truth, below 3 % of it (measured 0.63 % / 0.86 %)."""
     scene, _, res = roller_wave_run
     _, gx, gy = _surface_truth(scene)
     slope = res.surface_slope_mrad
@@ -191,7 +191,7 @@ def test_roller_wave_height_and_measures(roller_wave_run):
     """summary flatness: peak-to-valley within 3 % and wavelength within 1 % of the scene's (its height function over
     one period; measured 0.0983 mm / 300.16 mm at normal incidence, 0.0993 mm / 299.92 mm at 20 deg), direction
     across the rollers within 0.5 deg, the ASTM C1651 power of the measured wave; the height map itself within 5 %
-    of the truth's range (RMS; the truth detrended at degree N over the region)."""
+    of the truth's range (RMS; the truth detrended at degree N over the region; measured 1.3 % / 2.9 %)."""
     scene, _, res = roller_wave_run
     u = np.linspace(0.0, LAMBDA_MM, 3001)
     true_pv = np.ptp(scene.pane.deformation.front_shape.height(u, 0 * u))

@@ -7,8 +7,21 @@ and height (fields ``surface_slope_mrad``, ``surface_height_um`` of ``result.npz
 """
 
 from .integrate import integrate_slope
-from .measures import FlatnessMeasures, RollerWaveHeight, astm_c1651_mD, flatness_measures, roller_wave_height
-from .slope import SurfaceFields, landing_slope, pane_step_mm, polynomial_detrend, surface_fields, with_surface_fields
+from .measures import (
+    FlatnessMeasures,
+    RollerWaveHeight,
+    astm_c1651_mD,
+    flatness_measures,
+    roller_wave_height,
+)
+from .slope import (
+    SurfaceFields,
+    landing_slope,
+    pane_step_mm,
+    polynomial_detrend,
+    surface_fields,
+    with_surface_fields,
+)
 
 __all__ = [
     "FlatnessMeasures", "RollerWaveHeight", "SurfaceFields", "astm_c1651_mD", "flatness_measures", "integrate_slope",

@@ -51,8 +51,14 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-__all__ = ["RollerWaveHeight", "FlatnessMeasures", "astm_c1651_mD", "roller_wave_height", "flatness_measures",
-           "bow_of"]
+__all__ = [
+    "FlatnessMeasures",
+    "RollerWaveHeight",
+    "astm_c1651_mD",
+    "bow_of",
+    "flatness_measures",
+    "roller_wave_height",
+]
 
 
 def astm_c1651_mD(peak_to_valley_mm: float, wavelength_mm: float) -> float:

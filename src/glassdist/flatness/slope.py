@@ -44,8 +44,15 @@ import numpy as np
 from ..analyzer.reflection import ReflectionGeometry
 from .integrate import integrate_slope
 
-__all__ = ["SurfaceFields", "landing_slope", "pane_step_mm", "polynomial_detrend", "surface_fields",
-           "with_surface_fields", "geometry_of"]
+__all__ = [
+    "SurfaceFields",
+    "geometry_of",
+    "landing_slope",
+    "pane_step_mm",
+    "polynomial_detrend",
+    "surface_fields",
+    "with_surface_fields",
+]
 
 
 @dataclass(frozen=True)
