@@ -83,6 +83,22 @@ def test_integrator_is_second_order_and_ignores_the_outside():
     assert 3.0 < errs[0] / errs[1] < 5.0
 
 
+def test_integrator_iterative_and_direct_solves_agree(monkeypatch):
+    """The preconditioned conjugate gradients (large regions) and the direct factorisation (small ones, and the
+    fallback) give one height on the holed region with an island, to 1e-8 of its range."""
+    import glassdist.flatness.integrate as integ
+
+    step = (8.0, 7.0)
+    mask, _ = _holed_region()
+    _, zx, zy = _closed_form(step)
+    direct = integrate_slope(zx, zy, mask, step)
+    monkeypatch.setattr(integ, "DIRECT_MAX_SAMPLES", 0)
+    iterative = integrate_slope(zx, zy, mask, step)
+    assert np.nanmax(np.abs(iterative - direct)) <= 1e-8 * np.nanmax(np.abs(direct))
+    monkeypatch.setattr(integ, "_solve_cg", lambda *a, **k: None)  # not converged: the direct fallback
+    np.testing.assert_array_equal(integrate_slope(zx, zy, mask, step), direct)
+
+
 def test_integrator_refuses_non_finite_slopes_inside():
     mask = np.ones((5, 5), bool)
     g = np.zeros((5, 5))
