@@ -394,7 +394,7 @@ def reflect_result(result, geometry: ReflectionGeometry):
     return with_surface_fields(replace(
         result, distance_m=geometry.distance_m, mm_per_px=result.mm_per_px / m, sigma_mm=result.sigma_mm / m,
         effective_sigma_mm=eff_sigma, optics=optics, _deferred={**result._deferred, "fields": fields},
-    ))
+    ), geometry)
 
 
 def analyze_reflection(image, *, pitch_mm: float, geometry: ReflectionGeometry, reference=None, params=None,

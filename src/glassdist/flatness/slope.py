@@ -41,12 +41,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..analyzer.reflection import ReflectionGeometry
 from .integrate import integrate_slope
 
 __all__ = [
     "SurfaceFields",
-    "geometry_of",
     "landing_slope",
     "pane_step_mm",
     "polynomial_detrend",
@@ -84,15 +82,7 @@ class SurfaceFields:
     detrend_degree: int
 
 
-def geometry_of(optics: dict) -> ReflectionGeometry:
-    """The :class:`ReflectionGeometry` a reflection result's ``optics`` record describes."""
-    return ReflectionGeometry(
-        distance_m=optics["board_distance_m"],
-        camera_distance_m=None if optics["camera_in_board_plane"] else optics["camera_distance_m"],
-        incidence_deg=optics["incidence_deg"], plane_deg=optics["plane_of_incidence_deg"])
-
-
-def landing_slope(displacement_mm: np.ndarray, vx_mm, vy_mm, geometry: ReflectionGeometry,
+def landing_slope(displacement_mm: np.ndarray, vx_mm, vy_mm, geometry,
                   sigma_mm: np.ndarray | None = None):
     """Slope ``grad Z = M^{-1} delta`` of the front face from the board displacement (module notes).
 
@@ -102,8 +92,10 @@ def landing_slope(displacement_mm: np.ndarray, vx_mm, vy_mm, geometry: Reflectio
         Board displacement ``delta``, board mm, image frame.
     vx_mm, vy_mm : ndarray (...)
         In-plane vector from the camera's foot to each sample, pane mm
-        (:meth:`ReflectionGeometry.foot_offset_mm`).
+        (:meth:`~glassdist.analyzer.reflection.ReflectionGeometry.foot_offset_mm`).
     geometry : ReflectionGeometry
+        The capture geometry (:class:`glassdist.analyzer.reflection.ReflectionGeometry`): ``distance_m``
+        and ``camera_distance_mm`` are read.
     sigma_mm : ndarray (..., 2), optional
         Standard uncertainty of each component of ``delta`` (independent), board mm.
 
@@ -161,13 +153,15 @@ def polynomial_detrend(field: np.ndarray, mask: np.ndarray, degree: int, step_mm
     return out
 
 
-def surface_fields(result) -> SurfaceFields:
+def surface_fields(result, geometry) -> SurfaceFields:
     """Slope and height of the front face from a reflection result (module notes).
 
     Parameters
     ----------
     result : AnalysisResult
-        Of :func:`glassdist.analyzer.reflection.reflect_result` (``optics`` set).
+        A reflection result (``optics`` set, :func:`glassdist.analyzer.reflection.reflect_result`).
+    geometry : ReflectionGeometry
+        Its capture geometry (:class:`glassdist.analyzer.reflection.ReflectionGeometry`).
 
     Returns
     -------
@@ -178,7 +172,6 @@ def surface_fields(result) -> SurfaceFields:
     optics = result.optics
     if optics is None or optics.get("optics") != "reflection":
         raise ValueError("surface_fields needs a reflection result (optics = reflection)")
-    geometry = geometry_of(optics)
     fields = result._deferred["fields"]
     d = np.asarray(fields["displacement_mm"], float)
     region = np.asarray(result.grid_valid, bool) & np.isfinite(d).all(-1)
@@ -205,13 +198,13 @@ def surface_fields(result) -> SurfaceFields:
                          (sy, sx), N)
 
 
-def with_surface_fields(result):
-    """``result`` with ``surface_slope_mrad``, ``surface_height_um`` (and ``surface_slope_sigma_mrad``
+def with_surface_fields(result, geometry):
+    """``result`` (a reflection result of capture geometry ``geometry``) with ``surface_slope_mrad``, ``surface_height_um`` (and ``surface_slope_sigma_mrad``
     when the displacement has an uncertainty) among its fields; a transmission result unchanged."""
     optics = getattr(result, "optics", None)
     if optics is None or optics.get("optics") != "reflection":
         return result
-    s = surface_fields(result)
+    s = surface_fields(result, geometry)
     extra = {"surface_slope_mrad": s.slope_mrad, "surface_height_um": s.height_um}
     if s.slope_sigma_mrad is not None:
         extra["surface_slope_sigma_mrad"] = s.slope_sigma_mrad
