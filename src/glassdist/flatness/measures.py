@@ -237,7 +237,8 @@ class FlatnessMeasures:
             "detrend_degree": self.detrend_degree,
             "step_mm": list(self.step_mm),
             "field": "surface_height_um (pane frame, detrended at detrend_degree) on the analysis grid, trusted "
-                     "samples (glassdist.flatness)",
+                     "samples (glassdist.flatness); the reflective-power amplitude of the wave read from the board "
+                     "strain is measures.reflected_roll_wave.power_amplitude_mD",
         }
 
 
