@@ -8,9 +8,11 @@ and height (fields ``surface_slope_mrad``, ``surface_height_um`` of ``result.npz
 
 from .integrate import integrate_slope
 from .measures import (
+    EdgeLift,
     FlatnessMeasures,
     RollerWaveHeight,
     astm_c1651_mD,
+    edge_lift,
     flatness_measures,
     roller_wave_height,
 )
@@ -24,7 +26,7 @@ from .slope import (
 )
 
 __all__ = [
-    "FlatnessMeasures", "RollerWaveHeight", "SurfaceFields", "astm_c1651_mD", "flatness_measures", "integrate_slope",
-    "landing_slope", "pane_step_mm", "polynomial_detrend", "roller_wave_height", "surface_fields",
-    "with_surface_fields",
+    "EdgeLift", "FlatnessMeasures", "RollerWaveHeight", "SurfaceFields", "astm_c1651_mD", "edge_lift",
+    "flatness_measures", "integrate_slope", "landing_slope", "pane_step_mm", "polynomial_detrend",
+    "roller_wave_height", "surface_fields", "with_surface_fields",
 ]

@@ -52,10 +52,12 @@ import numpy as np
 from scipy.optimize import least_squares
 
 __all__ = [
+    "EdgeLift",
     "FlatnessMeasures",
     "RollerWaveHeight",
     "astm_c1651_mD",
     "bow_of",
+    "edge_lift",
     "flatness_measures",
     "roller_wave_height",
 ]
@@ -255,3 +257,70 @@ def flatness_measures(result) -> FlatnessMeasures | None:
     pv = float(np.ptp(z[mask])) if mask.any() else float("nan")
     return FlatnessMeasures(roller_wave_height(z, mask, step, degree=N), pv,
                             bow_of(z, mask, step, method=result.method, degree=N), N, step)
+
+
+@dataclass(frozen=True)
+class EdgeLift:
+    """The edge lift of one height profile taken in from a pane edge (:func:`edge_lift`).
+
+    Attributes
+    ----------
+    lift_mm : float
+        Height at the edge (``d = 0``) above the straight line fitted between ``flat_mm``, mm;
+        NaN when the profile does not reach the flat part or the edge's neighbourhood.
+    edge_height_um : float
+        The profile's height at the edge, µm: measured there, or extrapolated by the quadratic
+        fitted over the first ``extrapolate_mm`` of the measured profile when it starts further in.
+    first_mm : float
+        Distance from the edge of the first measured sample, mm.
+    line : (float, float)
+        ``(a, b)`` of the straight edge's line ``a + b d`` (µm, µm per mm).
+    """
+
+    lift_mm: float
+    edge_height_um: float
+    first_mm: float
+    line: tuple[float, float]
+
+
+def edge_lift(d_mm, height_um, *, flat_mm=(100.0, 300.0), extrapolate_mm: float = 40.0) -> EdgeLift:
+    """Edge lift of a height profile: the height at the edge above the line fitted to its flat part.
+
+    EN 12150-1 practice: a straight edge rests on the flat part of the pane, between 100 mm and
+    300 mm in from the edge, and the lift is the gap at the edge. Here the straight edge is the
+    least-squares line over the samples with ``flat_mm[0] <= d <= flat_mm[1]``, and the height at
+    the edge is the quadratic fitted over ``first_mm <= d <= first_mm + extrapolate_mm``,
+    evaluated at ``d = 0`` (exact for a lift ``h (1 - d / w)^2`` reaching ``w >= first_mm +
+    extrapolate_mm`` in; the measured region usually stops a guard band short of the edge).
+
+    Parameters
+    ----------
+    d_mm : array_like (n,)
+        Distance of each sample from the edge, inwards, pane mm.
+    height_um : array_like (n,)
+        Height ``Z`` (away from the camera), µm; NaN samples are skipped.
+    flat_mm : (float, float)
+        The straight edge's span, mm from the edge.
+    extrapolate_mm : float
+        Span of the quadratic that carries the profile to the edge, mm.
+
+    Returns
+    -------
+    EdgeLift
+        ``lift_mm`` > 0: the edge stands above the straight edge, away from the camera (for a lift towards the
+        camera, < 0).
+    """
+    d, z = np.asarray(d_mm, float), np.asarray(height_um, float)
+    ok = np.isfinite(d) & np.isfinite(z) & (d >= 0)
+    d, z = d[ok], z[ok]
+    nan = float("nan")
+    flat = (d >= flat_mm[0]) & (d <= flat_mm[1])
+    if flat.sum() < 2 or d.size == 0:
+        return EdgeLift(nan, nan, float(d.min()) if d.size else nan, (nan, nan))
+    b, a = np.polyfit(d[flat], z[flat], 1)
+    first = float(d.min())
+    near = d <= first + extrapolate_mm
+    if first > flat_mm[0] or near.sum() < 3:
+        return EdgeLift(nan, nan, first, (float(a), float(b)))
+    z0 = float(np.polyval(np.polyfit(d[near], z[near], 2), 0.0))
+    return EdgeLift((z0 - a) / 1000.0, z0, first, (float(a), float(b)))
