@@ -25,10 +25,12 @@ curvature ``(PV / 2)(2 pi / lambda)^2`` times 2 (a mirror):
 
 .. math:: P = \\frac{4 \\pi^2\\, PV}{\\lambda^2}
 
-(x 1e6: mD for ``PV`` and ``lambda`` in mm; 43.9 mD for 0.1 mm at 300 mm), the conversion
-ASTM C1651 states between the roll wave's depth and wavelength and its reflected optical
-power; equal, at normal incidence, to the ``power_amplitude_mD`` that
-``measures.reflected_roll_wave`` reads from the board strain.
+(x 1e6: mD for ``PV`` and ``lambda`` in mm; 43.9 mD for 0.1 mm at 300 mm): the peak
+reflective power of the sinusoid, the quantity in which ASTM C1651 reports roll wave (mD),
+written here from the wave's curvature; equal, at normal incidence, to the
+``power_amplitude_mD`` that ``measures.reflected_roll_wave`` reads from the board strain. A
+gauge that reports a different convention (e.g. the power's peak-to-valley, twice this)
+differs by its stated factor.
 
 Bow. A uniform curvature of the face is a degree-2 term of the height. The Direct Method's
 homography absorbs it (a change of scale of the board's image), and a detrend of degree
