@@ -389,9 +389,9 @@ def reflect_result(result, geometry: ReflectionGeometry):
     if result.method == "direct":
         optics["notes"].append(UNIFORM_POWER_NOTE)
     eff_sigma = None if result.effective_sigma_mm is None else result.effective_sigma_mm / m
-    from ..flatness.slope import with_surface_fields  # the front face's slope and height, from this result
+    from ..flatness.slope import with_surface_fields
 
-    return with_surface_fields(replace(
+    return with_surface_fields(replace(  # with the front face's slope and height
         result, distance_m=geometry.distance_m, mm_per_px=result.mm_per_px / m, sigma_mm=result.sigma_mm / m,
         effective_sigma_mm=eff_sigma, optics=optics, _deferred={**result._deferred, "fields": fields},
     ), geometry)
