@@ -389,10 +389,12 @@ def reflect_result(result, geometry: ReflectionGeometry):
     if result.method == "direct":
         optics["notes"].append(UNIFORM_POWER_NOTE)
     eff_sigma = None if result.effective_sigma_mm is None else result.effective_sigma_mm / m
-    return result.with_grid_fields(
+    from ..flatness.slope import with_surface_fields
+
+    return with_surface_fields(result.with_grid_fields(  # with the front face's slope and height
         fields, distance_m=geometry.distance_m, mm_per_px=result.mm_per_px / m, sigma_mm=result.sigma_mm / m,
         effective_sigma_mm=eff_sigma, optics=optics,
-    )
+    ), geometry)
 
 
 def analyze_reflection(image, *, pitch_mm: float, geometry: ReflectionGeometry, reference=None, params=None,

@@ -69,6 +69,9 @@ FIELDS: tuple[FieldSpec, ...] = (
               "[...,0]=x, [...,1]=y", 2),
     FieldSpec("phi_eff_sigma_mD", "mD", "standard uncertainty of phi_eff_mD from the image noise"),
     FieldSpec("phi_shear_sigma_mD", "mD", "standard uncertainty of phi_shear_mD from the image noise (linearised)"),
+    FieldSpec("surface_slope_mrad", "mrad", "reflection: front-face slope (dZ/dx, dZ/dy), pane frame, degree N-1 trend removed (glassdist.flatness)", 2),
+    FieldSpec("surface_slope_sigma_mrad", "mrad", "reflection: standard uncertainty of surface_slope_mrad from the image noise, per component", 2),
+    FieldSpec("surface_height_um", "um", "reflection: front-face height Z (away from the camera), least-squares integral of the slope, detrended at degree N"),
 )
 
 #: The power channels (mD) that statistics, specifications and heatmaps are about.

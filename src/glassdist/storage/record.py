@@ -256,6 +256,11 @@ class RunRecord:
             # with the shares the verdict judged (measured_percent, trusted_percent: one number each)
             **acc.summary(), "measures": self.measures,
         })
+        from ..flatness.measures import flatness_measures
+
+        flat = flatness_measures(result)  # reflection: the front face in mm and µm
+        if flat is not None:
+            summary["flatness"] = flat.to_dict()
         return summary
 
 

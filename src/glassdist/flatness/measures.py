@@ -1,0 +1,328 @@
+"""Flatness measures of the front face in mm and µm: roller wave, height peak-to-valley, bow.
+
+Written to ``summary.json["flatness"]`` for reflection runs (:func:`flatness_measures`), from
+the field ``surface_height_um`` (:mod:`glassdist.flatness.slope`) on the analysis grid, over
+its trusted samples.
+
+Roller wave. The height over the region is modelled as the degree-N polynomial its detrend
+leaves free plus one sinusoid,
+
+.. math:: Z(\\mathbf r) = \\sum_{i+j \\le N} c_{ij} x^i y^j + a \\cos(2\\pi\\,\\mathbf k\\cdot\\mathbf r)
+          + b \\sin(2\\pi\\,\\mathbf k\\cdot\\mathbf r),
+
+the wave vector ``k`` (cycles per pane mm) started at the peak of the 2-D spectrum of the
+masked height (zero-padded twice, parabolic sub-bin peak) and refined by least squares
+(variable projection: the linear coefficients solved at each ``k``,
+``scipy.optimize.least_squares`` on ``k``), the maximum-likelihood frequency of a sinusoid in
+white noise. Then the wavelength is ``1 / |k|``, the peak-to-valley ``2 sqrt(a^2 + b^2)``, and
+``direction_deg`` the direction of ``k`` (across the rollers: the direction along which the
+height varies), deg from +x towards +y in (-90, 90]. Fitting the polynomial with the wave
+makes the result independent of the detrend.
+
+ASTM C1651 millidioptres. The optical power of a sinusoidal roll wave of depth (peak to
+valley) ``PV`` and wavelength ``lambda`` seen in reflection at normal incidence is the peak
+curvature ``(PV / 2)(2 pi / lambda)^2`` times 2 (a mirror):
+
+.. math:: P = \\frac{4 \\pi^2\\, PV}{\\lambda^2}
+
+(x 1e6: mD for ``PV`` and ``lambda`` in mm; 43.9 mD for 0.1 mm at 300 mm): the peak
+reflective power of the sinusoid, the quantity in which ASTM C1651 reports roll wave (mD),
+written here from the wave's curvature; equal, at normal incidence, to the
+``power_amplitude_mD`` that ``measures.reflected_roll_wave`` reads from the board strain. A
+gauge that reports a different convention (e.g. the power's peak-to-valley, twice this)
+differs by its stated factor.
+
+Bow. A uniform curvature of the face is a degree-2 term of the height. The Direct Method's
+homography absorbs it (a change of scale of the board's image), and a detrend of degree
+N >= 2 removes it; the Comparative Method with N <= 1 keeps it, and the mean curvature of the
+height's fitted quadratic gives the radius.
+
+References
+----------
+ASTM C1651-11, *Standard Test Method for Measurement of Roll Wave Optical Distortion in
+Heat-Treated Flat Glass*.
+EN 12150-1:2015, *Glass in building - Thermally toughened soda lime silicate safety glass*,
+§ 6 (roller wave and edge lift, measured with a straight edge).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+
+__all__ = [
+    "EdgeLift",
+    "FlatnessMeasures",
+    "RollerWaveHeight",
+    "astm_c1651_mD",
+    "bow_of",
+    "edge_lift",
+    "flatness_measures",
+    "roller_wave_height",
+]
+
+
+def astm_c1651_mD(peak_to_valley_mm: float, wavelength_mm: float) -> float:
+    """Reflected optical power of a roll wave, ``4 pi^2 PV / lambda^2`` (module notes), mD."""
+    return float(4.0 * math.pi**2 * peak_to_valley_mm / wavelength_mm**2 * 1e6)
+
+
+@dataclass(frozen=True)
+class RollerWaveHeight:
+    """The dominant periodic component of the height (module notes, "Roller wave").
+
+    Attributes
+    ----------
+    peak_to_valley_mm : float
+        ``2 sqrt(a^2 + b^2)``, mm.
+    wavelength_mm : float
+        ``1 / |k|``, pane mm.
+    direction_deg : float
+        Direction of the wave vector (across the rollers), deg from +x towards +y, (-90, 90].
+    astm_c1651_mD : float
+        ``4 pi^2 PV / lambda^2``, mD.
+    explained_fraction : float
+        Share of the height's variance (less the polynomial) the sinusoid explains.
+    """
+
+    peak_to_valley_mm: float
+    wavelength_mm: float
+    direction_deg: float
+    astm_c1651_mD: float
+    explained_fraction: float
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def _basis(x, y, degree):
+    return np.column_stack([x**i * y**(n - i) for n in range(degree + 1) for i in range(n + 1)])
+
+
+def _spectral_peak(z, mask, step_mm):
+    """Wave vector (kx, ky), cycles/mm, of the masked height's spectral peak, or None."""
+    sy, sx = step_mm
+    h, w = z.shape
+    f = np.where(mask, z - z[mask].mean(), 0.0)
+    ny, nx = 2 * h, 2 * w
+    S = np.abs(np.fft.rfft2(f, s=(ny, nx))) ** 2
+    fy = np.fft.fftfreq(ny, sy)[:, None]
+    fx = np.fft.rfftfreq(nx, sx)[None, :]
+    kn = np.hypot(fx, fy)
+    S[(kn < 1.0 / max(h * sy, w * sx)) | (kn > 1.0 / (4.0 * max(sy, sx)))] = 0.0
+    if not np.any(S > 0):
+        return None
+    iy, ix = np.unravel_index(int(np.argmax(S)), S.shape)
+    lv = np.log(np.maximum([S[(iy - 1) % ny, ix], S[iy, ix], S[(iy + 1) % ny, ix]], 1e-300))
+    oy = 0.5 * (lv[0] - lv[2]) / (lv[0] - 2 * lv[1] + lv[2]) if lv[0] - 2 * lv[1] + lv[2] < 0 else 0.0
+    ox = 0.0
+    if 0 < ix < S.shape[1] - 1:
+        lv = np.log(np.maximum([S[iy, ix - 1], S[iy, ix], S[iy, ix + 1]], 1e-300))
+        den = lv[0] - 2 * lv[1] + lv[2]
+        ox = 0.5 * (lv[0] - lv[2]) / den if den < 0 else 0.0
+    return np.array([fx[0, ix] + np.clip(ox, -0.5, 0.5) / (nx * sx), fy[iy, 0] + np.clip(oy, -0.5, 0.5) / (ny * sy)])
+
+
+def roller_wave_height(height_um: np.ndarray, mask: np.ndarray, step_mm, *, degree: int = 0) -> RollerWaveHeight | None:
+    """The dominant roller wave of a height map (module notes).
+
+    Parameters
+    ----------
+    height_um : ndarray (h, w)
+        Height, µm (read where ``mask``).
+    mask : ndarray (h, w) bool
+        Samples to fit.
+    step_mm : (float, float)
+        Pane mm per sample along rows and columns.
+    degree : int
+        Degree of the polynomial fitted with the wave (the height's detrend degree N).
+
+    Returns
+    -------
+    RollerWaveHeight or None
+        None when fewer than 16 samples or no spectral peak in the band (four samples to the
+        region's extent).
+    """
+    mask = np.asarray(mask, bool) & np.isfinite(height_um)
+    if mask.sum() < 16:
+        return None
+    z = np.asarray(height_um, float)
+    k0 = _spectral_peak(z, mask, step_mm)
+    if k0 is None:
+        return None
+    r, c = np.nonzero(mask)
+    y, x, zv = r * step_mm[0], c * step_mm[1], z[mask]
+    xc, yc, sc = x.mean(), y.mean(), max(np.ptp(x), np.ptp(y), 1e-12) / 2
+    P = _basis((x - xc) / sc, (y - yc) / sc, max(int(degree), 0))
+    sub = slice(None, None, max(1, x.size // 40_000))
+
+    def design(k, s=slice(None)):
+        ph = 2 * np.pi * (k[0] * (x[s] - xc) + k[1] * (y[s] - yc))
+        return np.column_stack([P[s], np.cos(ph), np.sin(ph)])
+
+    def resid(k, s=sub):
+        A = design(k, s)
+        return zv[s] - A @ np.linalg.lstsq(A, zv[s], rcond=None)[0]
+
+    k = least_squares(resid, k0, x_scale=np.full(2, np.hypot(*k0)), xtol=1e-12, ftol=1e-12).x
+    A = design(k)
+    coef = np.linalg.lstsq(A, zv, rcond=None)[0]
+    rest = zv - P @ np.linalg.lstsq(P, zv, rcond=None)[0]
+    rss, tss = float(np.sum((zv - A @ coef) ** 2)), float(np.sum(rest**2))
+    kn = float(np.hypot(*k))
+    direction = math.degrees(math.atan2(k[1], k[0]))
+    direction = direction + 180.0 if direction <= -90.0 else direction - 180.0 if direction > 90.0 else direction
+    pv_mm = 2e-3 * float(np.hypot(coef[-2], coef[-1]))
+    return RollerWaveHeight(pv_mm, 1.0 / kn, direction, astm_c1651_mD(pv_mm, 1.0 / kn),
+                            max(0.0, 1.0 - rss / tss) if tss > 0 else 0.0)
+
+
+def bow_of(height_um: np.ndarray, mask: np.ndarray, step_mm, *, method: str, degree: int) -> dict:
+    """The bow the result leaves identifiable (module notes, "Bow"): radius of the mean curvature, or why none.
+
+    Returns
+    -------
+    dict
+        ``identifiable``, ``radius_m`` (of ``Z = -r^2 / 2R``: positive for a face concave towards
+        the camera; None when not identifiable or flat), ``note``.
+    """
+    if method == "direct":
+        return {"identifiable": False, "radius_m": None,
+                "note": "Direct Method: a uniform curvature is a change of scale of the board's image, absorbed by "
+                        "the homography; read the bow with the Comparative Method (a flat reference surface)"}
+    if degree >= 2:
+        return {"identifiable": False, "radius_m": None,
+                "note": f"the height is detrended at degree {degree} (>= 2), which removes a uniform curvature; "
+                        "run with --detrend-degree 1 or 0 to keep it"}
+    mask = np.asarray(mask, bool) & np.isfinite(height_um)
+    r, c = np.nonzero(mask)
+    if r.size < 16:
+        return {"identifiable": False, "radius_m": None, "note": "too few samples"}
+    y, x = r * step_mm[0], c * step_mm[1]
+    x, y = x - x.mean(), y - y.mean()
+    A = np.column_stack([np.ones_like(x), x, y, x * x, x * y, y * y])
+    cf = np.linalg.lstsq(A, np.asarray(height_um, float)[mask] * 1e-3, rcond=None)[0]  # mm
+    mean_curv = cf[3] + cf[5]  # (Z_xx + Z_yy) / 2, 1/mm
+    return {"identifiable": True, "radius_m": None if mean_curv == 0 else float(-1.0 / mean_curv / 1000.0),
+            "note": "Comparative Method: radius of the mean curvature of the height's least-squares quadratic "
+                    "(Z = -r^2 / 2R, R > 0 concave towards the camera), relative to the reference surface"}
+
+
+@dataclass(frozen=True)
+class FlatnessMeasures:
+    """``summary.json["flatness"]`` of a reflection run.
+
+    Attributes
+    ----------
+    roller_wave : RollerWaveHeight or None
+    height_peak_to_valley_um : float
+        Maximum less minimum of the detrended height over the trusted samples, µm.
+    bow : dict
+        :func:`bow_of`.
+    detrend_degree : int
+    step_mm : (float, float)
+        Pane mm per sample of the height map.
+    """
+
+    roller_wave: RollerWaveHeight | None
+    height_peak_to_valley_um: float
+    bow: dict
+    detrend_degree: int
+    step_mm: tuple[float, float]
+
+    def to_dict(self) -> dict:
+        return {
+            "roller_wave": None if self.roller_wave is None else self.roller_wave.to_dict(),
+            "height_peak_to_valley_um": self.height_peak_to_valley_um,
+            "bow": self.bow,
+            "detrend_degree": self.detrend_degree,
+            "step_mm": list(self.step_mm),
+            "field": "surface_height_um (pane frame, detrended at detrend_degree) on the analysis grid, trusted "
+                     "samples (glassdist.flatness); the reflective-power amplitude of the wave read from the board "
+                     "strain is measures.reflected_roll_wave.power_amplitude_mD",
+        }
+
+
+def flatness_measures(result) -> FlatnessMeasures | None:
+    """The flatness measures of a reflection result holding ``surface_height_um``, else None."""
+    from .slope import pane_step_mm
+
+    if "surface_height_um" not in {f.name for f in result.field_specs()}:
+        return None
+    z = np.asarray(result.grid_field("surface_height_um"), float)
+    mask = np.asarray(result.grid_valid, bool) & np.asarray(result.grid_trusted, bool) & np.isfinite(z)
+    step = pane_step_mm(result)
+    N = int(result.detrend_degree)
+    pv = float(np.ptp(z[mask])) if mask.any() else float("nan")
+    return FlatnessMeasures(roller_wave_height(z, mask, step, degree=N), pv,
+                            bow_of(z, mask, step, method=result.method, degree=N), N, step)
+
+
+@dataclass(frozen=True)
+class EdgeLift:
+    """The edge lift of one height profile taken in from a pane edge (:func:`edge_lift`).
+
+    Attributes
+    ----------
+    lift_mm : float
+        Height at the edge (``d = 0``) above the straight line fitted between ``flat_mm``, mm;
+        NaN when the profile does not reach the flat part or the edge's neighbourhood.
+    edge_height_um : float
+        The profile's height at the edge, µm: measured there, or extrapolated by the quadratic
+        fitted over the first ``extrapolate_mm`` of the measured profile when it starts further in.
+    first_mm : float
+        Distance from the edge of the first measured sample, mm.
+    line : (float, float)
+        ``(a, b)`` of the straight edge's line ``a + b d`` (µm, µm per mm).
+    """
+
+    lift_mm: float
+    edge_height_um: float
+    first_mm: float
+    line: tuple[float, float]
+
+
+def edge_lift(d_mm, height_um, *, flat_mm=(100.0, 300.0), extrapolate_mm: float = 40.0) -> EdgeLift:
+    """Edge lift of a height profile: the height at the edge above the line fitted to its flat part.
+
+    EN 12150-1 practice: a straight edge rests on the flat part of the pane, between 100 mm and
+    300 mm in from the edge, and the lift is the gap at the edge. Here the straight edge is the
+    least-squares line over the samples with ``flat_mm[0] <= d <= flat_mm[1]``, and the height at
+    the edge is the quadratic fitted over ``first_mm <= d <= first_mm + extrapolate_mm``,
+    evaluated at ``d = 0`` (exact for a lift ``h (1 - d / w)^2`` reaching ``w >= first_mm +
+    extrapolate_mm`` in; the measured region usually stops a guard band short of the edge).
+
+    Parameters
+    ----------
+    d_mm : array_like (n,)
+        Distance of each sample from the edge, inwards, pane mm.
+    height_um : array_like (n,)
+        Height ``Z`` (away from the camera), µm; NaN samples are skipped.
+    flat_mm : (float, float)
+        The straight edge's span, mm from the edge.
+    extrapolate_mm : float
+        Span of the quadratic that carries the profile to the edge, mm.
+
+    Returns
+    -------
+    EdgeLift
+        ``lift_mm`` > 0: the edge stands above the straight edge, away from the camera (for a lift towards the
+        camera, < 0).
+    """
+    d, z = np.asarray(d_mm, float), np.asarray(height_um, float)
+    ok = np.isfinite(d) & np.isfinite(z) & (d >= 0)
+    d, z = d[ok], z[ok]
+    nan = float("nan")
+    flat = (d >= flat_mm[0]) & (d <= flat_mm[1])
+    if flat.sum() < 2 or d.size == 0:
+        return EdgeLift(nan, nan, float(d.min()) if d.size else nan, (nan, nan))
+    b, a = np.polyfit(d[flat], z[flat], 1)
+    first = float(d.min())
+    near = d <= first + extrapolate_mm
+    if first > flat_mm[0] or near.sum() < 3:
+        return EdgeLift(nan, nan, first, (float(a), float(b)))
+    z0 = float(np.polyval(np.polyfit(d[near], z[near], 2), 0.0))
+    return EdgeLift((z0 - a) / 1000.0, z0, first, (float(a), float(b)))
