@@ -63,6 +63,9 @@ class RunRequest:
     history : Recording, False or None
         How the run is recorded in the results history (None: the default recording of
         the API; False: not recorded).
+    camera_distance_m : float or None
+        Camera to pane, m (transmission): the run also reports the pane's intrinsic reading
+        (:mod:`glassdist.viewpoint`), ``intrinsic`` in ``summary.json`` and its maps in ``result.npz``.
     """
 
     fields: str = "analysis"
@@ -73,6 +76,7 @@ class RunRequest:
     mask: np.ndarray | None = None
     metadata: dict = field(default_factory=dict)
     history: object = None
+    camera_distance_m: float | None = None
 
     def __post_init__(self):
         if self.fields not in FIELD_LAYOUTS:
@@ -203,6 +207,11 @@ class RunRecord:
             # with the shares the verdict judged (measured_percent, trusted_percent: one number each)
             **acc.summary(), "measures": self.measures,
         })
+        if self.request.camera_distance_m is not None and result.optics is None:
+            from ..viewpoint.intrinsic import intrinsic_section, reading_of_result
+
+            summary["intrinsic"] = intrinsic_section(reading_of_result(result, self.request.camera_distance_m),
+                                                     result.trusted)
         return summary
 
 
