@@ -25,8 +25,8 @@ HALF_VIEW_MM = 500.0
 PIXELS = (320, 240)
 WAVE = {"front": [{"kind": "roller_wave", "amplitude_mm": 0.6, "wavelength_mm": 400, "direction_deg": 0}]}
 OTHER_WAVE = {"front": [{"kind": "roller_wave", "amplitude_mm": 0.75, "wavelength_mm": 400, "direction_deg": 0}]}
-# a converging lens of P = (n - 1) 2 A / s^2 = 10.4 mD at its centre (thickening 2 A, Gaussian of s)
-LENS_A_MM, LENS_S_MM = 0.29, 170.0
+# a converging lens of P = (n - 1) 2 A / s^2 = 18 mD at its centre (thickening 2 A, Gaussian of s)
+LENS_A_MM, LENS_S_MM = 0.5, 170.0
 LENS = {"front": [{"kind": "gaussian", "amplitude_mm": -LENS_A_MM, "sigma_mm": LENS_S_MM, "center_mm": [0, 0]}],
         "back": [{"kind": "gaussian", "amplitude_mm": LENS_A_MM, "sigma_mm": LENS_S_MM, "center_mm": [0, 0]}]}
 
@@ -176,3 +176,123 @@ def test_intrinsic_model_is_geometry_free_on_exact_landing_points(deformation):
     means = np.array(means)
     print(deformation, means)
     assert np.all(np.abs(means[:2] / means[2] - 1) < 0.01), means
+
+
+# --- analysed captures ------------------------------------------------------------------------------------------------
+
+
+def test_capture_summary_and_fields_carry_the_intrinsic_reading(captures):
+    """``analyze --camera-distance-m`` writes ``intrinsic`` (the statistics keys of ``statistics``, the factor, the
+    smoothing carried onto the pane) and the intrinsic maps in result.npz; the capture's own figures unchanged."""
+    folder = captures["wave", 3.0]
+    s = _summary(folder)
+    intr = s["intrinsic"]
+    assert set(s["statistics"]["phi_eff_mD"]) <= set(intr["phi_eff_mD"])
+    assert intr["capture_factor"] == pytest.approx(0.75) and intr["pane_sigma_mm"] == pytest.approx(PANE_SIGMA_MM)
+    with np.load(folder / "result.npz") as z:
+        assert {"intrinsic_phi_eff_mD", "intrinsic_phi_shear_mD", "intrinsic_axis_deg"} <= set(z.files)
+        eff = z["intrinsic_phi_eff_mD"]
+        trusted = z["quality"] == 0
+    assert channel_statistics(eff, trusted)["mean_abs"] == pytest.approx(intr["phi_eff_mD"]["mean_abs"], rel=1e-5)
+    # off-axis pixels read more than Dc/(Dc+L) alone says (sec^2 alpha): the intrinsic mean is below capture / k
+    assert intr["phi_eff_mD"]["mean_abs"] < s["statistics"]["phi_eff_mD"]["mean_abs"] / 0.75
+
+
+@pytest.mark.parametrize("pane", ["wave", "lens"])
+def test_two_capture_geometries_read_the_same_intrinsic_pane(captures, pane):
+    """Dc 3 m / L 1 m and Dc 6 m / L 0.5 m (Comparative, one render each): the capture readings differ by 20 %
+    (wave) and 25 % (lens), the intrinsic mean |phi_eff| and mean phi_shear within 2 %.
+    Measured: wave 36.35 / 36.26 mD (0.25 %), lens see the printed figures."""
+    a, b = (_summary(captures[pane, Dc]) for Dc in (3.0, 6.0))
+    for ch in ("phi_eff_mD", "phi_shear_mD"):
+        ia, ib = a["intrinsic"][ch]["mean_abs"], b["intrinsic"][ch]["mean_abs"]
+        ca, cb = a["statistics"][ch]["mean_abs"], b["statistics"][ch]["mean_abs"]
+        print(pane, ch, "capture", ca, cb, "intrinsic", ia, ib, ia / ib - 1)
+        assert abs(ca / cb - 1) > 0.1
+        assert ia == pytest.approx(ib, rel=0.02)
+
+
+def _view_truth(scene, stored, *, sigma_mm, detrend):
+    """The independent evaluation of the exact landing points of ``scene`` on the capture's region (same pane points)."""
+    exact = np.nan_to_num(landing_points(scene).displacement_mm)
+    W, _ = scene.camera.pixels
+    Dc, L = -scene.camera.position_mm[2] / 1000, scene.backdrop.distance_m
+    mpp = 2 * HALF_VIEW_MM * (Dc + L) / Dc / W
+    return _truth.evaluate(exact, stored.valid, distance_m=L, mm_per_px=mpp, detrend_degree=detrend,
+                           sigma_mm=sigma_mm, jacobian=landing_jacobian(scene))
+
+
+@pytest.mark.parametrize("pane", ["wave", "lens"])
+def test_view_predicts_a_render_from_ten_metres(captures, pane, tmp_path):
+    """``glassdist view`` of the Dc 3 m / L 1 m capture at Do 10 m / Lo 3 m predicts the exact render's reading there
+    (independent evaluation of its landing points, same pane region, S and N) within 3 % on mean |phi_eff| and
+    mean phi_shear; the smoothing is the capture's carried to that backdrop, 52 mm."""
+    from glassdist.storage import load_result
+
+    src = captures[pane, 3.0]
+    out = tmp_path / "view"
+    assert main(["view", str(src), "--observer-distance-m", "10", "--background-distance-m", "3", "--out", str(out)]) == 0
+    s = _summary(out)
+    assert s["sigma_mm"] == pytest.approx(PANE_SIGMA_MM * 13 / 10)
+    stored = load_result(src)
+    detrend = s["detrend_degree"]
+    truth = _view_truth(pane_scene(WAVE if pane == "wave" else LENS, 10.0, 3.0), stored, sigma_mm=s["sigma_mm"],
+                        detrend=detrend)
+    trusted = stored.pixel_field("quality") == 0
+    for ch in ("phi_eff_mD", "phi_shear_mD"):
+        want = channel_statistics(getattr(truth, ch), trusted)["mean_abs"]
+        got = s["statistics"][ch]["mean_abs"]
+        print(pane, ch, "view", got, "render truth", want, got / want - 1)
+        assert got == pytest.approx(want, rel=0.03)
+
+
+def test_view_at_the_capture_geometry_gives_back_the_capture(captures):
+    """Predicting the capture's own point (Do = Dc, Lo = L, its S and N) returns its statistics within 1 %."""
+    from glassdist.storage import load_result
+    from glassdist.viewpoint import predict_view
+
+    stored = load_result(captures["wave", 6.0])
+    pred = predict_view(stored, observer_distance_m=6.0, background_distance_m=0.5)
+    for ch in ("phi_eff_mD", "phi_shear_mD"):
+        assert pred.statistics[ch]["mean_abs"] == pytest.approx(stored.summary["statistics"][ch]["mean_abs"], rel=0.01)
+
+
+def test_view_refuses_finer_smoothing_no_geometry_and_oblique_views(captures, tmp_path, capsys):
+    """Exit 2 with one line: S finer than the capture resolved, a result without --camera-distance-m, an oblique
+    view (not modelled yet); the output folder is not written."""
+    src = captures["wave", 3.0]
+    base = ["view", str(src), "--observer-distance-m", "10", "--background-distance-m", "3"]
+    for extra, needle in ((["--sigma-mm", "40"], "finer than the capture resolved"),
+                          (["--viewing-angle-deg", "30"], "oblique viewing is not modelled")):
+        capsys.readouterr()
+        assert main([*base, *extra, "--out", str(tmp_path / "v")]) == 2
+        err = capsys.readouterr().err.strip()
+        assert needle in err and len(err.splitlines()) == 1, err
+        assert not (tmp_path / "v").exists()
+    bare = tmp_path / "bare"
+    bare.mkdir()
+    s = _summary(src)
+    del s["intrinsic"]
+    (bare / "summary.json").write_text(json.dumps(s))
+    (bare / "result.npz").write_bytes((src / "result.npz").read_bytes())
+    assert main(["view", str(bare), "--observer-distance-m", "10", "--background-distance-m", "3",
+                 "--out", str(tmp_path / "v")]) == 2
+    assert "--camera-distance-m" in capsys.readouterr().err
+
+
+def test_compare_one_pane_two_geometries_and_two_panes(captures, tmp_path, capsys):
+    """``glassdist compare``: the wave at Dc 3 / L 1 against Dc 6 / L 0.5 is consistent with zero; against a wave
+    25 % deeper at Dc 6 / L 0.5 a difference is detected (both channels)."""
+    from glassdist.storage import load_result
+    from glassdist.viewpoint import compare_results
+
+    same = compare_results(load_result(captures["wave", 3.0]), load_result(captures["wave", 6.0]))
+    other = compare_results(load_result(captures["wave", 3.0]), load_result(captures["other", 6.0]))
+    print("same", same.to_dict(), "other", other.to_dict())
+    assert same.consistent and not same.warnings
+    assert not other.phi_eff_mean_abs.consistent and not other.phi_shear_mean.consistent
+    assert other.phi_eff_mean_abs.difference < 0  # the deeper wave reads more
+    out = tmp_path / "cmp.json"
+    assert main(["compare", str(captures["wave", 3.0]), str(captures["wave", 6.0]), "--json", str(out)]) == 0
+    assert json.loads(out.read_text())["consistent_with_zero"] is True
+    assert "consistent with zero" in capsys.readouterr().out
