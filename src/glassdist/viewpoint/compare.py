@@ -26,8 +26,14 @@ from ..analyzer.metrics import channel_statistics
 from .intrinsic import IntrinsicReading, intrinsic_reading
 from .view import capture_sigma_mm, stored_geometry, trusted_pixels
 
-__all__ = ["MODEL_RELATIVE_UNCERTAINTY", "COVERAGE_FACTOR", "ChannelDifference", "Comparison", "compare_results",
-           "stored_reading"]
+__all__ = [
+    "COVERAGE_FACTOR",
+    "MODEL_RELATIVE_UNCERTAINTY",
+    "ChannelDifference",
+    "Comparison",
+    "compare_results",
+    "stored_reading",
+]
 
 #: Relative standard uncertainty of one capture's intrinsic mean from the model and the analysis.
 MODEL_RELATIVE_UNCERTAINTY = 0.015

@@ -64,9 +64,21 @@ from ..analyzer.metrics import channel_statistics
 from ..analyzer.reflection import power_channels, strain_from_channels
 from ..errors import InputError
 
-__all__ = ["DEFAULT_REFRACTIVE_INDEX", "CaptureGeometry", "IntrinsicReading", "INTRINSIC_FIELDS", "capture_factor",
-           "projection_factors", "pane_coordinates", "intrinsic_reading", "intrinsic_section", "intrinsic_members",
-           "reading_of_result", "result_geometry", "transfer_tensor"]
+__all__ = [
+    "DEFAULT_REFRACTIVE_INDEX",
+    "INTRINSIC_FIELDS",
+    "CaptureGeometry",
+    "IntrinsicReading",
+    "capture_factor",
+    "intrinsic_members",
+    "intrinsic_reading",
+    "intrinsic_section",
+    "pane_coordinates",
+    "projection_factors",
+    "reading_of_result",
+    "result_geometry",
+    "transfer_tensor",
+]
 
 #: Soda-lime float glass.
 DEFAULT_REFRACTIVE_INDEX = 1.52

@@ -38,9 +38,14 @@ import numpy as np
 from ..analyzer.metrics import channel_statistics, evaluate_displacement
 from ..analyzer.result import CHANNELS
 from ..errors import InputError
-from .intrinsic import CaptureGeometry, _radial_frame, pane_coordinates, projection_factors
+from .intrinsic import (
+    CaptureGeometry,
+    _radial_frame,
+    pane_coordinates,
+    projection_factors,
+)
 
-__all__ = ["ViewPrediction", "predict_view", "stored_geometry", "capture_sigma_mm", "trusted_pixels"]
+__all__ = ["ViewPrediction", "capture_sigma_mm", "predict_view", "stored_geometry", "trusted_pixels"]
 
 #: Predicted strain above which the first-order model (and a real photo's analysis) stops holding.
 STRAIN_LIMIT = 0.05
