@@ -22,9 +22,13 @@ smoothing carried onto the pane, ``sigma Dc / (Dc + L)``, is at the observer's b
 ``sigma Dc (Do + Lo) / ((Dc + L) Do)``; a finer ``S`` is refused, a coarser one adds
 the Gaussian of ``sqrt(S^2 - that^2)``.
 
-The small-angle model stops holding where the predicted strain ``|eps| = phi Lo / 1000``
-reaches a few per cent (the analysis of a real photo then also degrades) and where the
-observer's field angle at the pane edge exceeds about 20 deg; both are warned of.
+Where it stops holding (both warned of): where the predicted strain ``|eps| = phi Lo / 1000``
+reaches a few per cent, the first-order reading of a photo (small-strain channels, a
+demodulation following so stretched a pattern) does, although the deflection itself stays
+small-angle; and where the observer's field angle over the captured area exceeds about
+20 deg, the first-order use of the projection factors. Not modelled: the slab's lateral
+shift (relative size ``d / (n Lo)``, growing for a backdrop close behind the pane) and the
+thickened slab's own shift (``x^2 / (n Do Lo)`` of a wedge across the view).
 Oblique viewing (``viewing_angle_deg`` other than 0) is not modelled yet and is refused.
 """
 
@@ -226,8 +230,9 @@ def predict_view(stored, *, observer_distance_m: float, background_distance_m: f
     strain = float(np.nanmax(total)) * Lo / 1000.0 if total.size else 0.0
     if strain > STRAIN_LIMIT:
         warnings.append(f"the predicted strain reaches {strain:.3g} (phi_total {float(np.nanmax(total)):.3g} mD over "
-                        f"Lo = {Lo:g} m): above {STRAIN_LIMIT:g} the small-angle model stops holding (and the "
-                        "analysis of such a photo degrades); the prediction is indicative only")
+                        f"Lo = {Lo:g} m): above {STRAIN_LIMIT:g} the first-order reading of a photo (the small-strain "
+                        "A3 channels, and the demodulation that has to follow so stretched a pattern) stops holding; "
+                        "a photo from there may not confirm the prediction")
     fa = float(np.degrees(alpha_o[valid]).max()) if valid.any() else 0.0
     if fa > FIELD_ANGLE_LIMIT_DEG:
         warnings.append(f"the observer sees the captured pane area at up to {fa:.3g} deg off the normal: above "
