@@ -256,7 +256,8 @@ def test_view_predicts_a_render_from_ten_metres(captures, pane, tmp_path):
     """``glassdist view`` of the Dc 3 m / L 1 m capture at Do 10 m / Lo 3 m predicts the exact render's reading there
     (independent evaluation of its landing points, same pane region, S and N) within 3 % on mean |phi_eff| and
     mean phi_shear; the smoothing is the capture's carried to that backdrop, 52 mm. Measured (view / render truth - 1):
-    wave +1.08 %, +0.90 %; lens -1.01 %, -0.15 %."""
+    wave +1.08 %, +0.90 %; lens -1.01 %, -0.15 %; the axis where phi_shear > half its largest value, 95th percentile
+    of the difference 0.43 deg (wave), 1.60 deg (lens)."""
     from glassdist.storage import load_result
 
     src = captures[pane, 3.0]
@@ -274,6 +275,13 @@ def test_view_predicts_a_render_from_ten_metres(captures, pane, tmp_path):
         got = s["statistics"][ch]["mean_abs"]
         print(pane, ch, "view", got, "render truth", want, got / want - 1)
         assert got == pytest.approx(want, rel=0.03)
+    # the axis, where phi_shear is well above its noise (half its largest value): within 3 deg
+    with np.load(out / "result.npz") as z:
+        axis = z["axis_deg"]
+    strong = trusted & (truth.phi_shear_mD > 0.5 * np.nanmax(truth.phi_shear_mD[trusted]))
+    diff = _truth.axis_difference_deg(axis[strong], truth.axis_deg[strong])
+    print(pane, "axis: median, p95 difference", np.median(diff), np.percentile(diff, 95))
+    assert np.percentile(diff, 95) < 3.0
 
 
 def test_view_at_the_capture_geometry_gives_back_the_capture(captures):
