@@ -380,34 +380,3 @@ def deflection_mrad(displacement_mm, x_mm, y_mm, geometry: CaptureGeometry) -> n
     ds = (-s * d[..., 0] + c * d[..., 1]) / (ms * geometry.distance_m)
     return np.stack([c * dt - s * ds, s * dt + c * ds], axis=-1)
 
-
-def intrinsic_from_displacement(displacement_detrended_mm, *, rows_px, cols_px, image_shape, mm_per_px: float,
-                                sigma_mm: float, geometry: CaptureGeometry, step_px=(1.0, 1.0), phi_eff_sigma_mD=None,
-                                phi_shear_sigma_mD=None) -> IntrinsicReading:
-    """The intrinsic reading from the capture's detrended, smoothed displacement (the field its A3 differentiates).
-
-    ``G = 1000 sym grad_p dtheta`` with ``dtheta = M^{-1} delta / L`` per sample
-    (:func:`deflection_mrad`) and the gradient by A3's differences
-    (:func:`glassdist.analyzer.metrics.strain_tensor`) w.r.t. pane mm: unlike
-    :func:`intrinsic_reading` it keeps the variation of ``M`` across the pane.
-    """
-    from ..analyzer.metrics import strain_tensor
-
-    k = geometry.factor
-    x, y = pane_coordinates(rows_px, cols_px, image_shape, mm_per_px=mm_per_px, geometry=geometry)
-    x, y = np.broadcast_arrays(x, y)
-    dth = deflection_mrad(displacement_detrended_mm, x, y, geometry)
-    G = 1000.0 * strain_tensor(np.nan_to_num(dth), step_px, mm_per_px=mm_per_px * k)
-    eff, shear, total, axis = power_channels(G)
-    bad = ~np.all(np.isfinite(np.asarray(displacement_detrended_mm, float)), axis=-1)
-    for a in (eff, shear, total, axis):
-        a[bad] = np.nan
-    alpha, _, _ = _radial_frame(x, y, geometry.camera_distance_m)
-    mt, ms = projection_factors(alpha, geometry.refractive_index)
-    m = 0.5 * (mt + ms)
-
-    def carried(u):
-        return None if u is None else np.asarray(u, float) / (k * m)
-
-    return IntrinsicReading(eff, shear, total, axis, carried(phi_eff_sigma_mD), carried(phi_shear_sigma_mD), x, y,
-                            np.degrees(alpha), geometry, float(sigma_mm) * k, float(mm_per_px) * k)

@@ -45,6 +45,7 @@ from ..errors import InputError
 from .intrinsic import (
     CaptureGeometry,
     _radial_frame,
+    deflection_mrad,
     pane_coordinates,
     projection_factors,
 )
@@ -209,15 +210,12 @@ def predict_view(stored, *, observer_distance_m: float, background_distance_m: f
     x, y = pane_coordinates(np.arange(H, dtype=float)[:, None], np.arange(W, dtype=float)[None, :], (H, W),
                             mm_per_px=mpp_c, geometry=cap)
     x, y = np.broadcast_arrays(x, y)
-    alpha_c, c, sn = _radial_frame(x, y, cap.camera_distance_m)
-    alpha_o, _, _ = _radial_frame(x, y, obs.camera_distance_m)
-    mtc, msc = projection_factors(alpha_c, cap.refractive_index)
+    # delta_o = Lo M_o dtheta, dtheta = M_c^-1 delta_c / L (mrad), in the (t, s) frame of each pixel
+    dth = deflection_mrad(delta, x, y, cap)
+    alpha_o, c, sn = _radial_frame(x, y, obs.camera_distance_m)
     mto, mso = projection_factors(alpha_o, cap.refractive_index)
-    # delta_o = Lo M_o M_c^-1 delta_c / L, in the (t, s) frame of each pixel
-    dt = c * delta[..., 0] + sn * delta[..., 1]
-    ds = -sn * delta[..., 0] + c * delta[..., 1]
-    dt *= (Lo / cap.distance_m) * mto / mtc
-    ds *= (Lo / cap.distance_m) * mso / msc
+    dt = Lo * mto * (c * dth[..., 0] + sn * dth[..., 1])
+    ds = Lo * mso * (-sn * dth[..., 0] + c * dth[..., 1])
     delta_o = np.stack([c * dt - sn * ds, sn * dt + c * ds], axis=-1)
     mpp_o = mpp_c * cap.factor / obs.factor
     extra = math.sqrt(max(S * S - finest * finest, 0.0))
