@@ -539,15 +539,18 @@ def test_pinned_bulk_of_a_turned_camera_reads_off_as_documented(tmp_path):
     assert direct.phi_eff_mD - comparative.phi_eff_mD == pytest.approx(0.105, abs=0.02)
 
 
-def test_camera_distance_in_transmission_needs_a_camera_file(tmp_path):
-    """--camera-distance-m without --optics reflection pins the Direct Method's magnification with a camera
-    file's focal length: without --camera-file, or with --reference, it is refused with one line (exit 2)."""
-    base = ["analyze", str(EXAMPLES / "site_pane.png"), "--pitch-mm", "10",
-            "--distance-m", "1", "--pattern", "checkerboard", "--camera-distance-m", "3", "-q"]
-    for extra in ([], ["--reference", str(EXAMPLES / "factory_reference.png")]):
-        run = run_cli(*base, *extra, "--out", tmp_path / "o")
-        assert run.returncode == 2 and "--camera-file" in run.stderr and len(run.stderr.strip().splitlines()) == 1
-        assert not (tmp_path / "o").exists()
+def test_camera_distance_in_transmission_reports_the_intrinsic_reading(tmp_path):
+    """--camera-distance-m in transmission is accepted by both methods (with or without a camera file): the run
+    adds the pane's intrinsic reading (summary.json 'intrinsic', glassdist.viewpoint), its factor Dc / (Dc + L)."""
+    import json
+
+    run = run_cli("analyze", str(EXAMPLES / "factory_pane.png"), "--pitch-mm", "10", "--distance-m", "1",
+                  "--pattern", "checkerboard", "--camera-distance-m", "3", "-q", "--reference",
+                  str(EXAMPLES / "factory_reference.png"), "--out", tmp_path / "o")
+    assert run.returncode == 0, run.stderr
+    intrinsic = json.loads((tmp_path / "o" / "summary.json").read_text())["intrinsic"]
+    assert intrinsic["capture_factor"] == pytest.approx(3.0 / 4.0)
+    assert intrinsic["phi_eff_mD"]["mean_abs"] > 0
     from glassdist.errors import InputError
     from glassdist.synthetic import synthetic_capture
 

@@ -35,7 +35,7 @@ EXIT_INTERNAL = 1
 EXIT_BAD_INPUT = 2
 
 # Modules adding sub-commands: each provides register(subparsers) -> sets func=run(args) -> int.
-COMMAND_MODULES = ["glassdist.jobs._cli", "glassdist.render._cli", "glassdist.theory._cli", "glassdist.virtual._cli", "glassdist.render.cycles", "glassdist.experiments._cli", "glassdist.virtual._sweep_cli", "glassdist.web._cli", "glassdist.history._cli"]
+COMMAND_MODULES = ["glassdist.jobs._cli", "glassdist.render._cli", "glassdist.theory._cli", "glassdist.virtual._cli", "glassdist.render.cycles", "glassdist.experiments._cli", "glassdist.virtual._sweep_cli", "glassdist.web._cli", "glassdist.history._cli", "glassdist.viewpoint._cli"]
 
 
 class _StoreOnce(argparse._StoreAction):
@@ -116,8 +116,9 @@ def _register_analyze(sub) -> None:
                    "pane; phi in reflective power on the pane, docs/user-guide/reflection.md)")
     p.add_argument("--camera-distance-m", type=number_option(DISTANCE_M),
                    help="reflection: camera-to-pane distance C, m (default: the camera in the board plane, C = D); "
-                   "transmission, Direct Method with --camera-file: the camera-to-pane distance along the pane normal, "
-                   "the camera facing the pane, which pins the magnification so that the bulk channel is reported")
+                   "transmission (either method): the camera-to-pane distance Dc along the pane normal, the camera facing "
+                   "the pane and aimed at its centre: the run also reports the pane's intrinsic reading (summary.json "
+                   "'intrinsic'); with --camera-file (Direct Method) it also pins the magnification for the bulk channel")
     p.add_argument("--incidence-deg", type=float,
                    help="reflection: angle between the line of sight and the pane normal at the view's centre, deg (default 0)")
     p.add_argument("--reference", type=Path, help="glass-less photo from the same camera position (Comparative Method)")
@@ -244,7 +245,8 @@ def _read_inputs(args):
     lens = _lens_source(args, pinned, protocol, params, images)
     request = RunRequest(fields=args.fields, report=args.report, export=args.export, spec=spec, protocol=protocol,
                          mask=mask, metadata={"pane_id": args.pane_id, "lot": args.lot, "site": args.site,
-                                              "operator": args.operator}, history=recording(args))
+                                              "operator": args.operator}, history=recording(args),
+                         camera_distance_m=args.camera_distance_m if optics is None else None)
     captures = tuple(InputFile(str(p), ph.sha256) for p, ph in zip(paths, photos))
     inputs = RunInputs(image=captures[0], captures=captures, camera=photos[0].camera, preview=preview(image),
                        reference=None if ref_photo is None else InputFile(str(args.reference), ref_photo.sha256),
@@ -274,10 +276,6 @@ def _optics(args, pinned, distance_m: float):
             if chosen[key] is None or (key == "camera_distance_m" and args.camera_distance_m is not None):
                 continue
             raise InputError(f"{opt} applies to --optics reflection only; add --optics reflection or leave {opt} out")
-        if args.camera_distance_m is not None and (args.reference is not None or args.camera_file is None):
-            raise InputError("--camera-distance-m without --optics reflection pins the Direct Method's magnification "
-                             "with the focal length of --camera-file: add --camera-file (and no --reference), or "
-                             "leave --camera-distance-m out")
         return None
     return ReflectionGeometry(distance_m=distance_m, camera_distance_m=chosen["camera_distance_m"],
                               incidence_deg=0.0 if chosen["incidence_deg"] is None else float(chosen["incidence_deg"]))
@@ -394,7 +392,8 @@ def _run_analyze(args) -> int:
             L = protocol.distance_m if optics is None else optics.effective_distance_m  # reflection: D / m
             kw = dict(pitch_mm=protocol.pitch_mm, distance_m=L, reference=reference, params=params, mask=request.mask)
             # a single photo is handed over, so that the analysis frees it once Block F is done
-            pin = args.camera_distance_m if optics is None else None  # transmission: the Direct bulk channel
+            # transmission: the Direct bulk channel (its magnification needs the camera file's focal length)
+            pin = args.camera_distance_m if optics is None and lens is not None and reference is None else None
             result = (analyze(images.pop(), lens=lens, camera_distance_m=pin, camera=inputs.camera or None, **kw)
                       if len(images) == 1
                       else analyze_captures(images, **kw))

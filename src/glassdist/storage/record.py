@@ -64,6 +64,9 @@ class RunRequest:
     history : Recording, False or None
         How the run is recorded in the results history (None: the default recording of
         the API; False: not recorded).
+    camera_distance_m : float or None
+        Camera to pane, m (transmission): the run also reports the pane's intrinsic reading
+        (:mod:`glassdist.viewpoint`), ``intrinsic`` in ``summary.json`` and its maps in ``result.npz``.
     """
 
     fields: str = "analysis"
@@ -74,6 +77,7 @@ class RunRequest:
     mask: np.ndarray | None = None
     metadata: dict = field(default_factory=dict)
     history: object = None
+    camera_distance_m: float | None = None
 
     def __post_init__(self):
         if self.fields not in FIELD_LAYOUTS:
@@ -261,6 +265,11 @@ class RunRecord:
         flat = flatness_measures(result)  # reflection: the front face in mm and µm
         if flat is not None:
             summary["flatness"] = flat.to_dict()
+        if self.request.camera_distance_m is not None and result.optics is None:
+            from ..viewpoint.intrinsic import intrinsic_section, reading_of_result
+
+            summary["intrinsic"] = intrinsic_section(reading_of_result(result, self.request.camera_distance_m),
+                                                     result.trusted)
         return summary
 
 

@@ -21,6 +21,7 @@ Exit codes (also those of ``glassdist analyze``):
 from __future__ import annotations
 
 import errno
+import itertools
 import json
 import logging
 import shutil
@@ -44,7 +45,7 @@ logger = logging.getLogger(__name__)
 
 def write_outputs(result, out_dir, *, fields="analysis", report=False, export=False, spec=None, spec_path=None,
                   protocol=None, mask=None, metadata=None, image=None, image_path=None, reference_path=None,
-                  mask_path=None, history=None):
+                  mask_path=None, history=None, camera_distance_m=None):
     """Write every file ``glassdist analyze`` writes for an analysis made in Python; prints nothing.
 
     The same straight line as the command line, from a result in hand: the request from
@@ -86,6 +87,9 @@ def write_outputs(result, out_dir, *, fields="analysis", report=False, export=Fa
         the record in the spool until a later run reaches it, and says so with a
         ``RuntimeWarning``); default ``Recording(source='api')`` (the database of
         ``GLASSDIST_DB``, else the user's data folder); False: not recorded.
+    camera_distance_m : float, optional
+        Camera to pane, m (transmission, normal incidence): also the pane's intrinsic reading
+        (:mod:`glassdist.viewpoint.intrinsic`).
 
     Returns
     -------
@@ -103,7 +107,7 @@ def write_outputs(result, out_dir, *, fields="analysis", report=False, export=Fa
     if protocol is None:
         protocol = result_protocol(result, loaded)
     request = RunRequest(fields=fields, report=report, export=export, spec=loaded, protocol=protocol, mask=mask,
-                         metadata=dict(metadata or {}), history=history)
+                         metadata=dict(metadata or {}), history=history, camera_distance_m=camera_distance_m)
     inputs = read_inputs(image_path, reference_path, mask_path, image=image, sources=getattr(result, "sources", None))
     planned = plan_outputs(result.field_specs(), fields=fields, report=report, export=export, limits=request.limits)
     spec_file = Path(loaded.path) if loaded is not None and loaded.path else None
@@ -188,6 +192,10 @@ def _write_outputs(record, out, digests) -> dict:
     """Every file of the run into ``out``, ``summary.json`` last; ``digests`` collects what was written."""
     result, request, acc = record.result, record.request, record.acceptance
     members = grid_members(result) if request.fields == "analysis" else pixel_members(result)
+    if request.camera_distance_m is not None and result.optics is None:  # the pane's intrinsic maps
+        from ..viewpoint.intrinsic import intrinsic_members
+
+        members = itertools.chain(members, intrinsic_members(result, request.camera_distance_m, request.fields))
     atomic_write(out / "result.npz", lambda fh: write_npz(fh, members), digests=digests)
     files = [write_statistics_csv(acc.stats, out / "statistics.csv", digests=digests),
              atomic_write_text(out / "worst_regions.csv", acc.regions_csv(), digests=digests)]

@@ -1,0 +1,108 @@
+"""``glassdist view`` and ``glassdist compare``: a capture seen from elsewhere; two captures of one pane."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from .._cli_shared import folder_option
+from ..validation import DISTANCE_M, SIGMA_MM, number_option
+
+__all__ = ["register"]
+
+
+def register(subparsers):
+    """Add the ``view`` and ``compare`` sub-commands."""
+    p = subparsers.add_parser(
+        "view", help="predict what analyze would report on a photo of the pane taken from another point",
+        description="From a result analysed with --camera-distance-m, predict the statistics and maps analyze would "
+        "report on a photo from an observer Do from the pane with the backdrop Lo behind it, aimed at the pane centre "
+        "(normal incidence). Writes summary.json and result.npz to --out.")
+    p.add_argument("result", type=Path, help="output folder of a 'glassdist analyze' run with --camera-distance-m")
+    p.add_argument("--observer-distance-m", type=number_option(DISTANCE_M), required=True,
+                   help="observer (camera) to pane along the normal, Do, m")
+    p.add_argument("--background-distance-m", type=number_option(DISTANCE_M), required=True,
+                   help="pane to the backdrop seen through it, Lo, m")
+    p.add_argument("--viewing-angle-deg", type=float, default=0.0,
+                   help="angle between the line of sight to the pane centre and the pane normal, deg (only 0 so far)")
+    p.add_argument("--viewing-azimuth-deg", type=float, default=0.0,
+                   help="0: the observer on the -x side of the normal, 90: on the -y side, deg")
+    p.add_argument("--sigma-mm", type=number_option(SIGMA_MM),
+                   help="the photo's smoothing on its backdrop, mm (default and least: the capture's carried there)")
+    p.add_argument("--detrend-degree", type=int, help="A2 detrend degree of the photo (default the capture's)")
+    p.add_argument("--out", type=folder_option, required=True, metavar="DIR", help="output folder")
+    p.set_defaults(func=_run_view)
+
+    q = subparsers.add_parser(
+        "compare", help="two captures of one pane on the intrinsic axis: their difference and its uncertainty",
+        description="Both results analysed with --camera-distance-m, at normal incidence, aimed at the pane centre. "
+        "Prints the intrinsic mean |phi_eff| and mean phi_shear of each over the pane area both trust, their "
+        "difference with its expanded uncertainty (k = 2), and whether it is consistent with zero.")
+    q.add_argument("result_a", type=Path, help="output folder of the first capture")
+    q.add_argument("result_b", type=Path, help="output folder of the second capture")
+    q.add_argument("--json", type=Path, metavar="FILE", help="also write the comparison as JSON")
+    q.set_defaults(func=_run_compare)
+    return p
+
+
+def _same_folder(a: Path, b: Path) -> bool:
+    try:
+        return a.resolve() == b.resolve()
+    except OSError:
+        return False
+
+
+def _run_view(args) -> int:
+    from ..errors import InputError
+    from ..fs import atomic_write, atomic_write_text
+    from ..io import prepare_output_dir, to_jsonable
+    from ..storage import load_result
+    from ..storage.fields import write_npz
+    from .view import predict_view
+
+    if _same_folder(args.out, args.result):
+        raise InputError(f"--out '{args.out}' is the result folder itself; give another folder (inputs are never "
+                         "overwritten)")
+    stored = load_result(args.result)
+    pred = predict_view(stored, observer_distance_m=args.observer_distance_m,
+                        background_distance_m=args.background_distance_m, viewing_angle_deg=args.viewing_angle_deg,
+                        viewing_azimuth_deg=args.viewing_azimuth_deg, sigma_mm=args.sigma_mm,
+                        detrend_degree=args.detrend_degree)
+    out = prepare_output_dir(args.out)
+    members = [(k, np.asarray(getattr(pred, k), np.float32), False) for k in
+               ("displacement_detrended_mm", "phi_eff_mD", "phi_shear_mD", "phi_total_mD", "axis_deg")]
+    members.append(("valid", np.asarray(pred.valid, bool), True))
+    atomic_write(out / "result.npz", lambda fh: write_npz(fh, members))
+    summary = {**pred.summary(), "source": str(args.result)}
+    atomic_write_text(out / "summary.json", json.dumps(to_jsonable(summary), indent=2, allow_nan=False) + "\n")
+    import sys
+
+    for w in pred.warnings:
+        print(f"glassdist: warning: {w}", file=sys.stderr)
+    st = pred.statistics
+    print(f"view from {pred.observer.camera_distance_m:g} m, backdrop {pred.observer.distance_m:g} m behind (normal): "
+          f"mean |phi_eff| {st['phi_eff_mD']['mean_abs']:.4g} mD, mean phi_shear {st['phi_shear_mD']['mean_abs']:.4g} mD "
+          f"(sigma {pred.sigma_mm:.4g} mm, detrend {pred.detrend_degree}); written to {out}")
+    return 0
+
+
+def _run_compare(args) -> int:
+    from ..fs import atomic_write_text
+    from ..io import to_jsonable
+    from ..storage import load_result
+    from .compare import compare_results
+
+    cmp = compare_results(load_result(args.result_a), load_result(args.result_b))
+    import sys
+
+    for w in cmp.warnings:
+        print(f"glassdist: warning: {w}", file=sys.stderr)
+    for label, d in (("mean |phi_eff|", cmp.phi_eff_mean_abs), ("mean phi_shear", cmp.phi_shear_mean)):
+        verdict = "consistent with zero" if d.consistent else "a difference"
+        print(f"intrinsic {label}: A {d.a:.4g} mD, B {d.b:.4g} mD, A - B {d.difference:+.3g} +- {d.expanded_uncertainty:.2g} "
+              f"mD (k = 2): {verdict}")
+    if args.json is not None:
+        atomic_write_text(args.json, json.dumps(to_jsonable(cmp.to_dict()), indent=2, allow_nan=False) + "\n")
+    return 0
