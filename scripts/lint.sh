@@ -8,5 +8,7 @@ cd "$(dirname "$0")/.."
 PY=${PYTHON:-python}
 paths=("$@")
 [ ${#paths[@]} -eq 0 ] && paths=(src/glassdist/analyzer tests/test_analyzer_work_once.py tests/test_code_layout.py)
-"$PY" -m ruff check "${paths[@]}"
-"$PY" -m mypy
+status=0
+"$PY" -m ruff check "${paths[@]}" || status=1
+"$PY" -m mypy || status=1
+exit $status

@@ -300,7 +300,7 @@ def test_a_centred_lens_filling_the_view_is_said():
     res = glassdist.analyze(img, params=analysis_params(sc), **kw)
     assert res.homography_fit.lens_model is not None  # the defect: the glass taken for the camera's lens
     warned = [w for w in res.warnings if said in w]
-    assert len(warned) == 1 and "--lens-photo" in warned[0] and "Comparative Method" in warned[0]
+    assert len(warned) == 1 and "calibrate_from_photo" in warned[0] and "Comparative Method" in warned[0]
     held, pane = (float(v) for v in re.findall(r"([\d.]+) mD", warned[0])[:2])
     assert held > 5 * pane
     bare = glassdist.analyze(img, params=analysis_params(sc).model_copy(update={"lens_model": "none"}), **kw)
