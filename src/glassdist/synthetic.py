@@ -51,8 +51,8 @@ def backdrop_pattern(X: np.ndarray, Y: np.ndarray, *, pitch_mm: float, pattern: 
     ``lines``: dark lines (Gaussian profile, FWHM ``line_width * pitch``) every
     ``pitch_mm`` along both grid axes; ``checkerboard``: squares of side
     ``pitch_mm`` with softened edges; ``dots``: a square lattice of dark round dots
-    (diameter ``2 * line_width * pitch``, edges softened over 0.05 pitch) every ``pitch_mm``
-    along both grid axes. The grid axes are rotated by ``rotation_deg`` (from +X towards +Y).
+    (Gaussian profile, FWHM ``line_width * pitch``, as the lines: band-limited, so that a
+    few pixels per period sample it without aliasing) every ``pitch_mm`` along both grid axes. The grid axes are rotated by ``rotation_deg`` (from +X towards +Y).
     """
     t = np.radians(rotation_deg)
     u = (np.cos(t) * X + np.sin(t) * Y) / pitch_mm
@@ -70,8 +70,8 @@ def backdrop_pattern(X: np.ndarray, Y: np.ndarray, *, pitch_mm: float, pattern: 
         c = np.tanh(k * np.sin(np.pi * u)) * np.tanh(k * np.sin(np.pi * v)) / np.tanh(k) ** 2
         return 0.5 + 0.5 * contrast * c
     if pattern == "dots":
-        rho = np.hypot(u - np.round(u), v - np.round(v))
-        ink = 0.5 - 0.5 * np.tanh((rho - line_width) / 0.025)
+        s = line_width / 2.3548
+        ink = np.exp(-0.5 * ((u - np.round(u)) ** 2 + (v - np.round(v)) ** 2) / s**2)
         return 0.9 - contrast * 0.9 * ink
     raise ValueError(f"unknown pattern {pattern!r}; use 'lines', 'checkerboard' or 'dots'")
 
