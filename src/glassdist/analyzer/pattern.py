@@ -54,8 +54,8 @@ DECISIVE_RATIO = 3.0
 
 #: Energy of the diagonal sums ``k1 ± k2``, relative to the fundamentals, from which (and at least
 #: as strong as the harmonics along the carriers) the spectrum reads a dot lattice. Measured
-#: (synthetic, 256 x 320 px): dots of diameter 0.2-0.6 pitch 0.25-0.85; line grids of line width
-#: (FWHM) 0.1-0.35 pitch 0.01-0.15; checkerboards 0.
+#: (synthetic, 256 x 320 px): sharp dots of diameter 0.2-0.6 pitch 0.25-0.85, Gaussian dots of FWHM
+#: 0.1-0.35 pitch 0.42-0.99; line grids of line width (FWHM) 0.1-0.35 pitch 0.01-0.15; checkerboards 0.
 DOTS_DIAGONAL = 0.2
 
 #: Energy above the background, in standard deviations of the background's own sum, that a
