@@ -8,9 +8,9 @@ surroundings), and ``auto`` must name the pattern. Images are small (at most 480
 
 import numpy as np
 import pytest
-from _truth import truth_for
 from scipy import ndimage
 
+from _truth import truth_for
 from glassdist import analyze
 from glassdist.analyzer import fourier as F
 from glassdist.analyzer.pattern import detect_pattern
@@ -177,7 +177,6 @@ def test_a_ray_traced_dot_board_reads_as_the_line_grid(method):
     Direct dots 1.000 / 0.999, lines 1.000 / 0.998.
     """
     from _truth import evaluate
-
     from glassdist.render import landing_points, render_scene
     from glassdist.scene import landing_jacobian
 

@@ -52,7 +52,8 @@ def backdrop_pattern(X: np.ndarray, Y: np.ndarray, *, pitch_mm: float, pattern: 
     ``pitch_mm`` along both grid axes; ``checkerboard``: squares of side
     ``pitch_mm`` with softened edges; ``dots``: a square lattice of dark round dots
     (Gaussian profile, FWHM ``line_width * pitch``, as the lines: band-limited, so that a
-    few pixels per period sample it without aliasing) every ``pitch_mm`` along both grid axes. The grid axes are rotated by ``rotation_deg`` (from +X towards +Y).
+    few pixels per period sample it without aliasing) every ``pitch_mm`` along both grid
+    axes. The grid axes are rotated by ``rotation_deg`` (from +X towards +Y).
     """
     t = np.radians(rotation_deg)
     u = (np.cos(t) * X + np.sin(t) * Y) / pitch_mm

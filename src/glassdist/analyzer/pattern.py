@@ -27,8 +27,8 @@ background-corrected spectral energy around ``a·k1 + b·k2`` relative to the fu
 ``along`` the largest of ``2k1, 2k2, 3k1, 3k2``, ``mixed`` the largest of ``2k1 ± k2,
 k1 ± 2k2``, ``diagonal`` the larger of ``k1 ± k2``. ``diagonal`` above :data:`DOTS_DIAGONAL`
 and at least ``along`` reads a dot lattice; else ``along / mixed`` above
-:data:`DECISIVE_RATIO` reads a line grid, below its inverse a checkerboard; in between, or with neither above the noise (a sinusoidal grid,
-harmonics beyond Nyquist), the spectrum does not tell (``pattern`` None).
+:data:`DECISIVE_RATIO` reads a line grid, below its inverse a checkerboard; in between, or
+with neither above the noise (a sinusoidal grid, harmonics beyond Nyquist), the spectrum does not tell (``pattern`` None).
 """
 
 from __future__ import annotations
@@ -157,6 +157,8 @@ def detect_pattern(image: np.ndarray, *, max_px: int = 1024, min_period_px: floa
     >>> cap = synthetic_capture((256, 256), pitch_mm=2.0, mm_per_px=0.25, pattern="checkerboard")
     >>> detect_pattern(cap.image).pattern
     'checkerboard'
+    >>> detect_pattern(synthetic_capture((256, 256), pitch_mm=2.0, mm_per_px=0.25, pattern="dots").image).pattern
+    'dots'
     """
     img = np.asarray(image, dtype=np.float32)
     H, W = img.shape[:2]

@@ -147,7 +147,8 @@ def _square_wave_mean(x, half, q):
     return _box_mean(cum, x, half, lambda: np.where(np.mod(x, 2 * q) < q, 1.0, -1.0))
 
 
-def _dot_cover(x, y, hx, hy, pitch, diameter):
+def _dot_cover(x: np.ndarray, y: np.ndarray, hx: np.ndarray | float, hy: np.ndarray | float, pitch: float,
+               diameter: float) -> np.ndarray:
     """Cover of the dot lattice over a box of half-widths ``(hx, hy)``: the edge's ramp along its normal."""
     dx = x - pitch * np.round(x / pitch)
     dy = y - pitch * np.round(y / pitch)
@@ -195,6 +196,7 @@ def pattern_intensity(backdrop: Backdrop, X, Y, half_width=(0.0, 0.0)) -> np.nda
         cy = _line_cover(py, hy, backdrop.pitch_mm, backdrop.line_width_mm)
         return w - (w - b) * (1.0 - (1.0 - cx) * (1.0 - cy))
     if backdrop.pattern == "dots":
+        assert backdrop.dot_diameter_mm is not None  # required by the model for dots
         return w - (w - b) * _dot_cover(px, py, hx, hy, backdrop.pitch_mm, backdrop.dot_diameter_mm)
     sx = _square_wave_mean(px, hx, backdrop.pitch_mm)
     sy = _square_wave_mean(py, hy, backdrop.pitch_mm)
