@@ -143,12 +143,21 @@ def test_auto_names_dots_on_a_board_in_a_dark_surround():
     assert detect_pattern(_framed("lines", 0.5, contrast=0.6)).pattern == "lines"
 
 
-def test_a_given_dots_pattern_is_not_contradicted_by_a_line_grid_reading():
-    """Lines and dots share the carrier period (the pitch): naming one for the other changes no length."""
+def test_a_given_dots_pattern_is_warned_only_where_the_scale_differs():
+    """Lines and dots share the carrier period (the pitch): 'dots' given on a line grid changes no length and
+    gets no warning; on a checkerboard (period pitch * sqrt(2)) it is warned."""
     from glassdist.analyzer.demodulate import carrier_period_mm
+    from glassdist.analyzer.params import AnalyzerParams
+    from glassdist.analyzer.pattern import settle_pattern
 
     assert carrier_period_mm(5.0, "dots") == carrier_period_mm(5.0, "lines") == 5.0
-    assert carrier_period_mm(5.0, "checkerboard") == pytest.approx(5.0 * np.sqrt(2.0))
+    y, x = np.mgrid[0:256, 0:320].astype(float)
+    given = AnalyzerParams(pattern="dots")
+    lines = backdrop_pattern(x * 0.25, y * 0.25, pitch_mm=2.0, pattern="lines")
+    board = backdrop_pattern(x * 0.25, y * 0.25, pitch_mm=2.0, pattern="checkerboard")
+    assert settle_pattern(given, lines).warnings == ()
+    (warning,) = settle_pattern(given, board).warnings
+    assert "checkerboard" in warning and "sqrt(2)" in warning
 
 
 def _traced(pattern):
