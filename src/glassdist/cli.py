@@ -122,7 +122,7 @@ def _register_analyze(sub) -> None:
     p.add_argument("--incidence-deg", type=float,
                    help="reflection: angle between the line of sight and the pane normal at the view's centre, deg (default 0)")
     p.add_argument("--reference", type=Path, help="glass-less photo from the same camera position (Comparative Method)")
-    p.add_argument("--pattern", choices=["auto", "lines", "checkerboard"],
+    p.add_argument("--pattern", choices=["auto", "lines", "checkerboard", "dots"],
                    help="backdrop pattern (default: from --spec or --params, else auto: decided from the photo's spectrum; "
                    "a given pattern the spectrum contradicts gets a warning)")
     p.add_argument("--detrend-degree", type=int, help="A2 polynomial detrend total degree N (default 2)")

@@ -50,8 +50,10 @@ def backdrop_pattern(X: np.ndarray, Y: np.ndarray, *, pitch_mm: float, pattern: 
 
     ``lines``: dark lines (Gaussian profile, FWHM ``line_width * pitch``) every
     ``pitch_mm`` along both grid axes; ``checkerboard``: squares of side
-    ``pitch_mm`` with softened edges. The grid axes are rotated by
-    ``rotation_deg`` (from +X towards +Y).
+    ``pitch_mm`` with softened edges; ``dots``: a square lattice of dark round dots
+    (Gaussian profile, FWHM ``line_width * pitch``, as the lines: band-limited, so that a
+    few pixels per period sample it without aliasing) every ``pitch_mm`` along both grid
+    axes. The grid axes are rotated by ``rotation_deg`` (from +X towards +Y).
     """
     t = np.radians(rotation_deg)
     u = (np.cos(t) * X + np.sin(t) * Y) / pitch_mm
@@ -68,7 +70,11 @@ def backdrop_pattern(X: np.ndarray, Y: np.ndarray, *, pitch_mm: float, pattern: 
         k = 3.0
         c = np.tanh(k * np.sin(np.pi * u)) * np.tanh(k * np.sin(np.pi * v)) / np.tanh(k) ** 2
         return 0.5 + 0.5 * contrast * c
-    raise ValueError(f"unknown pattern {pattern!r}; use 'lines' or 'checkerboard'")
+    if pattern == "dots":
+        s = line_width / 2.3548
+        ink = np.exp(-0.5 * ((u - np.round(u)) ** 2 + (v - np.round(v)) ** 2) / s**2)
+        return 0.9 - contrast * 0.9 * ink
+    raise ValueError(f"unknown pattern {pattern!r}; use 'lines', 'checkerboard' or 'dots'")
 
 
 def wave_displacement(amplitude_mm: float, wavelength_mm: float, direction_deg: float = 0.0,
@@ -129,7 +135,7 @@ def synthetic_capture(
     ----------
     shape : (H, W)
     pitch_mm : float
-        Backdrop pitch (line spacing, or square side for a checkerboard), mm.
+        Backdrop pitch (line spacing, dot spacing, or square side for a checkerboard), mm.
     mm_per_px : float
         Backdrop mm per image pixel at the image centre.
     displacement : callable (X, Y) -> (dX, dY), optional

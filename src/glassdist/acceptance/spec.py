@@ -131,7 +131,7 @@ class Protocol(BaseModel):
     method: Literal["comparative", "direct"] | None = None
     distance_m: float | None = Field(None, gt=0, allow_inf_nan=False, description="glass-to-grid distance L, m")
     pitch_mm: float | None = Field(None, gt=0, allow_inf_nan=False, description="printed grid pitch, mm")
-    pattern: Literal["lines", "checkerboard"] | None = None
+    pattern: Literal["lines", "checkerboard", "dots"] | None = None
     sigma_mm: float | None = Field(None, gt=0, le=SIGMA_MM.hi, allow_inf_nan=False, description="smoothing scale, mm")
     sigma_periods: float | None = Field(None, gt=0, allow_inf_nan=False,
                                         description="smoothing scale, carrier periods (instead of sigma_mm)")
@@ -534,7 +534,7 @@ class ResolvedProtocol:
     method : {'comparative', 'direct'}
     pitch_mm, distance_m : float
         Physical inputs (mm, m).
-    pattern : {'lines', 'checkerboard'}
+    pattern : {'lines', 'checkerboard', 'dots'}
     detrend_degree : int
     sigma_mm : float
         Smoothing scale (mm) the analysis will use.

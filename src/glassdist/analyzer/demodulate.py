@@ -132,7 +132,7 @@ def checked_image(img: np.ndarray, what: str) -> tuple[np.ndarray, tuple[str, ..
 
 
 def carrier_period_mm(pitch_mm: float, pattern: str) -> float:
-    """The carrier period on the backdrop, mm: the pitch, or ``pitch * sqrt(2)`` for a checkerboard.
+    """The carrier period on the backdrop, mm: the pitch (line grid, dot lattice), or ``pitch * sqrt(2)`` for a checkerboard.
 
     Checkerboard fundamentals are the diagonal products of the two square waves. The checkerboard's is a
     ``numpy.float64``, and float32 phases scaled by it are computed in float64 (NumPy's promotion rules).

@@ -337,6 +337,74 @@ def _carrier_band(spectrum: Spectrum, min_period_px: float) -> tuple[np.ndarray,
     return work, ky, band
 
 
+#: Share of the frame the grid must fill for the carrier search to read the photo's own spectrum;
+#: below it the search reads the grid-filled part, apodised (:func:`_grid_filled_spectrum`).
+GRID_FILL_MIN = 0.8
+
+
+def _grid_filled_spectrum(spectrum: Spectrum) -> Spectrum | None:
+    """The spectrum of the grid-filled part of the photo, apodised, where the grid fills under :data:`GRID_FILL_MIN`.
+
+    A grid filling only part of the frame (a mirror in dark surroundings, a screen with its
+    edges in view) leaves the outline of its region in the spectrum: a step, whose 1/|f|
+    spectrum along the directions normal to the outline outshines a weak grid's carriers at
+    low frequencies. On a copy of ~256 px on the short side, the local mean ``mu`` (Gaussian,
+    standard deviation ``s`` = 1/24 of the short side: it averages out a period of the
+    coarsest carrier searched, 6 periods across) is split in two by Otsu's threshold. The
+    split is an outline, not a brightness gradient, when it explains most of ``mu``'s
+    variance (between-class share above 0.9; a linear ramp gives 0.75) and the step between
+    the classes exceeds twice the texture (the median local standard deviation about a mean 4
+    times finer than ``mu``) of the class holding the grid, the more textured one. Where that
+    class is under :data:`GRID_FILL_MIN` of the frame, the image less its mean over the class
+    is multiplied by the class eroded by ``2 s`` and blurred by ``s`` (at the outline the taper
+    is near 2 %): the outline's content is left within a few bins of DC, and the carriers,
+    broadened by the taper's narrow spectrum, stay where they were.
+
+    Returns None (search the photo's own spectrum) where no such outline is found.
+    """
+    import cv2
+    from skimage.filters import threshold_otsu
+
+    H, W = spectrum.shape
+    img = sfft.irfft2(spectrum.rfft, s=(H, W), workers=_WORKERS).astype(np.float32, copy=False)
+    b = max(1, min(H, W) // 256)
+    size = (max(1, W // b), max(1, H // b))
+    crop = img[: size[1] * b, : size[0] * b]  # whole blocks: OpenCV's fast integer-factor area resize
+    m1 = cv2.resize(crop, size, interpolation=cv2.INTER_AREA)
+    sq = np.square(crop)
+    m2 = cv2.resize(sq, size, interpolation=cv2.INTER_AREA)
+    del sq
+    s = min(size) / 24.0
+    mu = ndimage.gaussian_filter(m1, s, mode="nearest")
+    # Texture: the local variance about a 4 times finer mean, so that the outline's own step
+    # counts only in a thin band along it.
+    fine = ndimage.gaussian_filter(m1, s / 4, mode="nearest")
+    var = np.maximum(ndimage.gaussian_filter(m2, s / 4, mode="nearest") - fine * fine, 0.0)
+    if not np.ptp(mu) > 0:
+        return None
+    t = threshold_otsu(mu)
+    hi = mu > t
+    n_hi = float(hi.mean())
+    if not 0.0 < n_hi < 1.0:
+        return None
+    m_hi, m_lo = float(mu[hi].mean()), float(mu[~hi].mean())
+    between = n_hi * (1.0 - n_hi) * (m_hi - m_lo) ** 2
+    if between < 0.9 * float(mu.var()):
+        return None
+    grid = hi if np.median(var[hi]) >= np.median(var[~hi]) else ~hi
+    texture = float(np.sqrt(np.median(var[grid])))
+    if grid.mean() >= GRID_FILL_MIN or abs(m_hi - m_lo) < 2.0 * texture:
+        return None
+    r = max(1, int(round(2 * s)))
+    core = ndimage.binary_erosion(grid, structure=np.ones((3, 3), bool), iterations=r, border_value=1)
+    if not core.any():
+        return None
+    taper = ndimage.gaussian_filter(core.astype(np.float32), s, mode="nearest")
+    w = cv2.resize(taper, (W, H), interpolation=cv2.INTER_LINEAR)  # stretched over the < b px the blocks leave
+    level = float(np.sum(img * w) / np.sum(w))
+    return compute_spectrum((img - level) * w)
+
+
 def _strongest_peaks(work: np.ndarray, band: np.ndarray, max_peaks: int):
     """Up to ``max_peaks`` local maxima of ``work``, strongest first, with their strength over the background.
 
@@ -467,6 +535,9 @@ def find_carriers(spectrum: Spectrum, *, min_period_px: float = 3.0, max_peaks: 
     [8.0, 10.0]
     """
     H, W = spectrum.shape
+    filled = _grid_filled_spectrum(spectrum)
+    if filled is not None:  # the grid fills part of the frame: its outline must not pass for a carrier
+        spectrum = filled
     work, ky, band = _carrier_band(spectrum, min_period_px)
     rows, cols, strengths = _strongest_peaks(work, band, max_peaks)
     kys = ky[rows].astype(float)

@@ -44,10 +44,11 @@ class AnalyzerParams(BaseModel):
 
     model_config = MODEL_CONFIG
 
-    pattern: Literal["auto", "lines", "checkerboard"] = Field(
+    pattern: Literal["auto", "lines", "checkerboard", "dots"] = Field(
         "auto",
         description="backdrop: 'lines' (crossed line grid, pitch = line spacing), "
-        "'checkerboard' (pitch = square size; carriers along the diagonals, period pitch*sqrt(2)) or "
+        "'checkerboard' (pitch = square size; carriers along the diagonals, period pitch*sqrt(2)), "
+        "'dots' (square lattice of dots, pitch = dot spacing; carriers along the lattice axes, period pitch) or "
         "'auto' (decided from the photo's spectrum: glassdist.analyzer.pattern)",
     )
     detrend_degree: int = Field(2, ge=0, le=8, description="A2: total degree N of the polynomial detrend")

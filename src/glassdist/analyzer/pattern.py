@@ -1,4 +1,4 @@
-"""Which backdrop a photo shows, a crossed line grid or a checkerboard, told from its spectrum's harmonics.
+"""Which backdrop a photo shows, a crossed line grid, a checkerboard or a dot lattice, told from its spectrum's harmonics.
 
 The two carriers ``k1``, ``k2`` (F1) are found the same way for both backdrops, but they
 mean different lengths: the line spacing for a line grid, the square's diagonal
@@ -13,14 +13,22 @@ mean different lengths: the line spacing for a line grid, the square's diagonal
   *both odd*. Its carriers are the diagonal fundamentals ``k1, k2 = (1, ±1)/(2p)``; a
   frequency ``a·k1 + b·k2`` is ``(a + b, a - b)/(2p)``, so only ``a + b`` odd occurs: the
   mixed terms ``2k1 ± k2``, ``k1 ± 2k2`` (amplitude 1/3 of the fundamental), never
-  ``2k1``, ``2k2``, and ``3k1`` only as ``(3, 3)/(2p)``, at 1/9.
+  ``2k1``, ``2k2``, and ``3k1`` only as ``(3, 3)/(2p)``, at 1/9;
+* a **dot lattice** of spacing p is one dot profile ``d`` repeated on the square lattice: its
+  spectrum holds every ``(m, n)/p`` with the weight ``D(|(m, n)|/p)`` of the dot's (isotropic)
+  transform, so the diagonal sums ``k1 ± k2`` (at √2/p) are nearly as strong as the
+  fundamentals and stronger than ``2k1`` (at 2/p). The carriers are ``(1, 0)/p`` and
+  ``(0, 1)/p``, of period p as for a line grid: the two read the same lengths in mm. In a line
+  grid ``k1 ± k2`` comes only from the crossings (the product of the two line profiles' first
+  harmonics), weak for thin lines.
 
 :func:`detect_pattern` measures, on a centred square crop (Hann window, one FFT), the
 background-corrected spectral energy around ``a·k1 + b·k2`` relative to the fundamentals:
 ``along`` the largest of ``2k1, 2k2, 3k1, 3k2``, ``mixed`` the largest of ``2k1 ± k2,
-k1 ± 2k2``. ``along / mixed`` above :data:`DECISIVE_RATIO` reads a line grid, below its
-inverse a checkerboard; in between, or with neither above the noise (a sinusoidal grid,
-harmonics beyond Nyquist), the spectrum does not tell (``pattern`` None).
+k1 ± 2k2``, ``diagonal`` the larger of ``k1 ± k2``. ``diagonal`` above :data:`DOTS_DIAGONAL`
+and at least ``along`` reads a dot lattice; else ``along / mixed`` above
+:data:`DECISIVE_RATIO` reads a line grid, below its inverse a checkerboard; in between, or
+with neither above the noise (a sinusoidal grid, harmonics beyond Nyquist), the spectrum does not tell (``pattern`` None).
 """
 
 from __future__ import annotations
@@ -37,12 +45,18 @@ from . import fourier as F
 if TYPE_CHECKING:
     from .params import AnalyzerParams
 
-__all__ = ["PatternEvidence", "SettledPattern", "detect_pattern", "settle_pattern", "DECISIVE_RATIO"]
+__all__ = ["PatternEvidence", "SettledPattern", "detect_pattern", "settle_pattern", "DECISIVE_RATIO", "DOTS_DIAGONAL"]
 
 #: ``along / mixed`` energy ratio (or its inverse) from which the spectrum decides the pattern.
 #: Measured: line grids 10-15, checkerboards 0.02-0.06 (synthetic, the bundled photos), up to 0.27
 #: on a 400 px crop of a bundled photo.
 DECISIVE_RATIO = 3.0
+
+#: Energy of the diagonal sums ``k1 ± k2``, relative to the fundamentals, from which (and at least
+#: as strong as the harmonics along the carriers) the spectrum reads a dot lattice. Measured
+#: (synthetic, 256 x 320 px): sharp dots of diameter 0.2-0.6 pitch 0.25-0.85, Gaussian dots of FWHM
+#: 0.1-0.35 pitch 0.42-0.99; line grids of line width (FWHM) 0.1-0.35 pitch 0.01-0.15; checkerboards 0.
+DOTS_DIAGONAL = 0.2
 
 #: Energy above the background, in standard deviations of the background's own sum, that a
 #: harmonic needs to count as present ...
@@ -53,6 +67,7 @@ _FLOOR = 5e-4
 
 _ALONG = ((2, 0), (0, 2), (3, 0), (0, 3))
 _MIXED = ((2, 1), (2, -1), (1, 2), (1, -2))
+_DIAGONAL = ((1, 1), (1, -1))
 
 
 @dataclass(frozen=True)
@@ -61,11 +76,12 @@ class PatternEvidence:
 
     Attributes
     ----------
-    pattern : {'lines', 'checkerboard'} or None
+    pattern : {'lines', 'checkerboard', 'dots'} or None
         None when the harmonics do not decide.
-    along, mixed : float
+    along, mixed, diagonal : float
         Energy of the strongest harmonic along a carrier (``2k``, ``3k``) and of the
-        strongest mixed odd term (``2k1 ± k2``, ``k1 ± 2k2``), each relative to the mean
+        strongest mixed odd term (``2k1 ± k2``, ``k1 ± 2k2``) and of the stronger diagonal sum
+        (``k1 ± k2``), each relative to the mean
         energy of the fundamentals (0 where not above the noise).
     noise : float
         The energy a harmonic needs to count as present, same units: five standard
@@ -76,17 +92,21 @@ class PatternEvidence:
     along: float
     mixed: float
     noise: float
+    diagonal: float = 0.0
 
     def describe(self) -> str:
         """One phrase for messages: what the harmonics show."""
         shown = {"lines": "harmonics along each carrier",
-                 "checkerboard": "harmonics only at odd mixed combinations of the carriers"}
+                 "checkerboard": "harmonics only at odd mixed combinations of the carriers",
+                 "dots": "strong harmonics at the sums of the carriers"}
         what = shown.get(self.pattern or "", "no decisive harmonics")
-        return f"{what}, energy along/mixed {self.along:.3g}/{self.mixed:.3g} of the fundamentals"
+        return (f"{what}, energy along/mixed/diagonal {self.along:.3g}/{self.mixed:.3g}/{self.diagonal:.3g} "
+                "of the fundamentals")
 
     def to_dict(self) -> dict[str, object]:
         """The evidence as a JSON-ready mapping."""
-        return {"pattern": self.pattern, "along": self.along, "mixed": self.mixed, "noise": self.noise}
+        return {"pattern": self.pattern, "along": self.along, "mixed": self.mixed, "diagonal": self.diagonal,
+                "noise": self.noise}
 
 
 def _energy(spectrum: F.Spectrum, f: np.ndarray, radius: float, background: float) -> tuple[float, float]:
@@ -104,7 +124,7 @@ def _energy(spectrum: F.Spectrum, f: np.ndarray, radius: float, background: floa
 
 
 def detect_pattern(image: np.ndarray, *, max_px: int = 1024, min_period_px: float = 3.0) -> PatternEvidence:
-    """Tell a line grid from a checkerboard by the harmonic structure of the photo's spectrum.
+    """Tell a line grid, a checkerboard and a dot lattice apart by the harmonic structure of the photo's spectrum.
 
     Parameters
     ----------
@@ -137,6 +157,8 @@ def detect_pattern(image: np.ndarray, *, max_px: int = 1024, min_period_px: floa
     >>> cap = synthetic_capture((256, 256), pitch_mm=2.0, mm_per_px=0.25, pattern="checkerboard")
     >>> detect_pattern(cap.image).pattern
     'checkerboard'
+    >>> detect_pattern(synthetic_capture((256, 256), pitch_mm=2.0, mm_per_px=0.25, pattern="dots").image).pattern
+    'dots'
     """
     img = np.asarray(image, dtype=np.float32)
     H, W = img.shape[:2]
@@ -169,13 +191,17 @@ def detect_pattern(image: np.ndarray, *, max_px: int = 1024, min_period_px: floa
 
     along, noise_a = strongest(_ALONG)
     mixed, noise_m = strongest(_MIXED)
+    diagonal, noise_d = strongest(_DIAGONAL)
     noise = min(noise_a, noise_m)
     pattern = None
-    if along > 0 and along >= DECISIVE_RATIO * max(mixed, noise_m):
+    if diagonal >= DOTS_DIAGONAL * fundamental and diagonal >= along:
+        pattern = "dots"
+    elif along > 0 and along >= DECISIVE_RATIO * max(mixed, noise_m):
         pattern = "lines"
     elif mixed > 0 and mixed >= DECISIVE_RATIO * max(along, noise_a):
         pattern = "checkerboard"
-    return PatternEvidence(pattern, along / fundamental, mixed / fundamental, noise / fundamental)
+    return PatternEvidence(pattern, along / fundamental, mixed / fundamental, noise / fundamental,
+                           diagonal / fundamental)
 
 
 @dataclass(frozen=True)
@@ -203,8 +229,10 @@ def settle_pattern(params: AnalyzerParams, image: np.ndarray) -> SettledPattern:
     Returns
     -------
     SettledPattern
-        ``params.pattern`` is ``'lines'`` or ``'checkerboard'``; a warning when a given pattern
-        is contradicted by the spectrum, or when ``'auto'`` cannot decide (then ``'lines'`` is used).
+        ``params.pattern`` is ``'lines'``, ``'checkerboard'`` or ``'dots'``; a warning when a given
+        pattern is contradicted by the spectrum in a way that changes the scale (a checkerboard's
+        carrier period is pitch·√2, the others' the pitch), or when ``'auto'`` cannot decide (then
+        ``'lines'`` is used).
     """
     no_grid = None
     try:
@@ -217,7 +245,8 @@ def settle_pattern(params: AnalyzerParams, image: np.ndarray) -> SettledPattern:
             warn = (f"the photo's spectrum does not tell a line grid from a checkerboard ({evidence.describe()}); "
                     "assumed 'lines': give the pattern (lengths in mm differ by sqrt(2) between the two)",)
         return SettledPattern(params.model_copy(update={"pattern": evidence.pattern or "lines"}), warn, no_grid)
-    if evidence.pattern is not None and evidence.pattern != params.pattern:
+    same_scale = "checkerboard" not in (evidence.pattern, params.pattern)  # lines and dots: period = pitch
+    if evidence.pattern is not None and evidence.pattern != params.pattern and not same_scale:
         return SettledPattern(params, (
             f"the pattern '{params.pattern}' was given but the photo's spectrum shows a {evidence.pattern} "
             f"({evidence.describe()}); lengths in mm (mm_per_px, displacements, sigma) are off by sqrt(2) "

@@ -35,7 +35,7 @@ def register(subparsers):
     p.add_argument("--pitch-mm", type=number_option(PITCH_MM), help="grid pitch, mm (default for panes without one)")
     p.add_argument("--distance-m", type=number_option(DISTANCE_M), help="glass-to-grid distance L, m (default for panes without one)")
     p.add_argument("--reference", metavar="REF", help="glass-less reference photo (Comparative method) by default")
-    p.add_argument("--pattern", choices=["auto", "lines", "checkerboard"],
+    p.add_argument("--pattern", choices=["auto", "lines", "checkerboard", "dots"],
                    help="grid pattern by default (default: auto, decided from each photo's spectrum)")
     p.add_argument("--params", metavar="PARAMS.json", help="analyzer parameters file by default")
     p.add_argument("--sigma-mm", type=number_option(SIGMA_MM), help="smoothing scale, mm, by default")

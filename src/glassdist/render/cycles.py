@@ -402,6 +402,9 @@ def _backdrop_section(scene: Scene) -> dict:
             "rotation_deg": b.rotation_deg, "offset_mm": offset,
             "line_value": b.black, "background_value": b.white,
         }
+    elif b.pattern == "dots":
+        raise ValueError("the Cycles renderer draws line grids and checkerboards only; "
+                         "render a dot lattice with the exact tracer (glassdist.render.render)")
     else:
         pattern = {
             "kind": "checkerboard", "pitch_mm": b.pitch_mm, "rotation_deg": b.rotation_deg,

@@ -118,13 +118,16 @@ class Backdrop(BaseModel):
     Pattern coordinates ``p = Rot(-rotation) (X - offset)`` with ``X`` the world
     ``(x, y)`` on the plane. ``lines``: dark lines of ``line_width_mm`` centred on
     multiples of ``pitch_mm`` along both pattern axes; ``checkerboard``: squares of
-    side ``pitch_mm``, the square touching the origin from +x,+y is white.
+    side ``pitch_mm``, the square touching the origin from +x,+y is white; ``dots``: dark
+    round dots of diameter ``dot_diameter_mm`` centred on the square lattice of spacing
+    ``pitch_mm`` (a dot on the origin).
     """
 
     model_config = _FROZEN
-    pattern: Literal["lines", "checkerboard"]
+    pattern: Literal["lines", "checkerboard", "dots"]
     pitch_mm: PositiveLength_mm
     line_width_mm: PositiveLength_mm | None = None
+    dot_diameter_mm: PositiveLength_mm | None = None
     rotation_deg: Angle_deg = 0.0
     offset_mm: tuple[Length_mm, Length_mm] = (0.0, 0.0)
     distance_m: float = Field(ge=DISTANCE_M.lo, le=DISTANCE_M.hi)
@@ -138,6 +141,11 @@ class Backdrop(BaseModel):
                 raise ValueError("line_width_mm is required for pattern 'lines'")
             if self.line_width_mm >= self.pitch_mm:
                 raise ValueError("line_width_mm must be smaller than pitch_mm")
+        if self.pattern == "dots":
+            if self.dot_diameter_mm is None:
+                raise ValueError("dot_diameter_mm is required for pattern 'dots'")
+            if self.dot_diameter_mm >= self.pitch_mm:
+                raise ValueError("dot_diameter_mm must be smaller than pitch_mm (the dots must not touch)")
         if self.black >= self.white:
             raise ValueError("black must be darker (smaller) than white")
         return self

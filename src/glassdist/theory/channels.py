@@ -51,9 +51,9 @@ def _incidence(scene: Scene):
 
 
 def carrier_period_mm(scene: Scene) -> float:
-    """Carrier period on the backdrop: the pitch for lines, pitch * sqrt(2) for a checkerboard."""
+    """Carrier period on the backdrop: the pitch for lines and dots, pitch * sqrt(2) for a checkerboard."""
     p = scene.backdrop.pitch_mm
-    return p if scene.backdrop.pattern == "lines" else p * math.sqrt(2.0)
+    return p * math.sqrt(2.0) if scene.backdrop.pattern == "checkerboard" else p
 
 
 def read_params_file(params_file) -> dict:
