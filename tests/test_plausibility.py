@@ -1,6 +1,6 @@
 """Plausibility at the boundary: slips a valid input can carry warn, and no bundled example or ray-traced scene does.
 
-The checks (:mod:`glassdist.plausibility`): a glass-to-grid distance no camera could have seen
+The checks (:mod:`glassdist.analyzer.plausibility`): a glass-to-grid distance no camera could have seen
 the photo's backdrop extent at (millimetres typed as metres), a reference that reads more
 distorted than its photo (the two swapped), a measured scale the photo's EXIF contradicts (a
 pitch in the wrong unit). Each is a warning on the result; every bundled example, example scene
@@ -16,7 +16,7 @@ from conftest import REPO, run_cli
 
 from glassdist import analyze
 from glassdist.io import write_png16
-from glassdist.plausibility import (EXIF_SCALE_FACTOR, MIN_VIEW_ANGLE_DEG, SWAP_RATIO, distance_warning,
+from glassdist.analyzer.plausibility import (EXIF_SCALE_FACTOR, MIN_VIEW_ANGLE_DEG, SWAP_RATIO, distance_warning,
                                     exif_scale_mm_per_px, exif_scale_warning, grid_spread, swap_warning,
                                     view_angle_deg)
 from glassdist.synthetic import lens_displacement, synthetic_capture

@@ -35,7 +35,7 @@ EXIT_INTERNAL = 1
 EXIT_BAD_INPUT = 2
 
 # Modules adding sub-commands: each provides register(subparsers) -> sets func=run(args) -> int.
-COMMAND_MODULES = ["glassdist.jobs._cli", "glassdist.render._cli", "glassdist.theory._cli", "glassdist.virtual._cli", "glassdist.render.cycles", "glassdist.experiments._cli", "glassdist.virtual._sweep_cli", "glassdist.web._cli", "glassdist.history._cli", "glassdist.viewpoint._cli"]
+COMMAND_MODULES = ["glassdist.jobs._cli", "glassdist.render._cli", "glassdist.theory._cli", "glassdist.virtual._cli", "glassdist.render.cycles", "glassdist.experiments._cli", "glassdist.virtual._sweep_cli", "glassdist.web._cli", "glassdist.history._cli", "glassdist._view_cli"]
 
 
 class _StoreOnce(argparse._StoreAction):

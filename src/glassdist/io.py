@@ -427,7 +427,7 @@ def prepare_output_dir(path: str | os.PathLike) -> Path:
 _EXIF_TAGS = {  # EXIF tag id -> name recorded
     0x010F: "make", 0x0110: "model", 0x0132: "datetime", 0x9003: "datetime_original", 0x829A: "exposure_time_s",
     0x829D: "f_number", 0x920A: "focal_length_mm", 0x8827: "iso", 0xA434: "lens_model", 0xA431: "serial_number",
-    # the capture geometry (glassdist.plausibility): focus distance, 35 mm-equivalent focal length, native width
+    # the capture geometry (glassdist.analyzer.plausibility): focus distance, 35 mm-equivalent focal length, native width
     0x9206: "subject_distance_m", 0xA405: "focal_length_35mm_mm", 0xA002: "pixel_width",
     0xA003: "pixel_height",
 }

@@ -40,7 +40,6 @@ import numpy as np
 from scipy import ndimage
 
 from ..errors import InputError
-from ..plausibility import review_measurement
 from .analysis_grid import AnalysisGrid
 from .homography import apply_inverse, fit_homography, logical_coordinates, logical_grid_points
 from .metrics import masked_gaussian, polynomial_detrend
@@ -56,6 +55,7 @@ from .pipeline import (
     result_of,
     routed_warnings,
 )
+from .plausibility import review_measurement
 from .region import min_region_samples, trusted_on
 from .result import AnalysisResult
 from .unwrap import label_regions

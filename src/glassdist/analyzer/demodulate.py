@@ -54,7 +54,7 @@ class ReferenceModel:
     params: AnalyzerParams = field(repr=False)
     warnings: tuple[str, ...] = ()
     noise_std: float = float("nan")
-    grid_spread: float = float("nan")  # glassdist.plausibility.grid_spread: the swapped-pair check
+    grid_spread: float = float("nan")  # glassdist.analyzer.plausibility.grid_spread: the swapped-pair check
 
 
 @dataclass(frozen=True)

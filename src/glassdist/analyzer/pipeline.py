@@ -39,7 +39,6 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
-from ..plausibility import grid_spread, review_measurement
 from ..validation import DISTANCE_M, PITCH_MM, check_number
 from . import deform as D
 from . import fourier as F
@@ -79,6 +78,7 @@ from .homography import HomographyFit, fit_grid_homography
 from .lens import LensCalibration
 from .params import AnalyzerParams, given_settings, load_params
 from .pattern import settle_pattern
+from .plausibility import grid_spread, review_measurement
 from .region import (
     BEYOND_RANGE,
     FRAGMENT,
@@ -530,7 +530,7 @@ def analyze(
     camera : dict, optional
         The photo's EXIF facts (:func:`glassdist.io.camera_metadata`; read from the file when
         ``image`` is a path): a focal length and subject distance cross-check the measured
-        scale against ``pitch_mm`` (:mod:`glassdist.plausibility`).
+        scale against ``pitch_mm`` (:mod:`glassdist.analyzer.plausibility`).
 
     Returns
     -------

@@ -14,8 +14,12 @@ Lengths in mm, the glass-to-grid distance ``L`` in m, angles in degrees.
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from .fourier import CarrierPair, Spectrum
 
 __all__ = [
     "EXIF_SCALE_FACTOR",
@@ -109,7 +113,7 @@ def distance_warning(distance_m: float, mm_per_px: float, image_shape: tuple[int
     return text
 
 
-def _baseband(spectrum, f: np.ndarray) -> tuple[np.ndarray, tuple[float, float]]:
+def _baseband(spectrum: Spectrum, f: np.ndarray) -> tuple[np.ndarray, tuple[float, float]]:
     """The complex baseband of carrier ``f`` (cycles/px), from the bins within ``|f| / 2`` of it; and its sample step, px."""
     H, W = spectrum.shape
     half = 0.5 * float(np.hypot(*f))
@@ -122,7 +126,7 @@ def _baseband(spectrum, f: np.ndarray) -> tuple[np.ndarray, tuple[float, float]]
     return z, (H / z.shape[0], W / z.shape[1])
 
 
-def grid_spread(image: np.ndarray | None, carriers, *, spectrum=None) -> float:
+def grid_spread(image: np.ndarray | None, carriers: CarrierPair, *, spectrum: Spectrum | None = None) -> float:
     """Spread of the grid's local carrier frequency over the photo, relative to the carrier frequency.
 
     A glass-less photo of a printed grid has one frequency everywhere but for the camera's
@@ -149,7 +153,7 @@ def grid_spread(image: np.ndarray | None, carriers, *, spectrum=None) -> float:
     float
         Dimensionless; NaN where the grid is nowhere visible.
     """
-    from .analyzer.fourier import compute_spectrum
+    from .fourier import compute_spectrum
 
     if spectrum is None:
         if image is None:
@@ -202,7 +206,7 @@ def swap_warning(photo_spread: float, reference_spread: float) -> str | None:
             "give the photo through the glass as the image and the glass-less one as the reference (--reference)")
 
 
-def exif_scale_mm_per_px(camera: dict | None, image_shape: tuple[int, int]) -> float | None:
+def exif_scale_mm_per_px(camera: dict[str, Any] | None, image_shape: tuple[int, int]) -> float | None:
     """The backdrop scale, mm per px, that the photo's EXIF focal length and subject distance imply, or None.
 
     With the camera's pixel pitch ``p`` (from the focal-plane resolution, else from the
@@ -236,8 +240,9 @@ def exif_scale_mm_per_px(camera: dict | None, image_shape: tuple[int, int]) -> f
     return pitch_mm * (s_mm - focal) / focal
 
 
-def exif_scale_warning(camera: dict | None, mm_per_px: float, image_shape: tuple[int, int], pitch_mm: float) -> str | None:
-    """A warning when the measured scale and the EXIF's (:func:`exif_scale_mm_per_px`) differ by more than :data:`EXIF_SCALE_FACTOR`.
+def exif_scale_warning(camera: dict[str, Any] | None, mm_per_px: float, image_shape: tuple[int, int],
+                       pitch_mm: float) -> str | None:
+    """A warning when the measured scale and the EXIF's differ by more than :data:`EXIF_SCALE_FACTOR`.
 
     The measured scale is the stated pitch over the carrier period in px: a pitch typed in
     the wrong unit moves it by a factor of 10 or more.
@@ -253,8 +258,8 @@ def exif_scale_warning(camera: dict | None, mm_per_px: float, image_shape: tuple
             f"about {expected:.3g} mm/px ({ratio:.2g} times as much); check the pitch is the printed grid's, in mm")
 
 
-def review_measurement(image: np.ndarray, reference_spread: float | None, carriers, *, mm_per_px: float,
-                       distance_m: float, pitch_mm: float, camera: dict | None = None) -> list[str]:
+def review_measurement(image: np.ndarray, reference_spread: float | None, carriers: CarrierPair, *, mm_per_px: float,
+                       distance_m: float, pitch_mm: float, camera: dict[str, Any] | None = None) -> list[str]:
     """Every plausibility warning of one measured photo: distance, swapped pair, EXIF scale.
 
     Parameters

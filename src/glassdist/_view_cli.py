@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .._cli_shared import folder_option
-from ..validation import DISTANCE_M, SIGMA_MM, number_option
+from ._cli_shared import folder_option
+from .validation import DISTANCE_M, SIGMA_MM, number_option
 
 __all__ = ["register"]
 
@@ -55,12 +55,12 @@ def _same_folder(a: Path, b: Path) -> bool:
 
 
 def _run_view(args) -> int:
-    from ..errors import InputError
-    from ..fs import atomic_write, atomic_write_text
-    from ..io import prepare_output_dir, to_jsonable
-    from ..storage import load_result
-    from ..storage.fields import write_npz
-    from .view import predict_view
+    from .errors import InputError
+    from .fs import atomic_write, atomic_write_text
+    from .io import prepare_output_dir, to_jsonable
+    from .storage import load_result
+    from .storage.fields import write_npz
+    from .viewpoint.view import predict_view
 
     if _same_folder(args.out, args.result):
         raise InputError(f"--out '{args.out}' is the result folder itself; give another folder (inputs are never "
@@ -89,10 +89,10 @@ def _run_view(args) -> int:
 
 
 def _run_compare(args) -> int:
-    from ..fs import atomic_write_text
-    from ..io import to_jsonable
-    from ..storage import load_result
-    from .compare import compare_results
+    from .fs import atomic_write_text
+    from .io import to_jsonable
+    from .storage import load_result
+    from .viewpoint.compare import compare_results
 
     cmp = compare_results(load_result(args.result_a), load_result(args.result_b))
     import sys
