@@ -16,14 +16,14 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Callable, cast
+from typing import Any, Callable, cast
 
 import numpy as np
 
 from ..errors import AnalysisError, InputError
 from . import fourier as F
 from .homography import HomographyFit
-from .params import AnalyzerParams
+from .params import AnalyzerParams, load_params
 from .region import Region, contamination_px, local_contrast, valid_region, within
 from .uncertainty import noise_std
 from .unwrap import unwrap
@@ -31,7 +31,7 @@ from .unwrap import unwrap
 __all__ = [
     "DEVIATION_WARN", "Demodulation", "LocalContrast", "Margins", "ReferenceModel", "bandpass_px2", "basebands",
     "carrier_period_mm", "checked_image", "covariances", "demodulate", "demodulation_blur_px2", "deviation_warnings",
-    "frequency_deviation", "margins", "modulation", "region", "region_warnings", "sampling_warnings",
+    "frequency_deviation", "margins", "modulation", "read_inputs", "region", "region_warnings", "sampling_warnings",
     "smooth_with_coherence", "unwrapped_phases",
 ]
 
@@ -138,6 +138,29 @@ def carrier_period_mm(pitch_mm: float, pattern: str) -> float:
     ``numpy.float64``, and float32 phases scaled by it are computed in float64 (NumPy's promotion rules).
     """
     return pitch_mm * np.sqrt(2.0) if pattern == "checkerboard" else pitch_mm
+
+
+def read_inputs(image: Any, reference: Any, params: Any, mask: Any, detrend_degree: int | None,
+                sigma_mm: float | None) -> tuple[Any, Any, Any, Any, dict[str, Any]]:
+    """Photos and mask given as paths read; ``detrend_degree`` / ``sigma_mm`` merged into the parameters.
+
+    Also returns the files read (:attr:`~glassdist.analyzer.result.AnalysisResult.sources`): each
+    path with the SHA-256 of the bytes decoded, and the photo's EXIF camera. What
+    :func:`~glassdist.analyzer.pipeline.analyze` reads before its inputs are checked
+    (:func:`~glassdist.analyzer.pipeline.checked_inputs`).
+    """
+    from ..io import read_sources
+
+    image, reference, mask, sources = read_sources(image, reference, mask)
+    settings = {k: v for k, v in (("detrend_degree", detrend_degree), ("sigma_mm", sigma_mm)) if v is not None}
+    if settings:
+        if params is None and isinstance(reference, ReferenceModel):
+            params = reference.params
+        if isinstance(params, AnalyzerParams):
+            params = {**params.model_dump(exclude_unset=True), **settings}
+        else:
+            params = load_params(params, **settings)
+    return image, reference, params, mask, sources
 
 
 # --------------------------------------------------------------------------- Block F's filters

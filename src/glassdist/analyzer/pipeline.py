@@ -67,6 +67,7 @@ from .demodulate import (
     deviation_warnings,
     margins,
     modulation,
+    read_inputs,
     region,
     region_warnings,
     sampling_warnings,
@@ -576,7 +577,7 @@ def analyze(
     >>> bool(res.phi_eff_mD[96, 128] < 0)  # a converging lens reads phi_eff < 0
     True
     """
-    img, ref, prm, msk, sources = _api_inputs(image, reference, params, mask, detrend_degree, sigma_mm)
+    img, ref, prm, msk, sources = read_inputs(image, reference, params, mask, detrend_degree, sigma_mm)
     sources["given"] = given_settings(prm, pattern=pattern, fallback=getattr(ref, "params", None))
     if camera_distance_m is not None:
         camera_distance_m = check_number(camera_distance_m, "camera_distance_m (camera to pane)", DISTANCE_M)
@@ -592,23 +593,3 @@ def analyze(
                     camera_distance_m=camera_distance_m)
     return replace(res, sources=sources)
 
-
-def _api_inputs(image: Any, reference: Any, params: Any, mask: Any, detrend_degree: int | None,
-                sigma_mm: float | None) -> tuple[Any, Any, Any, Any, dict[str, Any]]:
-    """Photos and mask given as paths read; ``detrend_degree`` / ``sigma_mm`` merged into the parameters.
-
-    Also returns the files read (:attr:`AnalysisResult.sources`): each path with the SHA-256 of
-    the bytes decoded, and the photo's EXIF camera.
-    """
-    from ..io import read_sources
-
-    image, reference, mask, sources = read_sources(image, reference, mask)
-    settings = {k: v for k, v in (("detrend_degree", detrend_degree), ("sigma_mm", sigma_mm)) if v is not None}
-    if settings:
-        if params is None and isinstance(reference, ReferenceModel):
-            params = reference.params
-        if isinstance(params, AnalyzerParams):
-            params = {**params.model_dump(exclude_unset=True), **settings}
-        else:
-            params = load_params(params, **settings)
-    return image, reference, params, mask, sources

@@ -160,7 +160,7 @@ class _PartRule:
 
 def _part_rule(p, grid: F.SamplingGrid, period_px: float) -> _PartRule:
     large = max(int(p.min_region_fraction * grid.shape[0] * grid.shape[1]), 16)
-    return _PartRule(min_region_samples(p, grid, period_px), large, tuple(grid.step), float(period_px))
+    return _PartRule(min_region_samples(p, grid, period_px), large, grid.step, float(period_px))
 
 
 def _continues_surroundings(part: np.ndarray, large: np.ndarray, phases, rule: _PartRule) -> bool:
@@ -429,7 +429,7 @@ def local_contrast(image: np.ndarray, period_px: float, grid: F.SamplingGrid) ->
     """
     import cv2
 
-    img = np.ascontiguousarray(image, np.float32)
+    img: np.ndarray = np.ascontiguousarray(image, np.float32)
     k = max(1, int(period_px // 4))  # block means keep the grid (at least 4 px per period) at 1/k^2 of the cost
     if k > 1:
         H, W = img.shape
@@ -688,6 +688,8 @@ def within(region: Region, first: Region, p, phases=()) -> Region:
     (:func:`~glassdist.analyzer.unwrap.branch_cuts`, :data:`PHASE_RESIDUE`), and connected parts
     are labelled anew (:func:`~glassdist.analyzer.unwrap.label_regions`).
     """
+    if region.quality is None or first.quality is None:
+        raise ValueError("within() needs the quality labels of both regions (Region.quality)")
     valid = region.valid & first.valid
     quality = region.quality.copy()
     dropped = region.valid & ~first.valid

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from functools import cached_property
-from typing import Any
+from typing import Any, overload
 
 import numpy as np
 
@@ -69,9 +69,13 @@ FIELDS: tuple[FieldSpec, ...] = (
               "[...,0]=x, [...,1]=y", 2),
     FieldSpec("phi_eff_sigma_mD", "mD", "standard uncertainty of phi_eff_mD from the image noise"),
     FieldSpec("phi_shear_sigma_mD", "mD", "standard uncertainty of phi_shear_mD from the image noise (linearised)"),
-    FieldSpec("surface_slope_mrad", "mrad", "reflection: front-face slope (dZ/dx, dZ/dy), pane frame, degree N-1 trend removed (glassdist.flatness)", 2),
-    FieldSpec("surface_slope_sigma_mrad", "mrad", "reflection: standard uncertainty of surface_slope_mrad from the image noise, per component", 2),
-    FieldSpec("surface_height_um", "um", "reflection: front-face height Z (away from the camera), least-squares integral of the slope, detrended at degree N"),
+    FieldSpec("surface_slope_mrad", "mrad",
+              "reflection: front-face slope (dZ/dx, dZ/dy), pane frame, degree N-1 trend removed (glassdist.flatness)", 2),
+    FieldSpec("surface_slope_sigma_mrad", "mrad",
+              "reflection: standard uncertainty of surface_slope_mrad from the image noise, per component", 2),
+    FieldSpec("surface_height_um", "um",
+              "reflection: front-face height Z (away from the camera), least-squares integral of the slope, "
+              "detrended at degree N"),
 )
 
 #: The power channels (mD) that statistics, specifications and heatmaps are about.
@@ -93,7 +97,13 @@ class _ImageGridField:
     def __init__(self, name: str):
         self.name = name
 
-    def __get__(self, obj, objtype=None):
+    @overload
+    def __get__(self, obj: None, objtype: type | None = None) -> _ImageGridField: ...
+
+    @overload
+    def __get__(self, obj: AnalysisResult, objtype: type | None = None) -> np.ndarray: ...
+
+    def __get__(self, obj: AnalysisResult | None, objtype: type | None = None) -> _ImageGridField | np.ndarray:
         if obj is None:
             return self
         val = obj.pixel_field(self.name)
@@ -226,6 +236,15 @@ class AnalysisResult:
     sources: dict = field(default_factory=dict, compare=False)
     _deferred: dict | None = field(default=None, repr=False, compare=False)
 
+    # Declared here so that its type is known where the class uses it; the loop after the class adds every field.
+    quality = _ImageGridField("quality")
+
+    def _held(self) -> dict[str, Any]:
+        """The fields on :attr:`analysis_grid` and what brings them to the pixel grid (``fields``, ``grid``, ``idx``, ...)."""
+        if self._deferred is None:
+            raise AttributeError("this result holds no fields on the analysis grid")
+        return self._deferred
+
     def field_specs(self) -> tuple[FieldSpec, ...]:
         """The registered fields this result holds, in :data:`FIELDS` order."""
         held = self._deferred["fields"] if self._deferred else {}
@@ -234,7 +253,7 @@ class AnalysisResult:
     @property
     def analysis_grid(self) -> F.SamplingGrid:
         """The grid the fields are computed on (sample centres in image px, see :class:`SamplingGrid`)."""
-        return self._deferred["grid"]
+        return self._held()["grid"]
 
     def grid_field(self, name: str) -> np.ndarray:
         """Field ``name`` on :attr:`analysis_grid` (float32, NaN outside the analysed region)."""
@@ -255,7 +274,7 @@ class AnalysisResult:
     def pixel_field(self, name: str) -> np.ndarray:
         """Field ``name`` brought to the input's pixel grid (not cached; the attribute is)."""
         f = self.grid_field(name)
-        d = self._deferred
+        d = self._held()
         if name == "quality":
             return pixel_quality(f, d.get("label_grid", d["grid"]), self.valid, d.get("mask"), self.margin_px[1])
         if _SPECS[name].kind == "label":
@@ -274,16 +293,18 @@ class AnalysisResult:
         """
         H, W = self.valid.shape
         block_rows = max(1, int(max_pixels) // max(W, 1))
-        d = self._deferred
         streams = []
         for name in names:
             if name in self.__dict__ or _SPECS[name].kind == "label":
                 streams.append(_row_slices(getattr(self, name), block_rows))
-            elif name == "axis_deg":
-                streams.append(upsample_axis_rows(self.grid_field(name), self.grid_field("phi_shear_mD"), d["idx"],
-                                                  d["grid"], ~self.valid, block_rows))
+                continue
+            f = self.grid_field(name)
+            d = self._held()
+            if name == "axis_deg":
+                streams.append(upsample_axis_rows(f, self.grid_field("phi_shear_mD"), d["idx"], d["grid"], ~self.valid,
+                                                  block_rows))
             else:
-                streams.append(upsample_field_rows(self.grid_field(name), d["idx"], d["grid"], ~self.valid, block_rows))
+                streams.append(upsample_field_rows(f, d["idx"], d["grid"], ~self.valid, block_rows))
         for blocks in zip(*streams):
             yield blocks[0][0] if blocks else slice(0, H), {n: b for n, (_, b) in zip(names, blocks)}
 
@@ -293,7 +314,7 @@ class AnalysisResult:
 
         The valid samples are those the nearest-valid fill of the upsampling maps to themselves.
         """
-        idx = self._deferred["idx"]
+        idx = self._held()["idx"]
         h, w = self.analysis_grid.shape
         if idx is None:  # all samples valid, or none
             return np.full((h, w), bool(self.valid.any()))
