@@ -57,6 +57,7 @@ NOT_RUN = [
     (r"scripts/check_known_bugs|scripts/mutation", "re-runs parts of the test suite on mutated copies (minutes)"),
     (r"\bPANE\.png|\bMANIFEST\.csv|\bFOLDER\b|\bDIR\b|\[--|photos/", "a synopsis with placeholders, not a command"),
     (r"scripts/update_quoted_outputs", "re-runs every quoted block of the repository (minutes)"),
+    (r"scripts/analyzer_flow", "profiles a run on the real photographs of ../shared/data/ (a record's recipe)"),
 ]
 
 _SHELL = {"bash", "sh", "shell"}
