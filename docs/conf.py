@@ -94,8 +94,10 @@ nitpicky = True
 nitpick_ignore_regex = [
     # the standard library, NumPy, pydantic and typing: their inventories are on the web
     ("py:.*", (r"(numpy|np|scipy|skimage|cv2|pydantic|pydantic_core|typing|collections|pathlib|os|datetime|enum|"
-               r"argparse|io|concurrent|sqlalchemy|dask|distributed|matplotlib|tifffile|fastapi|starlette)\..*")),
+               r"argparse|io|concurrent|dataclasses|sqlalchemy|dask|distributed|matplotlib|tifffile|fastapi|starlette)\..*")),
     ("py:class", (r"(ndarray|array_like|ArrayLike|Path|PathLike|Generator|Callable|Iterable|Iterator|Sequence|"
                   r"Mapping|BaseModel|Enum|Figure|Axes|Literal|Any|Self|NoneType|float64|float32|"
                   r"int|float|str|bool|dict|list|tuple|bytes|None|object|type)")),
+    # a module's private helpers, named in its docstrings: they have no page of their own
+    ("py:func", r"_[a-z][a-z0-9_]*"),
 ]

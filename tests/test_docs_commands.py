@@ -56,15 +56,9 @@ NOT_RUN = [
     (r"glassdist serve", "starts a server that runs until stopped"),
     (r"scripts/check_known_bugs|scripts/mutation", "re-runs parts of the test suite on mutated copies (minutes)"),
     (r"\bPANE\.png|\bMANIFEST\.csv|\bFOLDER\b|\bDIR\b|\[--|photos/", "a synopsis with placeholders, not a command"),
-    (r"examples/data/", ("names the real photographs that are no longer in the tree (they are read from "
-                         "../shared/data/real-checkerboard-water/); the page is to move to the examples of examples/images/")),
+    (r"scripts/update_quoted_outputs", "re-runs every quoted block of the repository (minutes)"),
+    (r"scripts/analyzer_flow", "profiles a run on the real photographs of ../shared/data/ (a record's recipe)"),
 ]
-
-#: Pages whose quoted output is not yet in ``console`` blocks: (file, why), each to be converted and removed.
-UNCONVERTED = {
-    "docs/industrial_workflow.md": "quotes the output of the real photographs' runs (examples/data/, no longer in the tree)",
-    "docs/distributed.md": "quotes an error a Dask cluster prints (not reproducible without one)",
-}
 
 _SHELL = {"bash", "sh", "shell"}
 
@@ -160,13 +154,10 @@ def test_output_is_quoted_only_in_console_blocks():
     found = []
     for path in DOC_FILES:
         rel = str(path.relative_to(REPO))
-        if rel in UNCONVERTED:
-            continue
         for lang, start, text in _blocks(path):
             if lang != "console" and any(_PRINTED.match(line.lstrip("# ")) for line in text.splitlines()):
                 found.append(f"{rel}:{start}")
     assert found == [], "quote these outputs in console blocks (scripts/update_quoted_outputs.py)"
-    assert all((REPO / name).is_file() for name in UNCONVERTED)  # an entry goes when its page does
 
 
 @pytest.fixture(scope="module")

@@ -335,6 +335,10 @@ def performance_page() -> str:
     parts += ["## The command line (`bench_cli.py`)", cli.table(rec["rows"]), _source("performance/cli_results.json")]
     rec = _record("performance/cli_floor.json")
     parts += ["## The command's floor: import and reading", cli.table(rec["rows"]), _source("performance/cli_floor.json")]
+    rec = _record("performance/cli_24mpx.json")
+    rows = [{**r, "image": f"{label}: {r['image']}"} for label, runs in rec["runs"].items() for r in runs]
+    parts += ["## Re-runs of the command at 24 Mpx", (f"{rec['cpus']} cores; one row per run and step, each run's time "
+              "in units of the rfft2 measured at its start. The record's note: " + _cell(rec["note"])), cli.table(rows), _source("performance/cli_24mpx.json")]
     rec = _record("performance/distributed_results.json")
     parts += ["## Dask: serial against two workers", _nested_table(rec["runs"]),
               (f"{rec['workers']} workers on {rec['cpu_count']} cores. "
