@@ -49,7 +49,7 @@ LABELS = {"image": "photo of the grid through the glass", "reference": "glass-le
 _OPTION_LABELS = {option: LABELS[key] for key, option in {**FIELDS, **ROLES, **FLAGS}.items() if option}
 _OPTION = re.compile(r"--[a-z][a-z0-9-]*")
 # a value written after an option: a number, or one of the form's choices
-_VALUE = r"(?:[= ](?P<value>[-+]?(?:\d+\.?\d*|\.\d+)(?:e[-+]?\d+)?|reflection|transmission|lines|checkerboard|auto)\b)?"
+_VALUE = r"(?:[= ](?P<value>[-+]?(?:\d+\.?\d*|\.\d+)(?:e[-+]?\d+)?|reflection|transmission|lines|checkerboard|dots|auto)\b)?"
 
 
 def _field(option: str) -> str:
