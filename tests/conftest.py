@@ -152,3 +152,94 @@ def real_pane_outputs(tmp_path_factory):
         assert main(args) == code, verdict
         out[verdict] = root / verdict
     return out
+
+
+#: The factory protocol for the real photographs (``../shared/data/real-checkerboard-water``, 1024 px, a 5 mm
+#: checkerboard, the pane assumed 730 x 730 mm filling the photo): the specification their acceptance tests judge
+#: with (the project's own example specification is written for its rendered example, examples/factory).
+REAL_PAIR_SPEC = {
+    "name": "Example line acceptance (Comparative, L = 1 m, 5 mm checkerboard, sigma 2 periods, N = 2)",
+    "description": "Area-change and shape-change limits on the detrended local distortion, tighter in the vision area than along the edge.",
+    "protocol": {
+        "method": "comparative",
+        "distance_m": 1.0,
+        "pitch_mm": 5.0,
+        "pattern": "checkerboard",
+        "sigma_periods": 2,
+        "detrend_degree": 2,
+        "min_px_per_period": 6
+    },
+    "pane": {
+        "corners_frac": [
+            [
+                0,
+                0
+            ],
+            [
+                1,
+                0
+            ],
+            [
+                1,
+                1
+            ],
+            [
+                0,
+                1
+            ]
+        ],
+        "size_mm": [
+            730,
+            730
+        ]
+    },
+    "zones": [
+        {
+            "name": "edge",
+            "edge_band_mm": 100,
+            "min_valid_percent": 40
+        },
+        {
+            "name": "vision",
+            "inset_mm": 100,
+            "min_valid_percent": 60
+        }
+    ],
+    "criteria": [
+        {
+            "channel": "phi_eff",
+            "statistic": "p95_abs",
+            "max_mD": 40,
+            "zone": "vision"
+        },
+        {
+            "channel": "phi_shear",
+            "statistic": "p95_abs",
+            "max_mD": 40,
+            "zone": "vision"
+        },
+        {
+            "channel": "phi_eff",
+            "statistic": "area_over",
+            "threshold_mD": 100,
+            "max_percent": 0.5,
+            "zone": "vision"
+        },
+        {
+            "channel": "phi_eff",
+            "statistic": "p95_abs",
+            "max_mD": 80,
+            "zone": "edge"
+        },
+        {
+            "channel": "phi_shear",
+            "statistic": "p95_abs",
+            "max_mD": 80,
+            "zone": "edge"
+        }
+    ],
+    "min_valid_percent": 50,
+    "figures": {
+        "colour_limit": "spec"
+    }
+}

@@ -22,7 +22,6 @@ from glassdist.errors import InputError
 
 REPO = Path(__file__).resolve().parents[1]
 REAL = REPO.parent / "shared" / "data" / "real-checkerboard-water"
-FACTORY = REPO / "examples" / "factory" / "spec.json"
 #: the factory example's pane as it was written for the 1024 px photos, in their pixels
 PANE_1024_PX = {"corners_px": [[-0.5, -0.5], [1023.5, -0.5], [1023.5, 1023.5], [-0.5, 1023.5]], "size_mm": [730, 730]}
 
@@ -122,8 +121,9 @@ def test_every_criterion_states_the_trusted_share_it_judges():
 # ----------------------------------------------------------------- the bundled photos, upscaled
 
 def _factory_spec(**pane):
-    spec = json.loads(FACTORY.read_text())
-    spec.pop("$comment")
+    from conftest import REAL_PAIR_SPEC
+
+    spec = json.loads(json.dumps(REAL_PAIR_SPEC))
     return dict(spec, pane=pane) if pane else spec
 
 
@@ -184,7 +184,7 @@ def test_a_resolution_independent_pane_gives_the_same_verdict_at_1024_px_and_3x(
 
     one, three = analyses
     spec = _factory_spec()
-    assert "corners_frac" in spec["pane"]  # the example file itself
+    assert "corners_frac" in spec["pane"]
     v1, v3 = assess(one, spec).verdict, assess(three, spec).verdict
     # the pixel-corner form still serves the resolution it was written for, with the same verdict
     v1_px = assess(one, _factory_spec(**PANE_1024_PX)).verdict
