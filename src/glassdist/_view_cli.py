@@ -38,7 +38,7 @@ def register(subparsers):
     q = subparsers.add_parser(
         "compare", help="two captures of one pane on the intrinsic axis: their difference and its uncertainty",
         description="Both results analysed with --camera-distance-m, at normal incidence, aimed at the pane centre. "
-        "Prints the intrinsic mean |phi_eff| and mean phi_shear of each over the pane area both trust, their "
+        "Prints the intrinsic mean absolute phi_eff and mean phi_shear of each over the pane area both trust, their "
         "difference with its expanded uncertainty (k = 2), and whether it is consistent with zero.")
     q.add_argument("result_a", type=Path, help="output folder of the first capture")
     q.add_argument("result_b", type=Path, help="output folder of the second capture")
