@@ -197,20 +197,26 @@ def test_exif_contradicting_the_pitch_warns(tmp_path):
 # --------------------------------------------------------------------------- no false alarm
 
 
-#: The bundled examples, as their READMEs run them (examples/*/README.md, README.md's Quick start).
+#: The bundled examples, as their READMEs run them (examples/*/README.md, README.md's Quick start), and the real
+#: photographs (../shared/data) as the tests analyse them.
+_IMG = "examples/images/"
 BUNDLED = {
-    "quick start (waves, Comparative)": ["examples/data/distorted_waves.bmp", "--reference", "examples/data/reference.png",
-                                         "--pattern", "checkerboard", "--pitch-mm", "5", "--distance-m", "0.5",
-                                         "--detrend-degree", "3"],
-    "factory waves": ["examples/data/distorted_waves.bmp", "--reference", "examples/data/reference.png",
-                      "--spec", "examples/factory/spec.json"],
-    "factory ring": ["examples/data/distorted_floating_ring.bmp", "--reference", "examples/data/reference.png",
+    "quick start (factory pane, Comparative)": [_IMG + "factory_pane.png", "--reference", _IMG + "factory_reference.png",
+                                                "--pattern", "checkerboard", "--pitch-mm", "10", "--distance-m", "1"],
+    "factory pane": [_IMG + "factory_pane.png", "--reference", _IMG + "factory_reference.png",
                      "--spec", "examples/factory/spec.json"],
-    "in situ (waves, Direct)": ["examples/data/distorted_waves.bmp", "--pitch-mm", "5", "--distance-m", "1",
-                                "--pattern", "checkerboard", "--detrend-degree", "3"],
-    "in situ contract": ["examples/data/distorted_waves.bmp", "--spec", "examples/insitu/contract_spec.json"],
+    "factory clean pane": [_IMG + "factory_pane_clean.png", "--reference", _IMG + "factory_reference.png",
+                           "--spec", "examples/factory/spec.json"],
+    "in situ contract (site pane, Direct)": [_IMG + "site_pane.png", "--spec", "examples/insitu/contract_spec.json"],
     "reflection": ["examples/reflection/pane.png", "--reference", "examples/reflection/flat.png",
                    "--spec", "examples/reflection/spec.json"],
+    "real waves, Comparative": [str(REAL / "distorted_waves.bmp"), "--reference", str(REAL / "reference.png"),
+                                "--pattern", "checkerboard", "--pitch-mm", "5", "--distance-m", "0.5",
+                                "--detrend-degree", "3"],
+    "real ring, Comparative": [str(REAL / "distorted_floating_ring.bmp"), "--reference", str(REAL / "reference.png"),
+                               "--pattern", "checkerboard", "--pitch-mm", "5", "--distance-m", "1"],
+    "real waves, Direct": [str(REAL / "distorted_waves.bmp"), "--pitch-mm", "5", "--distance-m", "1",
+                           "--pattern", "checkerboard", "--detrend-degree", "3"],
 }
 
 
@@ -219,7 +225,8 @@ BUNDLED = {
 def test_no_plausibility_warning_on_a_bundled_example(tmp_path, name):
     args = BUNDLED[name]
     if not (REPO / args[0]).exists():
-        pytest.skip(f"{args[0]} is not in this checkout")
+        assert args[0].startswith(str(REAL)), f"{args[0]}: a bundled example is missing"
+        pytest.skip(f"the real photographs are not in {REAL}")
     out = run_cli("analyze", *args, "--out", tmp_path / "out", "-q", cwd=REPO)
     assert out.returncode in (0, 3), out.stderr
     assert not plausibility_warnings(out.stderr.splitlines()), out.stderr
