@@ -346,6 +346,8 @@ _OPTION_WORDS = (
     ("camera_distance_m (the camera-to-pane distance C)",
      "camera_distance_m (--camera-distance-m, the camera-to-pane distance C)"),
     ("incidence_deg must be", "incidence_deg (--incidence-deg) must be"),
+    ("the glass-less one as the reference", "the glass-less one as the reference (--reference)"),
+    ("mm (pitch_mm) the grid measures", "mm (--pitch-mm) the grid measures"),
 )
 _DEGREE_WORDS = re.compile(r"with detrend_degree (\d+):")
 

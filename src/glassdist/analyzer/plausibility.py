@@ -88,10 +88,10 @@ def distance_warning(distance_m: float, mm_per_px: float, image_shape: tuple[int
 
     Examples
     --------
-    The bundled photos (about 0.72 mm/px over 1024 px) with ``--distance-m 500``:
+    The real photos (about 0.72 mm/px over 1024 px) with ``distance_m = 500``:
 
     >>> print(distance_warning(500.0, 0.722, (768, 1024)))  # doctest: +ELLIPSIS
-    implausible distance: distance_m = 500 m (--distance-m, the glass-to-grid distance L) ... did you mean 0.5 m ...?
+    implausible distance: 500 m for distance_m (the glass-to-grid distance L) ... did you mean 0.5 m ...?
     >>> distance_warning(0.5, 0.722, (768, 1024)) is None
     True
     """
@@ -101,7 +101,7 @@ def distance_warning(distance_m: float, mm_per_px: float, image_shape: tuple[int
     if angle >= MIN_VIEW_ANGLE_DEG:
         return None
     width_m = mm_per_px * max(image_shape) / 1000.0
-    text = (f"implausible distance: distance_m = {distance_m:g} m (--distance-m, the glass-to-grid distance L) puts "
+    text = (f"implausible distance: {distance_m:g} m for distance_m (the glass-to-grid distance L) puts "
             f"the camera at least {distance_m:g} m from a backdrop it sees {width_m:.3g} m of: an angle of view of "
             f"{angle:.2g} deg, narrower than any camera lens ({MIN_VIEW_ANGLE_DEG:g} deg); every power in mD scales "
             "as 1/L")
@@ -203,7 +203,7 @@ def swap_warning(photo_spread: float, reference_spread: float) -> str | None:
         return None
     return (f"the reference looks more distorted than the photo (spread of the grid's local frequency "
             f"{100 * reference_spread:.1f}% against {100 * photo_spread:.1f}%): the two may be swapped; "
-            "give the photo through the glass as the image and the glass-less one as the reference (--reference)")
+            "give the photo through the glass as the image and the glass-less one as the reference")
 
 
 def exif_scale_mm_per_px(camera: dict[str, Any] | None, image_shape: tuple[int, int]) -> float | None:
@@ -253,7 +253,7 @@ def exif_scale_warning(camera: dict[str, Any] | None, mm_per_px: float, image_sh
     ratio = mm_per_px / expected
     if 1.0 / EXIF_SCALE_FACTOR <= ratio <= EXIF_SCALE_FACTOR:
         return None
-    return (f"scale mismatch: with a grid pitch of {pitch_mm:g} mm (--pitch-mm) the grid measures {mm_per_px:.3g} "
+    return (f"scale mismatch: with a grid pitch of {pitch_mm:g} mm (pitch_mm) the grid measures {mm_per_px:.3g} "
             f"mm/px, but the photo's EXIF (focal length, subject distance {camera['subject_distance_m']:g} m) implies "
             f"about {expected:.3g} mm/px ({ratio:.2g} times as much); check the pitch is the printed grid's, in mm")
 
