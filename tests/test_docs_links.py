@@ -88,3 +88,17 @@ def test_link_extraction_can_fail(tmp_path):
 @pytest.mark.parametrize("path", DOC_FILES, ids=[str(p.relative_to(REPO)) for p in DOC_FILES])
 def test_relative_links_resolve(path):
     assert broken_links(path) == []
+
+
+def test_every_public_module_has_a_reference_page():
+    """A module added to the package gets its page in docs/reference/modules (and so in the built API reference)."""
+    src = REPO / "src" / "glassdist"
+    pages = {p.stem for p in (REPO / "docs" / "reference" / "modules").glob("glassdist*.md")}
+    modules = set()
+    for path in src.rglob("*.py"):
+        parts = list(path.relative_to(src.parent).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        if len(parts) > 1 and not any(p.startswith("_") for p in parts) and "migrations" not in parts:
+            modules.add(".".join(parts))
+    assert sorted(modules - pages) == []
