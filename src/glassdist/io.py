@@ -283,7 +283,9 @@ def _check_samples(p: Path, raw: np.ndarray, *, binary: bool = False) -> None:
             "from are lost; give the camera's grey or colour image"
         )
     if raw.dtype.kind == "f" and raw.size:
-        lo, hi = float(np.nanmin(raw)), float(np.nanmax(raw))
+        with warnings.catch_warnings():  # an all-NaN image: no range, refused by the checks that follow
+            warnings.simplefilter("ignore", RuntimeWarning)
+            lo, hi = float(np.nanmin(raw)), float(np.nanmax(raw))
         if np.isfinite(lo) and np.isfinite(hi) and (lo < -_FLOAT_SLACK or hi > 1.0 + _FLOAT_SLACK):
             raise InputError(
                 f"image '{shown}' holds floating-point values from {lo:.4g} to {hi:.4g}; glassdist reads a float image "
