@@ -320,7 +320,8 @@ def analyze_captures(
     with routed_warnings() as numerical:
         meas, warn = _measured_captures(images, pitch_mm, distance_m, reference, params, mask, pattern)
         refm = meas[0].inputs.reference  # the slips are the run's: checked on the first capture, as analyze does
-        warn += tuple(review_measurement(images[0], None if refm is None else refm.grid_spread, meas[0].carriers,
+        warn += tuple(review_measurement(np.shape(images[0]), None if refm is None else refm.grid_spread,
+                                         meas[0].grid_spread,
                                          mm_per_px=meas[0].mm_per_px, distance_m=distance_m, pitch_mm=pitch_mm))
         total, count, records = _registered_sums(meas)
         ag, n, w_avg = _averaged_grid(meas[0], total, count, len(meas))

@@ -189,6 +189,7 @@ class Measurement:
     noise_std: tuple[float, float | None]
     phase_noise: PhaseNoise
     warnings: tuple[str, ...] = ()
+    grid_spread: float = float("nan")  # the photo's, for the swapped-pair check (Comparative Method)
 
 
 @dataclass(frozen=True)
@@ -200,6 +201,7 @@ class _Demodulated:
     region: Region
     phases: np.ndarray
     warnings: tuple[str, ...]
+    grid_spread: float = float("nan")
 
 
 def _demodulated(inp: Inputs) -> _Demodulated:
@@ -215,14 +217,16 @@ def _demodulated(inp: Inputs) -> _Demodulated:
     w_one += region_warnings(one, demod.mods)
     phases = unwrapped_phases(demod, one, p)  # F4
     assert demod.spectrum is not None
+    # the photo's grid spread against the reference's (the swapped-pair check), from the same FFT
+    spread = grid_spread(None, carriers, spectrum=demod.spectrum) if inp.reference is not None else float("nan")
     f5 = D.follow_local_grid(demod.spectrum, img, inp.reference, demod, one, phases, p, contrast)  # F5
-    demod = replace(demod, spectrum=None)  # the photo's one FFT, read by F5: no longer held
+    demod = replace(demod, spectrum=None)  # the photo's one FFT, read by F5 and the spread: no longer held
     if f5 is None:
-        return _Demodulated(demod, mg, one, phases, first + w_one)
+        return _Demodulated(demod, mg, one, phases, first + w_one, spread)
     f5_region, w_f5 = region(f5.demod, p, inp.mask, mg, f5.residual, f5.region_mods, f5.beyond,
                              lambda: contrast(f5.demod.grid), first=f5.measured)
     if f5_region.n == 0:  # nothing F5 could measure: the one pass stands
-        return _Demodulated(demod, mg, one, phases, first + w_one)
+        return _Demodulated(demod, mg, one, phases, first + w_one, spread)
     # Where the one-pass local frequency was already beyond the bandpass, what F5 still cannot
     # measure there (no predictor to follow, or one that ran out of reach) is beyond reach: neither occluded,
     # a residue of the grid itself nor a stray fragment.
@@ -233,7 +237,7 @@ def _demodulated(inp: Inputs) -> _Demodulated:
     lost |= (f5_region.quality == LOW_MODULATION) & f5.grown
     f5_region.quality[lost] = BEYOND_RANGE
     w_f5 += region_warnings(f5_region, f5.demod.mods)
-    return _Demodulated(f5.demod, mg, f5_region, unwrapped_phases(f5.demod, f5_region, p), first + w_f5)
+    return _Demodulated(f5.demod, mg, f5_region, unwrapped_phases(f5.demod, f5_region, p), first + w_f5, spread)
 
 
 # Block I's fit is called weak below this inlier fraction (below 0.1 Block I warns itself). A roller
@@ -304,7 +308,8 @@ def measure(image: np.ndarray, pitch_mm: float, distance_m: float, reference: np
                      bandpass_px2(demod.covariances))
     inp = replace(inp, image=None, warnings=())  # several captures are held at once: not their photos
     return Measurement(inp, carriers, fit, H_jac, mm_per_px, sigma_mm, ag, reg.n, float(pitch_mm), float(distance_m),
-                       quality, demod.grid, dm.margins.as_tuple(), guard_px, noise, pn, warn + w_sigma)
+                       quality, demod.grid, dm.margins.as_tuple(), guard_px, noise, pn, warn + w_sigma,
+                       dm.grid_spread)
 
 
 # --------------------------------------------------------------------------- evaluation (Block A)
@@ -584,7 +589,7 @@ def analyze(
     with routed_warnings() as numerical:
         meas = measure(img, pitch_mm, distance_m, ref, prm, msk, pattern, lens=lens)
         refm = meas.inputs.reference
-        slips = tuple(review_measurement(img, None if refm is None else refm.grid_spread, meas.carriers,
+        slips = tuple(review_measurement(np.shape(img), None if refm is None else refm.grid_spread, meas.grid_spread,
                                          mm_per_px=meas.mm_per_px, distance_m=distance_m, pitch_mm=pitch_mm,
                                          camera=sources.get("camera") if camera is None else camera))
         del image, img  # Block A needs no photo: freed here unless the caller keeps it (the command line does not)

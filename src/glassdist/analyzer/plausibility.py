@@ -258,26 +258,27 @@ def exif_scale_warning(camera: dict[str, Any] | None, mm_per_px: float, image_sh
             f"about {expected:.3g} mm/px ({ratio:.2g} times as much); check the pitch is the printed grid's, in mm")
 
 
-def review_measurement(image: np.ndarray, reference_spread: float | None, carriers: CarrierPair, *, mm_per_px: float,
+def review_measurement(image_shape: tuple[int, ...], reference_spread: float | None, photo_spread: float, *, mm_per_px: float,
                        distance_m: float, pitch_mm: float, camera: dict[str, Any] | None = None) -> list[str]:
     """Every plausibility warning of one measured photo: distance, swapped pair, EXIF scale.
 
     Parameters
     ----------
-    image : ndarray (H, W)
-        The photo through the glass.
+    image_shape : tuple
+        The shape of the photo through the glass, (H, W).
     reference_spread : float or None
         :func:`grid_spread` of the reference photo (Comparative Method), None without one.
-    carriers : CarrierPair
-        The carriers the photo was demodulated at.
+    photo_spread : float
+        :func:`grid_spread` of the photo at the carriers it was demodulated at, from its F1
+        spectrum (NaN where not computed: the Direct Method).
     mm_per_px, distance_m, pitch_mm : float
         The measured backdrop scale, the glass-to-grid distance L (m) and the stated pitch (mm).
     camera : dict, optional
         The photo's EXIF facts (:func:`glassdist.io.camera_metadata`).
     """
-    shape = np.shape(image)
+    shape = (int(image_shape[0]), int(image_shape[1]))
     found = [distance_warning(distance_m, mm_per_px, shape),
              exif_scale_warning(camera, mm_per_px, shape, pitch_mm)]
     if reference_spread is not None and np.isfinite(reference_spread) and reference_spread > SWAP_FLOOR:
-        found.append(swap_warning(grid_spread(image, carriers), reference_spread))
+        found.append(swap_warning(photo_spread, reference_spread))
     return [w for w in found if w is not None]
