@@ -40,6 +40,7 @@ class BrownDistortion:
 
     @property
     def is_identity(self) -> bool:
+        """True when every coefficient is zero (the ideal pinhole)."""
         return self.k1 == 0 and self.k2 == 0 and self.p1 == 0 and self.p2 == 0
 
     def distort(self, x, y):
@@ -99,4 +100,5 @@ class BrownDistortion:
         return BrownDistortion(self.k1 * f**2, self.k2 * f**4, self.p1 * f, self.p2 * f)
 
     def to_dict(self) -> dict:
+        """The coefficients as a JSON-ready mapping (``k1``, ``k2``, ``p1``, ``p2``)."""
         return {"k1": self.k1, "k2": self.k2, "p1": self.p1, "p2": self.p2}

@@ -195,6 +195,7 @@ class RollWave:
     distance_m: float
 
     def to_dict(self) -> dict:
+        """The record as a JSON-ready mapping (its fields, by name)."""
         return asdict(self)
 
 
@@ -651,6 +652,7 @@ class GridLineSlope:
         return float(min(self.one_in_n))
 
     def statistics(self) -> dict:
+        """The measure's figures as a JSON-ready mapping (directions, maximum slopes, one-in-N)."""
         return {
             "directions_deg": list(self.directions_deg),
             "max_slope": list(self.max_slopes),
@@ -731,6 +733,7 @@ class EquivalentPower:
     convention: str = EQUIVALENT_POWER_CONVENTION
 
     def to_dict(self) -> dict:
+        """The record as a JSON-ready mapping (its fields, by name)."""
         return asdict(self)
 
 

@@ -19,7 +19,8 @@ __all__ = ["Executor", "SerialExecutor", "DaskExecutor", "JobOutcome", "open_exe
 logger = logging.getLogger(__name__)
 
 _INSTALL = "install the extra with: pip install 'glassdist[distributed]'"
-_SHARED = "inputs and outputs must be on a filesystem every worker sees under the same path (see docs/user-guide/batches-and-dask.md)"
+_SHARED = ("inputs and outputs must be on a filesystem every worker sees under the same path "
+           "(see docs/user-guide/batches-and-dask.md)")
 
 
 @dataclass(frozen=True)

@@ -6,11 +6,10 @@ from __future__ import annotations
 import shlex
 import sys
 import time
-from pathlib import Path
 
+from .._cli_shared import folder_option, progress_reporter
 from ..distributed import add_scheduler_options, open_executor
 from ..io import prepare_output_dir
-from .._cli_shared import folder_option, progress_reporter
 from ..validation import SIGMA_MM, Range, number_option
 from . import _NAMES
 
@@ -33,9 +32,11 @@ def register(subparsers):
     p.add_argument("name", choices=_NAMES, help="experiment to run")
     p.add_argument("--out", type=folder_option, required=True, metavar="DIR", help="output folder (created if needed)")
     p.add_argument("--engine", choices=["exact", "cycles"], default="exact", help="render engine (default exact)")
-    p.add_argument("--scale", type=number_option(Range(0.05, 16.0)), default=1.0, help="image size relative to the scenes' 1024 x 768 px (default 1)")
+    p.add_argument("--scale", type=number_option(Range(0.05, 16.0)), default=1.0,
+                   help="image size relative to the scenes' 1024 x 768 px (default 1)")
     p.add_argument("--spp", type=int, help="samples per pixel (default: the scenes', 16)")
-    p.add_argument("--sigma-mm", type=number_option(SIGMA_MM), help="reporting smoothing scale on the backdrop, mm (default: the experiment's)")
+    p.add_argument("--sigma-mm", type=number_option(SIGMA_MM),
+                   help="reporting smoothing scale on the backdrop, mm (default: the experiment's)")
     p.add_argument("--scenes", help="accuracy only: comma-separated subset of its scenes")
     p.add_argument("--params", metavar="FILE", help="analyzer parameters (JSON, as for glassdist analyze --params) over "
                    "each scene's own analysis settings (the experiment's own sigma and detrend degree stay over them), "

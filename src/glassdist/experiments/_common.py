@@ -149,7 +149,8 @@ def render_inputs(
 
     t0 = time.perf_counter()
     distorted = render_scene(scene, engine=eng, progress=stage(f"{scene.name}: render distorted"))
-    ref = render_scene(scene, engine=eng, reference=True, progress=stage(f"{scene.name}: render reference")) if reference else None
+    ref = (render_scene(scene, engine=eng, reference=True, progress=stage(f"{scene.name}: render reference"))
+           if reference else None)
     t1 = time.perf_counter()
     model = predict_displacement(scene)
     t2 = time.perf_counter()

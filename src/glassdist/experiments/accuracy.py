@@ -75,6 +75,7 @@ UNEVEN_LIGHT = {"vignetting": 0.3, "lighting": {"gradient": 0.3, "direction_deg"
 
 
 def example(name: str):
+    """The shipped example scene ``name`` (``SCENES_DIR/<name>.yaml``)."""
     return load_scene(SCENES_DIR / f"{name}.yaml")
 
 
@@ -100,10 +101,12 @@ def igu_flat():
 
 
 def lens_p64_noisy():
+    """The biconvex lens scene (64 px period) with camera noise."""
     return example("biconvex_lens_p64").with_changes(name="lens_p64_noisy", imaging={"noise": NOISE})
 
 
 def wavy_uneven_light():
+    """The wavy slab under vignetting and a lighting gradient."""
     return example("wavy_slab").with_changes(name="wavy_slab_uneven_light", imaging=UNEVEN_LIGHT)
 
 
@@ -133,13 +136,17 @@ SCENES = {
     "biconvex_lens_p96": _shipped("biconvex_lens_p96", "pitch 96.9 mm"),
     "mild_slab_rotated": _shipped("mild_slab_rotated", "grid rotated 20°"),
     "pillowed_igu": _shipped("pillowed_igu", "checkerboard, frame edge in view"),
-    "pillowed_igu_flat": _variant("flat", igu_flat, "control: the pillowed IGU scene without its domes (flat pane, frame in view)"),
+    "pillowed_igu_flat": _variant(
+        "flat", igu_flat, "control: the pillowed IGU scene without its domes (flat pane, frame in view)"
+    ),
     "wavy_slab_edge_mid": _variant(
         "clean", wavy_edge_mid_image, "wavy slab, camera moved sideways so that the pane's right edge crosses the image centre"
     ),
     "flat_noisy": _variant("flat", flat_noisy, f"the wavy slab's pane without deformation, {_NOISE_TEXT}"),
     "lens_p64_noisy": _variant("noisy", lens_p64_noisy, f"biconvex_lens_p64 with {_NOISE_TEXT}"),
-    "wavy_slab_uneven_light": _variant("clean", wavy_uneven_light, "wavy slab, vignetting 0.3 and a lighting gradient 0.3 at 30°"),
+    "wavy_slab_uneven_light": _variant(
+        "clean", wavy_uneven_light, "wavy slab, vignetting 0.3 and a lighting gradient 0.3 at 30°"
+    ),
     "wavy_slab_A0.5": _variant("clean", lambda: wavy_amplitude(0.5), "wavy slab, wave amplitude 0.5 mm"),
     "wavy_slab_A0.75": _variant("clean", lambda: wavy_amplitude(0.75), "wavy slab, wave amplitude 0.75 mm"),
 }
@@ -293,6 +300,7 @@ def _cell(run: dict, key: str, fmt: str, value: float) -> str:
 
 
 def results_table(record: dict) -> str:
+    """The accuracy record's per-run table (markdown): ratios to the truth, correlations, coverage."""
     rows = [
         "| scene | method | σ mm | N | φ_eff ratio | φ_shear ratio | r_eff | r_shear | pane coverage "
         "| p95 \\|φ_eff\\| mD | warnings |",
@@ -364,6 +372,7 @@ def _figure(run: dict, key: str) -> str:
 
 
 def accuracy_markdown(record: dict) -> str:
+    """The accuracy record as the markdown page ``docs/records/accuracy.md``."""
     t = record["timings"]
     scenes = "\n".join(f"- {s['name']}: {s['scene']}" for s in record["scenes"])
     return f"""Wall time {record['wall_s']:.0f} s on 2 shared cores (rendering {t['render_s']:.0f} s, model and truth \
@@ -424,16 +433,17 @@ def _coverage_section(folder: Path) -> str:
     return f"""
 ## Coverage against independent peers
 
-Produced by `{rec['command']}` (the "before" columns: `{rec.get("before", {}).get("command", "—")}`, the analyzer before the quality map). Peers: a
-compact fast checkerboard demodulation (FCD, Wildeman 2018; `benchmarks/_fcd.py`) and OpenCV's DIS and
-Farneback optical flow, each given the reference and the photo (the flows computed from the photo to the
+Produced by `{rec['command']}` (the "before" columns: `{rec.get("before", {}).get("command", "—")}`, the analyzer
+before the quality map). Peers: a compact fast checkerboard demodulation (FCD, Wildeman 2018; `benchmarks/_fcd.py`)
+and OpenCV's DIS and Farneback optical flow, each given the reference and the photo (the flows computed from the photo to the
 reference, so that, like FCD's field, they are defined at the photo's pixels: `benchmarks/_flow.py`).
 Agreement area: where FCD agrees with at
 least one of the flows within {rec['tolerance_periods']:g} carrier period (each flow alone locks onto the wrong
 period in places). Coverage: share of the agreement area that glassdist (Comparative Method) reports
 (`valid`); precision: share of the reported region inside the agreement area; accuracy: share of the
 reported region where glassdist agrees with FCD within {rec['tolerance_periods']:g} period. Real photos:
-the real photos (`../shared/data/real-checkerboard-water`) at 1024 px, 320 px centre crops and 320 px downscales, each also with an opaque drop
+the real photos (`../shared/data/real-checkerboard-water`) at 1024 px, 320 px centre crops and 320 px downscales,
+each also with an opaque drop
 (120 px across at 1024 px) painted in; synthetic: a roller wave behind a line grid or a checkerboard.
 
 | case | agree area | before: analysed / coverage / precision | analysed | coverage | precision | accuracy vs FCD |

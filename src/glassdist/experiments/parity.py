@@ -18,8 +18,17 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ._common import ExperimentResult, RunOptions, SceneRun, bound, bounds_table, evaluate
-from ._common import run_scenes, settings_record, validation_record
+from ._common import (
+    ExperimentResult,
+    RunOptions,
+    SceneRun,
+    bound,
+    bounds_table,
+    evaluate,
+    run_scenes,
+    settings_record,
+    validation_record,
+)
 
 __all__ = ["PAPER", "SCENE", "run_parity", "parity_figure", "parity_bounds", "bandpass_ablation", "parity_table"]
 

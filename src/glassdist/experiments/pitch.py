@@ -23,9 +23,22 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage
 
-from ._common import ExperimentResult, RunOptions, SceneRun, bound, bounds_table, common_region
-from ._common import relative_difference, run_scenes, settings_record, validation_record
-from ._common import map_panel, region_stats, share_fig_ax, shared_limit
+from ._common import (
+    ExperimentResult,
+    RunOptions,
+    SceneRun,
+    bound,
+    bounds_table,
+    common_region,
+    map_panel,
+    region_stats,
+    relative_difference,
+    run_scenes,
+    settings_record,
+    share_fig_ax,
+    shared_limit,
+    validation_record,
+)
 
 __all__ = [
     "PAPER",
@@ -245,7 +258,8 @@ def pitch_table(record: dict) -> str:
         lines += [
             f"Mean abs {ch}, mD (own regions):",
             "",
-            "| grid | pitch, mm | Direct | Comparative | abs(D-C)/max | truth | Direct / truth | paper Direct | paper Comparative | paper abs(D-C)/max |",
+            "| grid | pitch, mm | Direct | Comparative | abs(D-C)/max | truth | Direct / truth | paper Direct "
+            "| paper Comparative | paper abs(D-C)/max |",
             "|---|---|---|---|---|---|---|---|---|---|",
         ]
         for n in names:
@@ -333,7 +347,8 @@ def pitch_power_figure(runs: dict, *, channel: str = "phi_eff", fig=None, ax=Non
             st = region_stats(m, reg)
             map_panel(
                 axes[i, j], fig, m, reg, vmin=-lim if signed else 0.0, vmax=lim, cmap="RdBu_r" if signed else "viridis",
-                title=f"{who}, {n} grid ({pitch:g} mm)\n{_label(channel)}: mean abs {st['mean_abs']:.3f} mD, std {st['std']:.3f} mD",
+                title=f"{who}, {n} grid ({pitch:g} mm)\n"
+                      f"{_label(channel)}: mean abs {st['mean_abs']:.3f} mD, std {st['std']:.3f} mD",
             )
     fig.tight_layout()
     return fig, axes
@@ -357,7 +372,8 @@ def pitch_shear_figure(runs: dict, *, pitch: str = "coarse", fig=None, ax=None):
         st = region_stats(m, reg)
         map_panel(
             a, fig, m, reg, vmin=0.0, vmax=lim, cmap="viridis",
-            title=f"{who}, {pitch} grid ({p_mm:g} mm)\n{_label('phi_shear')}: mean abs {st['mean_abs']:.3f} mD, std {st['std']:.3f} mD",
+            title=f"{who}, {pitch} grid ({p_mm:g} mm)\n"
+                  f"{_label('phi_shear')}: mean abs {st['mean_abs']:.3f} mD, std {st['std']:.3f} mD",
         )
     fig.tight_layout()
     return fig, axes

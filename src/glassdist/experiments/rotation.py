@@ -16,9 +16,21 @@ from pathlib import Path
 
 import numpy as np
 
-from ._common import ExperimentResult, RunOptions, SceneRun, bound, bounds_table, common_region
-from ._common import run_scenes, settings_record, validation_record
-from ._common import map_panel, region_stats, share_fig_ax, shared_limit
+from ._common import (
+    ExperimentResult,
+    RunOptions,
+    SceneRun,
+    bound,
+    bounds_table,
+    common_region,
+    map_panel,
+    region_stats,
+    run_scenes,
+    settings_record,
+    share_fig_ax,
+    shared_limit,
+    validation_record,
+)
 
 __all__ = [
     "PAPER",
@@ -137,7 +149,8 @@ def rotation_table(record: dict) -> str:
         f"{record['image_size'][1]} px, {record['samples_per_pixel']} spp, engine {record['engine']}; Direct Method, "
         f"N = {record['detrend_degree']}, sigma = {record['sigma_mm']:g} mm ({record['sigma_mm'] / al['mm_per_px']:.0f} px).",
         "",
-        "| grid | rotation, deg | mean abs phi_eff, mD | std, mD | exact truth, mD | Analyzer / truth | common region, mD | paper, mD |",
+        "| grid | rotation, deg | mean abs phi_eff, mD | std, mD | exact truth, mD | Analyzer / truth "
+        "| common region, mD | paper, mD |",
         "|---|---|---|---|---|---|---|---|",
     ]
     for name, e, p in (("aligned", al, PAPER["aligned_phi_eff_mD"]), ("rotated", ro, PAPER["rotated_phi_eff_mD"])):

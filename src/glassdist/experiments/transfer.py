@@ -37,7 +37,7 @@ import numpy as np
 from scipy import ndimage
 
 from ..scene import load_scene
-from ..theory import analysis_params, predict_channels, read_params_file
+from ..theory import analysis_params, read_params_file
 from ._common import ExperimentResult, RunOptions, evaluate, render_inputs, share_fig_ax
 
 __all__ = ["measured_transfer", "independent_phi_eff", "minus_homography_change", "run_transfer", "RIPPLE_PERIODS",
@@ -188,7 +188,10 @@ def _interior(region, sigma_px):
 
 
 def _rms_ratio(a, b, m):
-    """Amplitude of ``a`` relative to ``b``: the least-squares slope of ``a`` on ``b`` (render noise, uncorrelated with ``b``, does not bias it)."""
+    """Amplitude of ``a`` relative to ``b``: the least-squares slope of ``a`` on ``b``.
+
+    Render noise, uncorrelated with ``b``, does not bias it.
+    """
     x, y = b[m] - b[m].mean(), a[m] - a[m].mean()
     return float(np.sum(x * y) / np.sum(x * x))
 
@@ -340,7 +343,8 @@ def run_transfer(*, periods=RIPPLE_PERIODS, sigma_periods=SIGMA_PERIODS, sigma_m
                              "value": min(direct["corr"], direct["corr_interior_independent"]),
                              "met": min(direct["corr"], direct["corr_interior_independent"]) >= 0.99},
     }
-    return ExperimentResult("transfer", record, transfer_table(record), {"transfer_function.png": lambda: transfer_figure(record)})
+    figures = {"transfer_function.png": lambda: transfer_figure(record)}
+    return ExperimentResult("transfer", record, transfer_table(record), figures)
 
 
 def transfer_table(record: dict) -> str:
@@ -355,7 +359,8 @@ def transfer_table(record: dict) -> str:
         "*single*: the +A render alone, through the stack. *G*: the share of the ripple the Gaussian of sigma keeps; "
         f"cases with G < {MIN_GAIN} keep too little of the ripple to be judged (listed).",
         "",
-        "| ripple, periods | sigma, periods | G | method | ratio (stack) | ratio (indep.) | truth stack / indep. | single | interior | judged |",
+        "| ripple, periods | sigma, periods | G | method | ratio (stack) | ratio (indep.) | truth stack / indep. "
+        "| single | interior | judged |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in record["ripples"]:
@@ -389,7 +394,8 @@ def transfer_figure(record: dict, *, fig=None, ax=None):
     nn = np.linspace(n.min(), n.max(), 200)
     for i, (sp, vals) in enumerate(tf["measured"].items()):
         c = f"C{i}"
-        a.plot(nn, np.exp(-2 * np.pi**2 * float(sp) ** 2 / nn**2), "-", color=c, lw=1, label=f"target G, sigma {float(sp):g} periods")
+        a.plot(nn, np.exp(-2 * np.pi**2 * float(sp) ** 2 / nn**2), "-", color=c, lw=1,
+               label=f"target G, sigma {float(sp):g} periods")
         a.plot(n, vals, "o", color=c, ms=4, label=f"measured, sigma {float(sp):g}")
     a.plot(n, tf["instrument"], "k--", lw=1, label="Block F alone (bandpass + F3)")
     a.set_yscale("log")

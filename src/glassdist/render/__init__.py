@@ -66,7 +66,9 @@ class Renderer(Protocol):
         reference: bool,
         rng: np.random.Generator,
         progress: Callable[[int, int], None] | None = None,
-    ) -> np.ndarray: ...
+    ) -> np.ndarray:
+        """Render ``scene`` (or, with ``reference=True``, its glass-less reference) as a float image in [0, 1]."""
+        ...
 
 
 def get_renderer(name: str = "exact") -> Renderer:

@@ -13,9 +13,9 @@ import numpy as np
 from .._cli_shared import add_render_options, add_scene_command, apply_render_overrides, progress_reporter
 from .._version import __version__
 from ..errors import InputError
-from ..validation import safe_text
 from ..io import prepare_output_dir, write_png16
 from ..scene import load_scene
+from ..validation import safe_text
 
 log = logging.getLogger(__name__)
 

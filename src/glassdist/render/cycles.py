@@ -77,8 +77,8 @@ from typing import Callable
 import numpy as np
 
 from ..errors import GlassdistError, InputError
-from ..validation import safe_text
 from ..scene import Scene, pixel_directions, straight_landing
+from ..validation import safe_text
 
 __all__ = [
     "CyclesRenderer",
@@ -101,7 +101,8 @@ BPY_PYTHON = (3, 11)  # the only Python the bpy 5.0.1 wheels are built for
 ENV_PYTHON = "GLASSDIST_CYCLES_PYTHON"
 ENV_CACHE = "GLASSDIST_CACHE_DIR"
 WORKER = Path(__file__).with_name("_cycles_worker.py")
-INSTALL_HINT = "run 'glassdist cycles-setup' once (downloads Blender's bpy, 374 MB) or set GLASSDIST_CYCLES_PYTHON to a Python that has bpy"
+INSTALL_HINT = ("run 'glassdist cycles-setup' once (downloads Blender's bpy, 374 MB) "
+                "or set GLASSDIST_CYCLES_PYTHON to a Python that has bpy")
 
 #: world (x right, y down, z forward) -> Blender (x right, y forward, z up); a proper rotation
 WORLD_TO_BLENDER = ((1.0, 0.0, 0.0), (0.0, 0.0, 1.0), (0.0, -1.0, 0.0))
@@ -771,7 +772,8 @@ def register(subparsers) -> None:
 
 def main(argv=None) -> int:
     """``python -m glassdist.render.cycles``: install the Cycles engine."""
-    p = argparse.ArgumentParser(prog="python -m glassdist.render.cycles", description="Install the Blender Cycles engine.", allow_abbrev=False)
+    p = argparse.ArgumentParser(prog="python -m glassdist.render.cycles", description="Install the Blender Cycles engine.",
+                                allow_abbrev=False)
     _add_setup_arguments(p)
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")

@@ -55,7 +55,8 @@ def run(args) -> int:
         "incidence_deg": pred.incidence_deg,
         **{f"term_{k}_mm": v for k, v in pred.terms_mm.items()},
     }
-    np.savez_compressed(out / "prediction.npz", **{k: np.asarray(v, np.float32) if v.dtype.kind == "f" else v for k, v in arrays.items()})
+    np.savez_compressed(out / "prediction.npz",
+                        **{k: np.asarray(v, np.float32) if v.dtype.kind == "f" else v for k, v in arrays.items()})
     stats = {n: channel_statistics(getattr(ch, n), valid) for n in ("phi_eff_mD", "phi_shear_mD", "phi_total_mD")}
     record = {
         "glassdist_version": __version__,

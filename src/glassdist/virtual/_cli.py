@@ -6,8 +6,7 @@ import json
 
 import numpy as np
 
-from .._cli_shared import add_analysis_options, add_render_options, add_scene_command
-from .._cli_shared import apply_render_overrides, progress_reporter
+from .._cli_shared import add_analysis_options, add_render_options, add_scene_command, apply_render_overrides, progress_reporter
 from ..io import prepare_output_dir, write_png16
 from ..scene import load_scene
 
@@ -51,8 +50,9 @@ def run(args) -> int:
     np.savez_compressed(
         out / "validation_fields.npz",
         valid=val.valid,
-        **{f"analyzer_{n}": np.asarray(getattr(val.analysis, n), np.float32) for n in ("phi_eff_mD", "phi_shear_mD", "phi_total_mD", "displacement_detrended_mm")},
-        **{f"analytical_{n}": np.asarray(getattr(val.analytical, n), np.float32) for n in ("phi_eff_mD", "phi_shear_mD", "phi_total_mD", "displacement_detrended_mm")},
+        **{f"{who}_{n}": np.asarray(getattr(fields, n), np.float32)
+           for who, fields in (("analyzer", val.analysis), ("analytical", val.analytical))
+           for n in ("phi_eff_mD", "phi_shear_mD", "phi_total_mD", "displacement_detrended_mm")},
     )
     r, pr = record["ratios"], record["procrustes"]
     print(

@@ -181,8 +181,8 @@ def _read_json(path):
 
 
 def _finish_variant(v, out, tmp, outcome, seconds, fingerprint):
-    from ..jobs.runner import place_folder
     from ..fs import atomic_write_text
+    from ..jobs.runner import place_folder
 
     final = out / "variants" / v.id
     failed_json, failed_log = out / "failed" / f"{v.id}.json", out / "failed" / f"{v.id}.log"
