@@ -11,4 +11,6 @@ paths=("$@")
 status=0
 "$PY" -m ruff check "${paths[@]}" || status=1
 "$PY" -m mypy || status=1
+# the lazily loaded public names, as IDEs and mypy see them, match what loads at run time
+"$PY" scripts/lazy_stubs.py --check || status=1
 exit $status

@@ -345,3 +345,27 @@ def test_every_public_name_resolves(package):
         except AttributeError:
             broken.append(n)
     assert missing == [] and broken == [], (missing, broken)
+
+
+def _typed_names(init: Path) -> dict[str, str]:
+    """``{public name: ".module"}`` (``".module:attr"`` for an alias) imported under ``if TYPE_CHECKING:``."""
+    tree = ast.parse(init.read_text())
+    found: dict[str, str] = {}
+    for node in tree.body:
+        if isinstance(node, ast.If) and isinstance(node.test, ast.Name) and node.test.id == "TYPE_CHECKING":
+            for imp in node.body:
+                assert isinstance(imp, ast.ImportFrom), ast.dump(imp)
+                module = "." * imp.level + (imp.module or "")
+                for a in imp.names:
+                    found[a.asname or a.name] = module if a.asname in (None, a.name) else f"{module}:{a.name}"
+    return found
+
+
+@pytest.mark.parametrize("init", sorted(p for p in SRC.rglob("__init__.py") if "lazy_exports(" in p.read_text()),
+                         ids=lambda p: str(p.parent.relative_to(SRC.parent)))
+def test_lazy_names_are_visible_to_static_tools(init):
+    """What an IDE and mypy see (the TYPE_CHECKING imports) is exactly what ``__getattr__`` loads."""
+    import importlib
+
+    package = importlib.import_module(".".join(init.parent.relative_to(SRC.parent).parts))
+    assert _typed_names(init) == package._LAZY_HOMES, "run: python scripts/lazy_stubs.py"

@@ -17,6 +17,7 @@ Conventions (used everywhere in the package)
 """
 
 import logging
+from typing import TYPE_CHECKING
 
 from ._lazy import lazy_exports
 from ._version import __version__
@@ -51,6 +52,26 @@ _HOMES = {
     "write_outputs": ".storage",
 }
 
+
+# --- typed names for static tools (scripts/lazy_stubs.py writes this block) ---
+if TYPE_CHECKING:
+    from ._api import evaluate_spec, write_report
+    from .analyzer import (
+        AnalysisResult,
+        AnalyzerParams,
+        ReflectionGeometry,
+        analyze,
+        analyze_captures,
+        analyze_reflection,
+        channel_statistics,
+        evaluate_displacement,
+        load_params,
+        prepare_reference,
+    )
+    from .errors import AnalysisError, GlassdistError, InputError
+    from .io import read_image, read_mask
+    from .storage import load_result, write_outputs
+# --- end of the typed names ---
 
 _lazy_getattr, _lazy_dir = lazy_exports(__name__, _HOMES)
 

@@ -28,8 +28,17 @@ def lazy_exports(package: str, homes: dict[str, str]):
     (callable, callable)
         Assign them to the package's ``__getattr__`` and ``__dir__``. A name is imported on
         first access and then kept in the package's namespace as a plain attribute.
+
+    Notes
+    -----
+    Static tools do not run ``__getattr__``: each package also imports its lazy names under
+    ``if TYPE_CHECKING:``, written from ``homes`` by ``scripts/lazy_stubs.py`` (and checked
+    by ``tests/test_code_layout.py``), so that an IDE and mypy see the typed public API.
     """
     namespace = importlib.import_module(package).__dict__
+    # kept for ``scripts/lazy_stubs.py`` and the test that the package's ``TYPE_CHECKING`` imports
+    # (what an IDE and mypy see) name exactly these homes
+    namespace["_LAZY_HOMES"] = dict(homes)
 
     def __getattr__(name):
         home = homes.get(name)

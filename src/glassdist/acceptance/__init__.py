@@ -8,7 +8,15 @@
 * :mod:`~glassdist.acceptance.assess`: :func:`assess`, all of them for one result.
 """
 
+from typing import TYPE_CHECKING
+
 from .._lazy import lazy_exports
+
+# --- typed names for static tools (scripts/lazy_stubs.py writes this block) ---
+if TYPE_CHECKING:
+    from .assess import METADATA_KEYS, Acceptance, assess
+    from .spec import Spec, load_spec
+# --- end of the typed names ---
 
 # loaded on first use: reading a specification needs neither the statistics nor scipy.ndimage
 __getattr__, __dir__ = lazy_exports(__name__, {

@@ -18,7 +18,29 @@ table, figures); :func:`write_experiment` writes them. ``glassdist experiment NA
 one from the command line.
 """
 
+from typing import TYPE_CHECKING
+
 from .._lazy import lazy_exports
+
+# --- typed names for static tools (scripts/lazy_stubs.py writes this block) ---
+if TYPE_CHECKING:
+    from ._common import (
+        ExperimentResult,
+        Inputs,
+        RunOptions,
+        SceneRun,
+        evaluate,
+        render_inputs,
+        run_scenes,
+        scaled_scene,
+        write_experiment,
+    )
+    from .accuracy import run_accuracy
+    from .parity import run_parity
+    from .pitch import run_pitch
+    from .rotation import run_rotation
+    from .transfer import run_transfer
+# --- end of the typed names ---
 
 _HOMES = {name: "._common" for name in ("ExperimentResult", "Inputs", "RunOptions", "SceneRun", "evaluate",
                                          "render_inputs", "run_scenes", "scaled_scene", "write_experiment")}

@@ -22,10 +22,28 @@ from __future__ import annotations
 import contextlib
 import sys
 import types
+from typing import TYPE_CHECKING
 
 from .._lazy import lazy_exports
-from .store import (HistoryUnavailable, Location, Recorded, Recording, SpoolFlush, data_dir, flush_spool, locate,
-                    open_store, record, record_run, spool_dir)
+from .store import (
+    HistoryUnavailable,
+    Location,
+    Recorded,
+    Recording,
+    SpoolFlush,
+    data_dir,
+    flush_spool,
+    locate,
+    open_store,
+    record,
+    record_run,
+    spool_dir,
+)
+
+# --- typed names for static tools (scripts/lazy_stubs.py writes this block) ---
+if TYPE_CHECKING:
+    from .query import COLUMNS, HistoryFilter, Trend, plot_trends, query_runs, trends
+# --- end of the typed names ---
 
 # the query side (SQLAlchemy, numpy) is imported when first used
 __getattr__, __dir__ = lazy_exports(__name__, dict.fromkeys(

@@ -6,7 +6,15 @@
   (:mod:`~glassdist.jobs.index_figures`: its thumbnails and trend plot).
 """
 
+from typing import TYPE_CHECKING
+
 from .._lazy import lazy_exports
+
+# --- typed names for static tools (scripts/lazy_stubs.py writes this block) ---
+if TYPE_CHECKING:
+    from .batch import EXIT_PANE_ERRORS, Pane, read_manifest, run_batch
+    from .runner import PaneOutcome, run_glassdist
+# --- end of the typed names ---
 
 # loaded on first use: `glassdist --help` and the other commands register `batch` without them
 __getattr__, __dir__ = lazy_exports(__name__, {

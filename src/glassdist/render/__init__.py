@@ -17,13 +17,19 @@ demand). The exact engine also returns exact landing points per pixel
 from __future__ import annotations
 
 import importlib
-from typing import Callable, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Callable, Protocol, runtime_checkable
 
 import numpy as np
 
 from .._lazy import lazy_exports
 from ..errors import InputError
 from ..scene import Scene
+
+# --- typed names for static tools (scripts/lazy_stubs.py writes this block) ---
+if TYPE_CHECKING:
+    from .imaging import apply_imaging
+    from .tracer import ExactTracer, Landing, TraceResult, landing_points, refract, render_intensity, trace_rays
+# --- end of the typed names ---
 
 # the engine loads on first use: the sub-commands register without scipy.ndimage
 __getattr__, __dir__ = lazy_exports(__name__, {

@@ -8,7 +8,16 @@
   line, ``glassdist batch`` and the Python API alike (:func:`write_outputs`).
 """
 
+from typing import TYPE_CHECKING
+
 from .._lazy import lazy_exports
+
+# --- typed names for static tools (scripts/lazy_stubs.py writes this block) ---
+if TYPE_CHECKING:
+    from .fields import FIELD_LAYOUTS, GRID_KEYS, SUMMARY_NAME, StoredResult, load_result
+    from .folder import OutputFolder, open_output_folder, plan_outputs
+    from .writer import EXIT_OK, EXIT_SPEC_FAIL, write_outputs
+# --- end of the typed names ---
 
 # loaded on first use: a run's record and folder need neither the figures nor the report
 __getattr__, __dir__ = lazy_exports(__name__, {

@@ -7,7 +7,16 @@ same evaluation stack and reports the paper's Table 2 figures
 scene values (``glassdist sweep``).
 """
 
+from typing import TYPE_CHECKING
+
 from .._lazy import lazy_exports
+
+# --- typed names for static tools (scripts/lazy_stubs.py writes this block) ---
+if TYPE_CHECKING:
+    from .figure import validation_figure
+    from .sweep import Variant, expand_variants, parse_vary, run_sweep, write_sweep_index
+    from .validate import CHANNELS, Validation, compare, compare_with_scene, exact_truth, procrustes, validate_scene
+# --- end of the typed names ---
 
 # loaded on first use: the sub-commands register without the render and analysis stacks
 __getattr__, __dir__ = lazy_exports(__name__, {
