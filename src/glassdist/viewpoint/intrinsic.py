@@ -75,6 +75,7 @@ __all__ = [
     "intrinsic_section",
     "pane_coordinates",
     "projection_factors",
+    "projection_matrix",
     "reading_of_result",
     "result_geometry",
     "transfer_tensor",
@@ -144,6 +145,36 @@ def projection_factors(alpha_rad, n: float = DEFAULT_REFRACTIVE_INDEX):
     K0 = n * cb - ca
     kt = K0 * ca + sa * sb * (n * n * cb / ca - n)
     return kt / ((n - 1.0) * ca * ca), K0 / ((n - 1.0) * ca)
+
+
+def projection_matrix(directions, n: float = DEFAULT_REFRACTIVE_INDEX):
+    """``M`` (..., 2, 2): backdrop displacement per ``L`` per intrinsic deflection, ``delta = L M dtheta``, at any incidence.
+
+    ``directions``: unit lines of sight (..., 3) in the pane frame (x, y along the pane, z its
+    normal towards the backdrop). With ``t`` the in-plane direction of the line of sight
+    (module notes, steps 2-3),
+
+    .. math::
+
+       M = \\frac{1}{(n - 1)\\cos\\alpha}\\left[K_0 I + \\tan\\alpha\\,\\sin\\beta
+           \\left(\\frac{n^2\\cos\\beta}{\\cos\\alpha} - n\\right) t\\,t^T\\right],
+
+    whose eigenvalues are ``(m_t, m_s)`` of :func:`projection_factors`; ``M = I`` at normal incidence.
+    The deflection comes from the wedge ``Delta g = dtheta / (n - 1)`` through the thin prism,
+    projected over the path ``L / cos(alpha)`` along the line of sight (the ``sec`` factors).
+    """
+    a = np.asarray(directions, float)
+    ca = a[..., 2]
+    sa = np.hypot(a[..., 0], a[..., 1])
+    safe = np.where(sa > 1e-14, sa, 1.0)
+    tx, ty = np.where(sa > 1e-14, a[..., 0] / safe, 1.0), np.where(sa > 1e-14, a[..., 1] / safe, 0.0)
+    sb = sa / n
+    cb = np.sqrt(1.0 - sb * sb)
+    K0 = n * cb - ca
+    c2 = (sa / ca) * sb * (n * n * cb / ca - n)
+    t = np.stack([tx, ty], -1)
+    M = K0[..., None, None] * np.eye(2) + c2[..., None, None] * t[..., :, None] * t[..., None, :]
+    return M / ((n - 1.0) * ca)[..., None, None]
 
 
 def pane_coordinates(rows_px, cols_px, image_shape, *, mm_per_px: float, geometry: CaptureGeometry):
