@@ -1,35 +1,46 @@
 """The view from anywhere: what ``glassdist analyze`` would report on a photo taken from another point.
 
 From a capture's intrinsic reading (:mod:`glassdist.viewpoint.intrinsic`) the pane's
-deflection ``dtheta = M_c^{-1} delta_c / L`` is carried to an observer at ``Do`` from the
-pane, the backdrop ``Lo`` behind it, on the pane normal through its centre and aimed at it
-(normal incidence):
+deflection ``dtheta = M_c^{-1} delta_c / L`` is carried to a photo taken ``Do`` from the pane
+centre along a line of sight at ``theta`` to the pane normal (azimuth ``psi``), aimed at the
+centre, the backdrop parallel to the pane ``Lo`` behind it (:func:`observer_camera`). For
+each pixel of that photo, its line of sight ``a`` crosses the pane at ``x_p`` and
 
 .. math::
 
-   \\delta_o = L_o\\,M_o\\,\\Delta\\theta, \\qquad
-   X_o = x_p\\,\\frac{D_o + L_o}{D_o},
+   \\delta_o = L_o\\,M(\\mathbf a)\\,\\Delta\\theta(x_p), \\qquad
+   X_o = O + (x_p - O)\\,\\frac{h + L_o}{h}, \\quad h = D_o\\cos\\theta,
 
-so that on the axis ``phi_o = phi_int Do / (Do + Lo)``. The predicted photo is then read
-as ``analyze`` reads one: the A2 detrend of degree N in its pixel coordinates (a
-uniform scale of the capture's at normal incidence), the smoothing ``S`` in its backdrop
-mm (isotropic in its pixels), the A3 channels with ``L = Lo``
-(:func:`glassdist.analyzer.metrics.evaluate_displacement`), statistics over the
-capture's trusted pixels (:func:`glassdist.analyzer.metrics.channel_statistics`).
+with ``M`` the thin prism at that incidence projected over ``Lo / cos(alpha)``
+(:func:`~glassdist.viewpoint.intrinsic.projection_matrix`, the ``K0`` and ``sec`` factors),
+evaluated per pixel (its variation across the pane is kept). At the pane centre a unit
+intrinsic power reads ``k m_t`` along the plane of incidence and ``k m_s`` across it,
+``k = h / (h + Lo)``: 1.64 and 1.23 (over the normal reading) at 30 deg, 3.25 and 1.62 at 45
+deg (Do 5 m, Lo 1 m); so a roller wave seen from its side is amplified more than one seen
+along its crests, and the axis of a shear turns towards the plane of incidence.
 
-A prediction may smooth more than the capture resolved, never less: the capture's
-smoothing carried onto the pane, ``sigma Dc / (Dc + L)``, is at the observer's backdrop
-``sigma Dc (Do + Lo) / ((Dc + L) Do)``; a finer ``S`` is refused, a coarser one adds
-the Gaussian of ``sqrt(S^2 - that^2)``.
+The predicted photo is then read as ``analyze`` reads one: the A2 detrend of degree N in
+its pixel coordinates, the smoothing ``S`` in its backdrop mm (isotropic in its pixels, at
+the median scale ``sqrt |det dX/dr|``), the A3 channels with the exact Jacobian of its
+glass-less view and ``L = Lo`` (:func:`glassdist.analyzer.metrics.evaluate_displacement`),
+statistics over the photo's pixels that see the capture's trusted pane area
+(:func:`glassdist.analyzer.metrics.channel_statistics`).
 
-Where it stops holding (both warned of): where the predicted strain ``|eps| = phi Lo / 1000``
-reaches a few per cent, the first-order reading of a photo (small-strain channels, a
-demodulation following so stretched a pattern) does, although the deflection itself stays
-small-angle; and where the observer's field angle over the captured area exceeds about
-20 deg, the first-order use of the projection factors. Not modelled: the slab's lateral
-shift (relative size ``d / (n Lo)``, growing for a backdrop close behind the pane) and the
-thickened slab's own shift (``x^2 / (n Do Lo)`` of a wedge across the view).
-Oblique viewing (``viewing_angle_deg`` other than 0) is not modelled yet and is refused.
+A prediction may smooth more than the capture resolved, never less: the capture's smoothing,
+isotropic ``sigma Dc / (Dc + L)`` on the pane, is in the oblique photo's pixels an
+elongated Gaussian (foreshortened along the plane of incidence); ``S`` finer than its longer
+axis anywhere on the view is refused, and the photo's smoothing adds only what the capture's
+lacks (``S^2 I - C`` in px^2, ``C`` that covariance at the view's centre).
+
+Where it stops holding (each warned of): the predicted strain ``|eps| = phi Lo / 1000``
+reaching a few per cent (the first-order reading of a photo); incidence beyond 60 deg (the
+range over which the chain is checked against exact refraction, within 2 %,
+``tests/test_viewpoint.py``); the pane's own deflection changing the projection factors by
+more than 5 % (second order in the deflection, ``|d ln m_t / d alpha| |dtheta|``); a normal
+view whose field reaches beyond 20 deg. Not modelled: the flat slab's lateral shift, which
+varies with the incidence across an oblique view (for a 6 mm pane, a near-linear field that
+a detrend of degree >= 1 takes out), the slab's lateral shift under slope (relative size
+``d / (n Lo)``), and the capture's own field-angle variation of ``M`` (normal captures).
 """
 
 from __future__ import annotations
@@ -71,12 +82,12 @@ class ViewPrediction:
     Attributes
     ----------
     phi_eff_mD, phi_shear_mD, phi_total_mD, axis_deg : ndarray (H, W)
-        The predicted maps on the capture's pixel grid (each pixel sees the same pane point
-        in the predicted photo, up to its scale); NaN where invalid.
+        The predicted maps on the photo's pixel grid (:attr:`camera`; at normal incidence each
+        pixel sees the pane point of the same capture pixel); NaN where invalid.
     displacement_detrended_mm : ndarray (H, W, 2)
         The predicted photo's detrended, smoothed displacement, its backdrop mm.
     valid, trusted : ndarray (H, W) bool
-        The capture's reported and trusted regions.
+        The photo's pixels that see the capture's reported and trusted pane areas.
     statistics : dict
         Per channel, the statistics ``analyze`` writes (``mean_abs``, ``p95_abs``, ...).
     capture, observer : CaptureGeometry
@@ -86,7 +97,14 @@ class ViewPrediction:
     mm_per_px : float
         The photo's backdrop mm per capture pixel.
     factor : float
-        ``Do / (Do + Lo)``: the predicted reading over the intrinsic one on the axis.
+        The predicted mean power over the intrinsic one at the pane centre,
+        ``h / (h + Lo) (m_t + m_s) / 2`` (``Do / (Do + Lo)`` at normal incidence).
+    viewing_angle_deg, viewing_azimuth_deg : float
+    median_incidence_deg : float
+        Over the photo's valid pixels.
+    camera : dict
+        The photo's pinhole (:func:`observer_camera`): ``position_mm``, ``yaw_deg``,
+        ``pitch_deg``, ``focal_length_px``, ``pixels``, in the capture's pane frame.
     warnings : tuple of str
     """
 
