@@ -208,7 +208,8 @@ def test_two_capture_geometries_read_the_same_intrinsic_pane(captures, pane):
     (+0.27 %), near-orthographic 36.09, 36.09 mD; lens 15.76 / 16.14 mD (-2.4 %), 16.65 / 17.12 mD (-2.7 %),
     near-orthographic 15.98, 16.72 mD, of which the two captures' own analysis errors (analyzer / truth 0.990 and
     1.007 on phi_eff, 1.001 and 1.022 on phi_shear) make about 2 %: the chain alone, on each capture's exact landing
-    points, agrees within 1 %. Tolerances: 2 % (wave), 3 % (lens: the 2 % asked for is not met end to end).
+    points, agrees within 1 %. Tolerances: 2 % (wave), 3 % (lens: the 2 % asked for is not met end to end with these
+    captures; why, and where it is, in the next test).
     """
     from glassdist.storage import load_result
     from glassdist.viewpoint import CaptureGeometry, intrinsic_reading
@@ -239,6 +240,30 @@ def test_two_capture_geometries_read_the_same_intrinsic_pane(captures, pane):
         assert exact_intrinsic[0][i] == pytest.approx(exact_intrinsic[1][i], rel=0.01)
         for v in (ia, ib):  # the near-orthographic render's reading
             assert v == pytest.approx(ortho[i], rel=0.03)
+
+
+def test_lens_intrinsic_agreement_where_neither_capture_is_strained_or_noise_limited(tmp_path):
+    """Where the 2 % is missed (the lens above: -2.4 %, -2.7 %) and why, measured on the same pane area (both
+    captures' trusted pixels; same pane point per pixel): the chain alone, on each capture's exact landing points,
+    agrees within 0.7 % (-0.64 %, -0.72 %; with the variation of the projection factors across the pane kept,
+    -0.71 %, -0.51 %: neither the field angle per pixel nor the smoothing carried onto the pane is the cause). The
+    rest is each capture's own analysis error: at Dc 3 m / L 1 m, -1.0 % on phi_eff, the first-order reading of a
+    capture strained to 5.4 % at the lens centre (-2 P k L = 0.054; +0.3 % at half the lens's power); at Dc 6 m /
+    L 0.5 m, +0.7 % and +2.2 %, the noise's bias on a mean of magnitudes (the render's sampling noise, 0.68 mD, on
+    a displacement halved by L; 16 samples per pixel). The same pane at half the power rendered with 64 samples per
+    pixel (noise 0.14 and 0.25 mD): the two geometries agree within 2 % (measured -1.49 %, -1.39 %)."""
+    tmp = tmp_path
+    A = LENS_A_MM / 2
+    lens = {"front": [{"kind": "gaussian", "amplitude_mm": -A, "sigma_mm": LENS_S_MM, "center_mm": [0, 0]}],
+            "back": [{"kind": "gaussian", "amplitude_mm": A, "sigma_mm": LENS_S_MM, "center_mm": [0, 0]}]}
+    folders = [_capture(tmp, f"lens_{Dc:g}", pane_scene(lens, Dc, L, detrend=1, spp=64), Dc)
+               for Dc, L in ((3.0, 1.0), (6.0, 0.5))]
+    maps = [np.load(f / "result.npz") for f in folders]
+    common = (maps[0]["quality"] == 0) & (maps[1]["quality"] == 0)
+    for ch in ("intrinsic_phi_eff_mD", "intrinsic_phi_shear_mD"):
+        a, b = (channel_statistics(m[ch], common)["mean_abs"] for m in maps)
+        print(ch, a, b, a / b - 1)
+        assert a == pytest.approx(b, rel=0.02)
 
 
 def _view_truth(scene, stored, *, sigma_mm, detrend):
