@@ -493,3 +493,47 @@ def test_direct_method_accepts_the_camera_distance_and_reads_the_same_pane(captu
     for ch in ("phi_eff_mD", "phi_shear_mD"):
         print("direct / comparative", ch, d[ch]["mean_abs"], c[ch]["mean_abs"])
         assert d[ch]["mean_abs"] == pytest.approx(c[ch]["mean_abs"], rel=0.02)
+
+
+def test_spec_reference_geometry_converts_the_capture_and_states_the_factor(captures, tmp_path, capsys):
+    """A specification whose limits hold at another geometry: the verdict judges the capture converted there, states
+    the factor and the sentence; the wave at Dc 3 m / L 1 m passes 32 mD as captured (about 27 mD) and fails it
+    intrinsically (factor 4/3, about 36 mD); without --camera-distance-m the geometry check fails (never a silent
+    PASS); an area_over criterion cannot be converted and is refused (exit 2)."""
+    import glassdist
+    from glassdist.viewpoint import CaptureGeometry, reference_factor
+
+    comp = captures["wave", 3.0]
+    sc = pane_scene(WAVE, 3.0, 1.0)
+    base = ["analyze", str(comp.parent / "wave_3.png"), "--reference", str(comp.parent / "wave_3_ref.png"),
+            "--pitch-mm", str(sc.backdrop.pitch_mm), "--distance-m", "1", "--pattern", "lines", "--sigma-mm",
+            str(sc.analysis["sigma_mm"]), "--detrend-degree", "2", "-q"]
+    crit = [{"channel": "phi_eff", "statistic": "mean_abs", "max_mD": 32}]
+
+    def spec(name, geometry, criteria=crit):
+        path = tmp_path / f"{name}.json"
+        path.write_text(json.dumps({"name": name, "criteria": criteria, "reference_geometry": geometry}))
+        return str(path)
+
+    captured = _summary(comp)["statistics"]["phi_eff_mD"]["mean_abs"]
+    assert captured < 32
+    plain = spec("plain", {"observer_distance_m": 3, "background_distance_m": 1})  # the capture's own: k = 1
+    assert main([*base, "--camera-distance-m", "3", "--spec", plain, "--out", str(tmp_path / "a")]) == 0
+    intr = spec("intrinsic", {"intrinsic": True})
+    assert main([*base, "--camera-distance-m", "3", "--spec", intr, "--out", str(tmp_path / "b")]) == 3
+    v = _summary(tmp_path / "b")["verdict"]
+    geo = next(c for c in v["checks"] if c["criterion"].startswith("reference geometry"))
+    k = reference_factor(CaptureGeometry(3.0, 1.0), glassdist.acceptance.spec.ReferenceGeometry(intrinsic=True))
+    assert geo["value"] == pytest.approx(4 / 3) == pytest.approx(k)
+    assert "the difference is geometry (factor 1.333), not glass" in geo["note"]
+    mean = next(c for c in v["checks"] if c["criterion"].startswith("mean"))
+    assert mean["value"] == pytest.approx(captured * 4 / 3, rel=1e-6) and not mean["passed"]
+    assert geo["note"].startswith("at the specification's geometry this pane reads")
+    assert main([*base, "--spec", intr, "--out", str(tmp_path / "c")]) == 3
+    v = _summary(tmp_path / "c")["verdict"]
+    assert "--camera-distance-m" in next(c for c in v["checks"] if c["criterion"].startswith("reference"))["note"]
+    area = spec("area", {"intrinsic": True}, [{"channel": "phi_eff", "statistic": "area_over", "threshold_mD": 50,
+                                               "max_percent": 1}])
+    capsys.readouterr()
+    assert main([*base, "--camera-distance-m", "3", "--spec", area, "--out", str(tmp_path / "d")]) == 2
+    assert "reference_geometry" in capsys.readouterr().err

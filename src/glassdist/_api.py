@@ -12,7 +12,7 @@ from __future__ import annotations
 __all__ = ["evaluate_spec", "write_report"]
 
 
-def evaluate_spec(result, spec, *, mask=None):
+def evaluate_spec(result, spec, *, mask=None, camera_distance_m=None):
     """The verdict of an acceptance specification on an analysis.
 
     Parameters
@@ -25,6 +25,9 @@ def evaluate_spec(result, spec, *, mask=None):
     mask : ndarray of bool (H, W), optional
         The region the analysis was asked for (``analyze(..., mask=)``): the coverage
         limit ``min_valid_percent`` is then checked against it, not the whole image.
+    camera_distance_m : float, optional
+        The camera-to-pane distance, m: needed by a specification's ``reference_geometry``
+        (the capture converted to the geometry its limits hold at).
 
     Returns
     -------
@@ -62,7 +65,7 @@ def evaluate_spec(result, spec, *, mask=None):
     """
     from .acceptance.assess import assess
 
-    return assess(result, spec, mask=mask).verdict
+    return assess(result, spec, mask=mask, camera_distance_m=camera_distance_m).verdict
 
 
 def write_report(result, out, *, spec=None, image=None, reference=None, mask=None, pane_id=None, site=None,

@@ -117,7 +117,7 @@ def colour_limits(result, spec=None, channels=("phi_eff", "phi_shear"), *, limit
     return {c: float(min(limits[c])) if limits.get(c) else shared for c in channels}
 
 
-def assess(result, spec=None, *, protocol=None, mask=None, metadata=None, camera=False):
+def assess(result, spec=None, *, protocol=None, mask=None, metadata=None, camera=False, camera_distance_m=None):
     """Capture check, statistics, pane frame, zones, worst regions and verdict of one analysis.
 
     Parameters
@@ -137,6 +137,9 @@ def assess(result, spec=None, *, protocol=None, mask=None, metadata=None, camera
         The camera facts of the photograph's EXIF (:func:`glassdist.io.camera_metadata`;
         None: the photo has none), recorded with the metadata; left out when no photo
         is known.
+    camera_distance_m : float, optional
+        The camera-to-pane distance (``--camera-distance-m``): a specification's
+        ``reference_geometry`` converts the capture with it.
 
     Returns
     -------
@@ -172,7 +175,7 @@ def assess(result, spec=None, *, protocol=None, mask=None, metadata=None, camera
     verdict = None
     if spec is not None:
         verdict = spec_verdict(spec, stats, result, spec_path=loaded.path, spec_sha256=loaded.sha256, zones=zones,
-                                trusted_percent=trusted, of_mask=mask is not None)
+                                trusted_percent=trusted, of_mask=mask is not None, camera_distance_m=camera_distance_m)
     regions = all_worst_regions(result, frame, spec, channels=REGION_CHANNELS, statistics=stats, limits=limits)
     meta = {k: v for k, v in (metadata or {}).items() if v is not None}
     if camera is not False:

@@ -77,6 +77,7 @@ __all__ = [
     "projection_factors",
     "projection_matrix",
     "reading_of_result",
+    "reference_factor",
     "result_geometry",
     "transfer_tensor",
 ]
@@ -175,6 +176,42 @@ def projection_matrix(directions, n: float = DEFAULT_REFRACTIVE_INDEX):
     t = np.stack([tx, ty], -1)
     M = K0[..., None, None] * np.eye(2) + c2[..., None, None] * t[..., :, None] * t[..., None, :]
     return M / ((n - 1.0) * ca)[..., None, None]
+
+
+def centre_factor(distance_to_centre_m: float, background_distance_m: float, viewing_angle_deg: float = 0.0,
+                  n: float = DEFAULT_REFRACTIVE_INDEX) -> float:
+    """A reading's mean power per unit intrinsic power at the pane centre: ``h / (h + L) (m_t + m_s) / 2``.
+
+    ``h = D cos(theta)``, the observer's height above the pane; ``Dc / (Dc + L)`` at normal
+    incidence (:func:`capture_factor`).
+    """
+    h = distance_to_centre_m * math.cos(math.radians(viewing_angle_deg))
+    mt, ms = projection_factors(math.radians(viewing_angle_deg), n)
+    return float(h / (h + background_distance_m) * 0.5 * (mt + ms))
+
+
+def reference_factor(capture: CaptureGeometry, reference) -> float:
+    """``k``: a statistic at ``reference`` over the same at the capture's (normal) geometry, at the pane centre.
+
+    ``reference``: a :class:`glassdist.acceptance.spec.ReferenceGeometry` (or any object with its
+    attributes). ``k = F_ref / F_cap`` with ``F`` of :func:`centre_factor` (``1`` for the
+    intrinsic reading). Exact for an isotropic power at normal incidence; off the normal the
+    plane of incidence reads ``m_t``, across it ``m_s``, so ``k`` is the mean of the two and a
+    distortion along one direction reads up to ``|m_t - m_s| / (m_t + m_s)`` more or less
+    (``glassdist view`` predicts it in full).
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace
+    >>> ref = SimpleNamespace(intrinsic=False, observer_distance_m=10.0, background_distance_m=3.0, viewing_angle_deg=0.0)
+    >>> round(reference_factor(CaptureGeometry(3.0, 1.0), ref), 4)  # (10 / 13) / (3 / 4)
+    1.0256
+    """
+    cap = centre_factor(capture.camera_distance_m, capture.distance_m, 0.0, capture.refractive_index)
+    if getattr(reference, "intrinsic", False):
+        return 1.0 / cap
+    return centre_factor(reference.observer_distance_m, reference.background_distance_m,
+                         reference.viewing_angle_deg, capture.refractive_index) / cap
 
 
 def pane_coordinates(rows_px, cols_px, image_shape, *, mm_per_px: float, geometry: CaptureGeometry):

@@ -55,6 +55,7 @@ from ..analyzer.result import CHANNELS
 from ..errors import InputError
 from .intrinsic import (
     CaptureGeometry,
+    centre_factor,
     deflection_mrad,
     pane_coordinates,
     projection_factors,
@@ -359,7 +360,7 @@ def predict_view(stored, *, observer_distance_m: float, background_distance_m: f
                        "normal towards the backdrop (glassdist.scene's camera convention)"}
     return ViewPrediction(ch.phi_eff_mD, ch.phi_shear_mD, ch.phi_total_mD, ch.axis_deg, ch.displacement_detrended_mm,
                           valid, trusted, stats, cap, CaptureGeometry(Do, Lo, n), S, N, mpp_o,
-                          _axis_factor(Do, Lo, theta), theta, psi, float(np.median(incidence[valid])), camera,
+                          centre_factor(Do, Lo, theta, n), theta, psi, float(np.median(incidence[valid])), camera,
                           tuple(warnings))
 
 
@@ -368,10 +369,3 @@ def _log_slope(incidence_deg: float, n: float) -> float:
     a, h = math.radians(incidence_deg), 1e-4
     return float(abs(math.log(projection_factors(a + h, n)[0] / projection_factors(max(a - h, 0.0), n)[0])) /
                  (a + h - max(a - h, 0.0)))
-
-
-def _axis_factor(Do: float, Lo: float, theta_deg: float) -> float:
-    """The predicted mean reading over the intrinsic one at the pane centre: ``h / (h + Lo) * (m_t + m_s) / 2``."""
-    h = Do * math.cos(math.radians(theta_deg))
-    mt, ms = projection_factors(math.radians(theta_deg))
-    return float(h / (h + Lo) * 0.5 * (mt + ms))
