@@ -158,6 +158,9 @@ def stored_geometry(stored) -> CaptureGeometry:
     if not intr:
         raise InputError("this result records no camera-to-pane distance; analyse the photo again with "
                          "--camera-distance-m Dc (the camera to the pane, m)")
+    if float(intr.get("viewing_angle_deg", 0.0)) != 0.0:
+        raise InputError("this result is an oblique capture: the view and the comparison start from a capture at "
+                         "normal incidence so far")
     return CaptureGeometry(float(intr["camera_distance_m"]), float(s["distance_m"]),
                            float(intr.get("refractive_index", 1.52)))
 
