@@ -564,7 +564,7 @@ def test_spec_reference_geometry_converts_the_capture_and_states_the_factor(capt
     assert main([*base, "--camera-distance-m", "3", "--spec", intr, "--out", str(tmp_path / "b")]) == 3
     v = _summary(tmp_path / "b")["verdict"]
     geo = next(c for c in v["checks"] if c["criterion"].startswith("reference geometry"))
-    k = reference_factor(CaptureGeometry(3.0, 1.0), glassdist.acceptance.spec.ReferenceGeometry(intrinsic=True))
+    k = reference_factor(CaptureGeometry(3.0, 1.0), glassdist.acceptance.geometry.ReferenceGeometry(intrinsic=True))
     assert geo["value"] == pytest.approx(4 / 3) == pytest.approx(k)
     assert "the difference is geometry (factor 1.333), not glass" in geo["note"]
     mean = next(c for c in v["checks"] if c["criterion"].startswith("mean"))

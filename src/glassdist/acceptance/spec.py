@@ -42,12 +42,6 @@ Criteria
   repeats each pin as a check (a result computed otherwise fails it).
 * ``pane`` (optional, :class:`Pane`) and ``zones`` (optional, :class:`Zone`): named parts
   of the pane in pane millimetres (:mod:`glassdist.acceptance.zones`).
-* ``reference_geometry`` (optional, :class:`ReferenceGeometry`): the viewing geometry the
-  limits hold at (``{"observer_distance_m": 10, "background_distance_m": 50,
-  "viewing_angle_deg": 30}``), or ``{"intrinsic": true}`` for the pane's own channels. The
-  verdict converts the capture's statistics to it by the factor ``k`` of
-  :func:`glassdist.viewpoint.reference_factor` (the capture analysed with
-  ``--camera-distance-m``; without it the check fails) and states ``k``.
 * ``figures`` (optional, :class:`Figures`) and ``worst_regions`` (optional,
   :class:`WorstRegions`): heatmap colour limit; worst-region threshold and count
   (:mod:`glassdist.acceptance.regions`).
@@ -72,10 +66,11 @@ from pydantic import BaseModel, Field, field_validator, model_validator
 
 from ..errors import InputError
 from ..validation import MODEL_CONFIG, SIGMA_MM, check_input_file, load_mapping, safe_text, validate_model
+from .geometry import ReferenceGeometry, check_convertible
 from .stats import format_limit, share_percent
 
 __all__ = [
-    "Criterion", "Protocol", "Pane", "ReferenceGeometry", "Zone", "WorstRegions", "Figures", "Spec", "Check", "Verdict", "ResolvedProtocol",
+    "Criterion", "Protocol", "Pane", "Zone", "WorstRegions", "Figures", "Spec", "Check", "Verdict", "ResolvedProtocol",
     "LoadedSpec", "load_spec", "as_spec", "spec_verdict", "spec_channels", "spec_limits", "resolve_protocol", "check_capture", "px_per_period",
 ]
 
@@ -120,39 +115,6 @@ class Criterion(BaseModel):
         if self.statistic == "area_over":
             return f"area |{c}| > {self.threshold_mD:g} mD <= {self.max_percent:g} %{where}"
         return f"{_STAT_TEXT[self.statistic].format(c=c)}{where} <= {self.max_mD:g} mD"
-
-
-class ReferenceGeometry(BaseModel):
-    """The viewing geometry a specification's limits hold at (``glassdist view``'s conventions).
-
-    ``observer_distance_m`` (observer to the pane centre along the line of sight),
-    ``background_distance_m`` (pane to what is seen through it), ``viewing_angle_deg`` (line
-    of sight to the pane normal, below 70) and ``viewing_azimuth_deg``; or ``intrinsic: true``
-    (the pane's own channels, :mod:`glassdist.viewpoint.intrinsic`), without distances.
-    """
-
-    model_config = MODEL_CONFIG
-
-    intrinsic: bool = False
-    observer_distance_m: float | None = Field(None, gt=0, le=10_000)
-    background_distance_m: float | None = Field(None, gt=0, le=10_000)
-    viewing_angle_deg: float = Field(0.0, ge=0, lt=70)
-    viewing_azimuth_deg: float = Field(0.0, ge=-360, le=360)
-
-    @model_validator(mode="after")
-    def _one_kind(self):
-        given = self.observer_distance_m is not None and self.background_distance_m is not None
-        if self.intrinsic == given or (not given and (self.observer_distance_m or self.background_distance_m)):
-            raise ValueError("'reference_geometry' takes either 'intrinsic': true or both 'observer_distance_m' and "
-                             "'background_distance_m' (m)")
-        return self
-
-    def describe(self) -> str:
-        """``"intrinsic"`` or ``"observer 10 m, background 50 m, 30 deg"``."""
-        if self.intrinsic:
-            return "intrinsic (the pane's own channels)"
-        return (f"observer {self.observer_distance_m:g} m, background {self.background_distance_m:g} m, "
-                f"{self.viewing_angle_deg:g} deg")
 
 
 class Protocol(BaseModel):
@@ -366,11 +328,7 @@ class Spec(BaseModel):
             if c.zone is not None and c.zone not in names:
                 known = ", ".join(names) or "none defined"
                 raise ValueError(f"a criterion names zone '{c.zone}', which is not in 'zones' ({known})")
-        if self.reference_geometry is not None:
-            carried = [c.describe() for c in self.criteria if c.statistic == "area_over" or c.channel.endswith("_sigma")]
-            if carried:
-                raise ValueError(f"with 'reference_geometry' every criterion must be a statistic of phi_eff, phi_shear "
-                                 f"or phi_total in mD (converted by the geometry's factor); not: {'; '.join(carried)}")
+        check_convertible(self.reference_geometry, self.criteria)
         return self
 
     def zone(self, name):
@@ -868,7 +826,7 @@ def _protocol_checks(protocol, result):
 
 
 def spec_verdict(spec, stats, result, *, spec_path="", spec_sha256="", zones=None, trusted_percent=None,
-                 of_mask=False, camera_distance_m=None):
+                 of_mask=False):
     """Check every criterion of ``spec`` against an analysis whose statistics are already computed.
 
     The engine under :func:`glassdist.acceptance.assess.assess`; from a result alone use
@@ -897,10 +855,6 @@ def spec_verdict(spec, stats, result, *, spec_path="", spec_sha256="", zones=Non
     of_mask : bool
         ``trusted_percent`` is a share of the user's mask (named so in the check), not of
         the image.
-    camera_distance_m : float, optional
-        The capture's camera-to-pane distance: with ``spec.reference_geometry`` the values are
-        converted to that geometry (:func:`glassdist.viewpoint.reference_factor`); without it
-        such a specification fails its geometry check.
 
     Returns
     -------
@@ -930,10 +884,6 @@ def spec_verdict(spec, stats, result, *, spec_path="", spec_sha256="", zones=Non
         from .zones import measured_region
 
         trusted_percent = share_percent(measured_region(result))
-    k = 1.0
-    if spec.reference_geometry is not None:
-        check, k = _geometry_check(spec, stats, result, camera_distance_m)
-        checks.append(check)
     for c in spec.criteria:
         if c.zone is None:
             source, covers, cov = stats, "the mask" if of_mask else "the image", float(trusted_percent)
@@ -941,31 +891,10 @@ def spec_verdict(spec, stats, result, *, spec_path="", spec_sha256="", zones=Non
             z = zones.get(c.zone) or {}
             source, covers = z.get("statistics", {}), f"zone '{c.zone}'"
             cov = float(z.get("trusted_percent", float("nan")))
-        value = float(source.get(c.channel, {}).get(c.stat_key, float("nan"))) * k
+        value = float(source.get(c.channel, {}).get(c.stat_key, float("nan")))
         limit = c.max_percent if c.statistic == "area_over" else c.max_mD
         unit = "%" if c.statistic == "area_over" else "mD"
         ok = (not math.isnan(value)) and value <= limit
         checks.append(Check(c.describe(), value, limit, unit, "<=", ok,
                             "no valid pixel to measure" if math.isnan(value) else "", cov, covers))
     return Verdict(spec.name, str(spec_path), spec_sha256, tuple(checks))
-
-
-def _geometry_check(spec, stats, result, camera_distance_m):
-    """The check stating the conversion to ``spec.reference_geometry`` and its factor ``k`` (nan: not possible)."""
-    ref = spec.reference_geometry
-    label = f"reference geometry: {ref.describe()}"
-    if camera_distance_m is None or getattr(result, "optics", None) is not None:
-        why = ("the capture's camera-to-pane distance is unknown: analyse with --camera-distance-m"
-               if camera_distance_m is None else "a reflection capture cannot be converted")
-        return Check(label, "not converted", "converted", "", "==", False, why), float("nan")
-    from ..viewpoint.intrinsic import CaptureGeometry, reference_factor
-
-    capture = CaptureGeometry(float(camera_distance_m), float(result.distance_m))
-    k = reference_factor(capture, ref)
-    c0 = spec.criteria[0]
-    y = float(stats.get(c0.channel, {}).get(c0.stat_key, float("nan")))
-    stat = _STAT_TEXT[c0.statistic].format(c=_SYMBOL[c0.channel])
-    note = (f"at the specification's geometry this pane reads {y * k:.4g} mD; at the capture geometry {y:.4g} mD "
-            f"({stat}, camera {capture.camera_distance_m:g} m, backdrop {capture.distance_m:g} m): the difference "
-            f"is geometry (factor {k:.4g}), not glass")
-    return Check(label, round(k, 6), "converted", "", "factor", True, note), k

@@ -23,4 +23,5 @@ from .intrinsic import (
 from .view import ViewPrediction, predict_view
 
 __all__ = ["DEFAULT_REFRACTIVE_INDEX", "CaptureGeometry", "Comparison", "IntrinsicReading", "ViewPrediction",
-           "capture_factor", "compare_results", "intrinsic_reading", "predict_view", "projection_factors", "projection_matrix", "reference_factor"]
+           "capture_factor", "compare_results", "intrinsic_reading", "predict_view", "projection_factors",
+           "projection_matrix", "reference_factor"]

@@ -298,7 +298,9 @@ def _rotate(T, c, s):
 
 
 def transfer_tensor(T, m_from, m_to, c, s):
-    """Carry a tensor between readings with factors ``m_from`` to ``m_to`` per ``(t, s)`` axis: ``T_ij (m_to,i + m_to,j) / (m_from,i + m_from,j)``.
+    """Carry a tensor between readings with factors ``m_from`` to ``m_to`` per ``(t, s)`` axis.
+
+    ``T_ij (m_to,i + m_to,j) / (m_from,i + m_from,j)`` in the ``(t, s)`` frame.
 
     ``m_from``, ``m_to``: pairs ``(m_t, m_s)``; ``(1, 1)`` for the intrinsic reading.
     """
