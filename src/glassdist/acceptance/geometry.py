@@ -2,9 +2,9 @@
 
 A specification's ``reference_geometry`` (:class:`ReferenceGeometry`) states where its limits
 are to be read from (an observer's distance, the background's, the angle) or that they judge
-the pane's intrinsic channels. The verdict (:func:`glassdist.acceptance.spec.spec_verdict`)
-multiplies the capture's statistics by the factor ``k`` of
-:func:`glassdist.viewpoint.reference_factor` and states it (:func:`geometry_check`): "at the
+the pane's intrinsic channels. The verdict (:func:`glassdist.acceptance.assess.assess`)
+multiplies the capture's statistics in mD by the factor ``k`` of
+:func:`glassdist.viewpoint.reference_factor` and states it as a check of its own: "at the
 specification's geometry this pane reads X mD; at the capture geometry Y mD: the difference is
 geometry (factor k), not glass."
 """
