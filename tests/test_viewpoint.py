@@ -178,6 +178,47 @@ def test_intrinsic_model_is_geometry_free_on_exact_landing_points(deformation):
     assert np.all(np.abs(means[:2] / means[2] - 1) < 0.01), means
 
 
+@pytest.mark.parametrize("deformation", ["wave", "lens"])
+def test_intrinsic_reading_of_oblique_captures(deformation):
+    """The chain off the normal (no analyzer): captures at Dc 3 m (along the line of sight) / L 1 m, normal and 30 and
+    45 deg from the side, their exact landing points evaluated independently (smoothing 10 mm on the pane), read the
+    same intrinsic mean |phi_eff| and mean phi_shear over the pane's central 800 x 700 mm within 2 % (the capture
+    readings differ by up to a factor 3), the wave also the near-orthographic Dc 200 m's. Measured (phi_eff, phi_shear):
+    wave (detrend 1) normal 48.54, 48.41; 30 deg 48.18, 48.02; 45 deg 48.40, 48.22; orthographic 48.40, 48.40 mD;
+    lens (no detrend) normal 13.06, 18.24; 30 deg 13.04, 18.28; 45 deg 13.10, 18.34 mD (the orthographic 13.49 mD of
+    phi_eff differs by the flat slab's shift, which no detrend takes out here). The detrend acts in the capture's
+    pixels, projective on the pane off the normal: with detrend 1 the lens's phi_eff (its linear part is its power)
+    reads -3.3 % at 30 deg and -6.4 % at 45 deg (not tested)."""
+    from glassdist.viewpoint import CaptureGeometry, intrinsic_reading
+    from glassdist.viewpoint.view import observer_camera
+
+    deform, detrend = (WAVE, 1) if deformation == "wave" else (LENS, 0)
+    W, H = 160, 120
+    means = {}
+    for Dc, th in ((200.0, 0.0), (3.0, 0.0), (3.0, 30.0), (3.0, 45.0)):
+        cam = observer_camera(Dc, th, 0.0, (H, W), 2 * HALF_VIEW_MM / W)
+        sc = _camera_scene(deform, {"focal_length_px": cam.focal_length_px, "pixels": [W, H],
+                                    "position_mm": cam.position_mm, "yaw_deg": cam.yaw_deg,
+                                    "pitch_deg": cam.pitch_deg}, 1.0)
+        J = landing_jacobian(sc)
+        mpp = float(np.median(np.sqrt(np.abs(np.linalg.det(J)))))
+        g = CaptureGeometry(Dc, 1.0, viewing_angle_deg=th, focal_length_px=cam.focal_length_px)
+        sigma_b = 10.0 / g.factor
+        t = _truth.evaluate(np.nan_to_num(landing_points(sc).displacement_mm), np.ones((H, W), bool), distance_m=1.0,
+                            mm_per_px=mpp, detrend_degree=detrend, sigma_mm=sigma_b, jacobian=J)
+        r = intrinsic_reading(t.phi_eff_mD, t.phi_shear_mD, t.axis_deg, rows_px=np.arange(H)[:, None],
+                              cols_px=np.arange(W)[None], image_shape=(H, W), mm_per_px=mpp, sigma_mm=sigma_b,
+                              geometry=g)
+        inner = (np.abs(r.x_mm) < 400) & (np.abs(r.y_mm) < 350)
+        means[Dc, th] = np.array([channel_statistics(getattr(r, c), inner)["mean_abs"]
+                                  for c in ("phi_eff_mD", "phi_shear_mD")])
+    print(deformation, means)
+    for th in (30.0, 45.0):
+        assert np.all(np.abs(means[3.0, th] / means[3.0, 0.0] - 1) < 0.02), means
+    if deformation == "wave":
+        assert np.all(np.abs(means[3.0, 45.0] / means[200.0, 0.0] - 1) < 0.02), means
+
+
 # --- analysed captures ------------------------------------------------------------------------------------------------
 
 
@@ -208,7 +249,8 @@ def test_two_capture_geometries_read_the_same_intrinsic_pane(captures, pane):
     (+0.27 %), near-orthographic 36.09, 36.09 mD; lens 15.76 / 16.14 mD (-2.4 %), 16.65 / 17.12 mD (-2.7 %),
     near-orthographic 15.98, 16.72 mD, of which the two captures' own analysis errors (analyzer / truth 0.990 and
     1.007 on phi_eff, 1.001 and 1.022 on phi_shear) make about 2 %: the chain alone, on each capture's exact landing
-    points, agrees within 1 %. Tolerances: 2 % (wave), 3 % (lens: the 2 % asked for is not met end to end).
+    points, agrees within 1 %. Tolerances: 2 % (wave), 3 % (lens: the 2 % asked for is not met end to end with these
+    captures; why, and where it is, in the next test).
     """
     from glassdist.storage import load_result
     from glassdist.viewpoint import CaptureGeometry, intrinsic_reading
@@ -241,6 +283,30 @@ def test_two_capture_geometries_read_the_same_intrinsic_pane(captures, pane):
             assert v == pytest.approx(ortho[i], rel=0.03)
 
 
+def test_lens_intrinsic_agreement_where_neither_capture_is_strained_or_noise_limited(tmp_path):
+    """Where the 2 % is missed (the lens above: -2.4 %, -2.7 %) and why, measured on the same pane area (both
+    captures' trusted pixels; same pane point per pixel): the chain alone, on each capture's exact landing points,
+    agrees within 0.7 % (-0.64 %, -0.72 %; with the variation of the projection factors across the pane kept,
+    -0.71 %, -0.51 %: neither the field angle per pixel nor the smoothing carried onto the pane is the cause). The
+    rest is each capture's own analysis error: at Dc 3 m / L 1 m, -1.0 % on phi_eff, the first-order reading of a
+    capture strained to 5.4 % at the lens centre (-2 P k L = 0.054; +0.3 % at half the lens's power); at Dc 6 m /
+    L 0.5 m, +0.7 % and +2.2 %, the noise's bias on a mean of magnitudes (the render's sampling noise, 0.68 mD, on
+    a displacement halved by L; 16 samples per pixel). The same pane at half the power rendered with 64 samples per
+    pixel (noise 0.14 and 0.25 mD): the two geometries agree within 2 % (measured -1.49 %, -1.39 %)."""
+    tmp = tmp_path
+    A = LENS_A_MM / 2
+    lens = {"front": [{"kind": "gaussian", "amplitude_mm": -A, "sigma_mm": LENS_S_MM, "center_mm": [0, 0]}],
+            "back": [{"kind": "gaussian", "amplitude_mm": A, "sigma_mm": LENS_S_MM, "center_mm": [0, 0]}]}
+    folders = [_capture(tmp, f"lens_{Dc:g}", pane_scene(lens, Dc, L, detrend=1, spp=64), Dc)
+               for Dc, L in ((3.0, 1.0), (6.0, 0.5))]
+    maps = [np.load(f / "result.npz") for f in folders]
+    common = (maps[0]["quality"] == 0) & (maps[1]["quality"] == 0)
+    for ch in ("intrinsic_phi_eff_mD", "intrinsic_phi_shear_mD"):
+        a, b = (channel_statistics(m[ch], common)["mean_abs"] for m in maps)
+        print(ch, a, b, a / b - 1)
+        assert a == pytest.approx(b, rel=0.02)
+
+
 def _view_truth(scene, stored, *, sigma_mm, detrend):
     """The independent evaluation of the exact landing points of ``scene`` on the capture's region (same pane points)."""
     exact = np.nan_to_num(landing_points(scene).displacement_mm)
@@ -256,8 +322,8 @@ def test_view_predicts_a_render_from_ten_metres(captures, pane, tmp_path):
     """``glassdist view`` of the Dc 3 m / L 1 m capture at Do 10 m / Lo 3 m predicts the exact render's reading there
     (independent evaluation of its landing points, same pane region, S and N) within 3 % on mean |phi_eff| and
     mean phi_shear; the smoothing is the capture's carried to that backdrop, 52 mm. Measured (view / render truth - 1):
-    wave +1.08 %, +0.90 %; lens -1.01 %, -0.15 %; the axis where phi_shear > half its largest value, 95th percentile
-    of the difference 0.43 deg (wave), 1.60 deg (lens)."""
+    wave +1.08 %, +0.90 %; lens -0.14 %, +0.27 %; the axis where phi_shear > half its largest value, 95th percentile
+    of the difference 0.43 deg (wave), 2.56 deg (lens)."""
     from glassdist.storage import load_result
 
     src = captures[pane, 3.0]
@@ -284,6 +350,123 @@ def test_view_predicts_a_render_from_ten_metres(captures, pane, tmp_path):
     assert np.percentile(diff, 95) < 3.0
 
 
+OBLIQUE_DO_M, OBLIQUE_LO_M = 5.0, 1.0
+
+
+def _camera_scene(deformation, camera, Lo_m):
+    """The pane seen by the camera ``glassdist view`` records (its summary's ``view.camera``), the backdrop Lo behind."""
+    W, _ = camera["pixels"]
+    return scene_from_dict({
+        "pane": {"size_mm": [2400, 1800], "thickness_mm": 6, "refractive_index": N_GLASS, "deformation": deformation},
+        "backdrop": {"pattern": "lines", "pitch_mm": 20, "line_width_mm": 5, "distance_m": Lo_m},
+        "camera": {"focal_length_mm": camera["focal_length_px"] * 36 / W, "sensor_width_mm": 36,
+                   "pixels": camera["pixels"], "position_mm": camera["position_mm"], "yaw_deg": camera["yaw_deg"],
+                   "pitch_deg": camera["pitch_deg"]}})
+
+
+@pytest.mark.parametrize("th", [0.0, 15.0, 30.0, 45.0, 60.0])
+def test_oblique_factors_in_closed_form_against_the_exact_tracer(th):
+    """Seen at incidence theta (Do 5 m along the line of sight, L 1 m, from the side), a thin lens of power P reads
+    E_tt = -k P m_t and E_ss = -k P m_s at the pane centre (t in the plane of incidence), k = h / (h + L) with
+    h = Do cos(theta), (m_t, m_s) of :func:`projection_factors`; a cylinder reads the one of them along its power.
+    The exact tracer's landing points (flat slab's shift taken out, exact), differentiated on their own (centred
+    differences, the exact Jacobian), over the central 4 x 4 px (8 x 8 mm across the plane of incidence), against the
+    same at normal incidence. Measured (tracer / closed form - 1) at 15, 30, 45, 60 deg: spherical lens t +0.02,
+    -0.07, -0.58, -1.6 %; s +0.05, +0.17, +0.39, +0.73 %; cylinder along t +0.02, -0.03, -0.32, -0.88 %; along s
+    +0.02, +0.07, +0.16, +0.25 %."""
+    from glassdist.theory import predict_displacement
+    from glassdist.viewpoint import projection_factors
+    from glassdist.viewpoint.view import observer_camera
+
+    lens = {"back": [{"kind": "spherical_cap", "radius_mm": 20000, "aperture_mm": 600}]}
+    cyl_t = {"back": [{"kind": "roller_wave", "amplitude_mm": 1.0, "wavelength_mm": 2000, "phase_deg": 90}]}
+    cyl_s = {"back": [{"kind": "roller_wave", "amplitude_mm": 1.0, "wavelength_mm": 2000, "direction_deg": 90,
+                       "phase_deg": 90}]}
+
+    def central_tensor(deformation, theta):
+        cam = observer_camera(OBLIQUE_DO_M, theta, 0.0, (32, 32), 2.0)
+        sc = _camera_scene(deformation, {"focal_length_px": cam.focal_length_px, "pixels": [32, 32],
+                                         "position_mm": cam.position_mm, "yaw_deg": cam.yaw_deg,
+                                         "pitch_deg": cam.pitch_deg}, OBLIQUE_LO_M)
+        exact = np.nan_to_num(landing_points(sc).displacement_mm) - predict_displacement(sc).terms_mm["slab"]
+        G = _truth.gradient_mm(exact, jacobian=landing_jacobian(sc))
+        return 1000 * 0.5 * (G + np.swapaxes(G, -1, -2))[14:18, 14:18].mean(axis=(0, 1)) / OBLIQUE_LO_M
+
+    h = OBLIQUE_DO_M * np.cos(np.radians(th))
+    k = h / (h + OBLIQUE_LO_M) / (OBLIQUE_DO_M / (OBLIQUE_DO_M + OBLIQUE_LO_M))
+    mt, ms = projection_factors(np.radians(th))
+    E_lens, E0_lens = central_tensor(lens, th), central_tensor(lens, 0.0)
+    E_t, E0_t = central_tensor(cyl_t, th)[0, 0], central_tensor(cyl_t, 0.0)[0, 0]
+    E_s, E0_s = central_tensor(cyl_s, th)[1, 1], central_tensor(cyl_s, 0.0)[1, 1]
+    got = {"lens t": E_lens[0, 0] / E0_lens[0, 0], "lens s": E_lens[1, 1] / E0_lens[1, 1], "cylinder t": E_t / E0_t,
+           "cylinder s": E_s / E0_s}
+    want = {"lens t": k * mt, "lens s": k * ms, "cylinder t": k * mt, "cylinder s": k * ms}
+    print(th, {key: round(got[key] / want[key] - 1, 5) for key in got})
+    assert E0_lens[0, 0] < 0 and abs(E_lens[0, 1]) < 1e-3 * abs(E_lens[0, 0])  # converging; the axis stays on t
+    for key in got:
+        assert got[key] == pytest.approx(want[key], rel=0.02)
+
+
+@pytest.fixture(scope="module")
+def direct_wave(captures, tmp_path_factory):
+    """The Dc 3 m / L 1 m wave's render analysed by the Direct Method (no reference), with --camera-distance-m."""
+    img = captures["wave", 3.0].parent / "wave_3.png"
+    sc = pane_scene(WAVE, 3.0, 1.0)
+    out = tmp_path_factory.mktemp("direct") / "direct"
+    assert main(["analyze", str(img), "--pitch-mm", str(sc.backdrop.pitch_mm), "--distance-m", "1", "--pattern",
+                 "lines", "--sigma-mm", str(sc.analysis["sigma_mm"]), "--detrend-degree", "2",
+                 "--camera-distance-m", "3", "--out", str(out), "-q"]) == 0
+    return out
+
+
+@pytest.mark.parametrize("theta, azimuth", [(30.0, 0.0), (45.0, 0.0), (45.0, 90.0)])
+@pytest.mark.parametrize("pane", ["wave", "lens", "wave, Direct"])
+def test_view_predicts_oblique_renders(captures, direct_wave, pane, theta, azimuth, tmp_path):
+    """``glassdist view`` of the Dc 3 m / L 1 m capture at Do 5 m / Lo 1 m, 30 and 45 deg from the side (and 45 deg
+    from above) predicts the exact render's reading from the camera it records (the independent evaluation of the
+    render's landing points over the region it documents, with its S, N and scale) within 3 % (30 deg) and 5 % (45
+    deg) on mean |phi_eff| and mean phi_shear; the axis within 3 deg (95th percentile) where phi_shear exceeds half
+    its largest value. Measured (view / render truth - 1, phi_eff, phi_shear; axis p95): wave 30 deg +1.22, +1.19 %,
+    0.37 deg; 45 deg -0.39, -0.29 %, 0.53 deg; lens 30 deg -1.19, -0.67 %, 1.60 deg; 45 deg -1.52, -1.10 %, 1.49 deg;
+    lens 45 deg from above +0.09, +0.98 %, 2.64 deg."""
+    src = direct_wave if pane == "wave, Direct" else captures[pane, 3.0]
+    out = tmp_path / "view"
+    assert main(["view", str(src), "--observer-distance-m", str(OBLIQUE_DO_M), "--background-distance-m",
+                 str(OBLIQUE_LO_M), "--viewing-angle-deg", str(theta), "--viewing-azimuth-deg", str(azimuth),
+                 "--out", str(out)]) == 0
+    s = _summary(out)
+    v = s["view"]
+    assert v["viewing_angle_deg"] == theta and v["median_incidence_deg"] == pytest.approx(theta, abs=2.0)
+    with np.load(out / "result.npz") as z:
+        valid, trusted, axis = z["valid"], z["trusted"], z["axis_deg"]
+    sc = _camera_scene(LENS if pane == "lens" else WAVE, v["camera"], OBLIQUE_LO_M)
+    truth = _truth.evaluate(np.nan_to_num(landing_points(sc).displacement_mm), valid, distance_m=OBLIQUE_LO_M,
+                            mm_per_px=s["mm_per_px"], detrend_degree=s["detrend_degree"], sigma_mm=s["sigma_mm"],
+                            jacobian=landing_jacobian(sc))
+    tol = 0.03 if theta <= 30 else 0.05
+    for ch in ("phi_eff_mD", "phi_shear_mD"):
+        want = channel_statistics(getattr(truth, ch), trusted)["mean_abs"]
+        got = s["statistics"][ch]["mean_abs"]
+        print(pane, theta, azimuth, ch, "view", got, "render truth", want, got / want - 1)
+        assert got == pytest.approx(want, rel=tol)
+    strong = trusted & (truth.phi_shear_mD > 0.5 * np.nanmax(truth.phi_shear_mD[trusted]))
+    diff = _truth.axis_difference_deg(axis[strong], truth.axis_deg[strong])
+    print(pane, theta, azimuth, "axis: median, p95 difference", np.median(diff), np.percentile(diff, 95))
+    assert np.percentile(diff, 95) < 3.0
+
+
+def test_view_warns_where_the_small_angle_model_stops_holding(captures):
+    """Beyond 60 deg incidence (the range validated against exact refraction) the prediction says so."""
+    from glassdist.storage import load_result
+    from glassdist.viewpoint import predict_view
+
+    stored = load_result(captures["lens", 3.0])
+    assert not any("incidence" in w for w in predict_view(stored, observer_distance_m=5.0, background_distance_m=1.0,
+                                                           viewing_angle_deg=30.0).warnings)
+    far = predict_view(stored, observer_distance_m=5.0, background_distance_m=1.0, viewing_angle_deg=60.0)
+    assert any("not validated against exact refraction" in w for w in far.warnings), far.warnings
+
+
 def test_view_at_the_capture_geometry_gives_back_the_capture(captures):
     """Predicting the capture's own point (Do = Dc, Lo = L, its S and N) returns its statistics within 1 %."""
     from glassdist.storage import load_result
@@ -296,12 +479,12 @@ def test_view_at_the_capture_geometry_gives_back_the_capture(captures):
 
 
 def test_view_refuses_finer_smoothing_no_geometry_and_oblique_views(captures, tmp_path, capsys):
-    """Exit 2 with one line: S finer than the capture resolved, a result without --camera-distance-m, an oblique
-    view (not modelled yet); the output folder is not written."""
+    """Exit 2 with one line: S finer than the capture resolved, a result without --camera-distance-m, a view at 70 deg
+    or more (the pane nearly edge-on); the output folder is not written."""
     src = captures["wave", 3.0]
     base = ["view", str(src), "--observer-distance-m", "10", "--background-distance-m", "3"]
     for extra, needle in ((["--sigma-mm", "40"], "finer than the capture resolved"),
-                          (["--viewing-angle-deg", "30"], "oblique viewing is not modelled")):
+                          (["--viewing-angle-deg", "75"], "outside [0, 70)")):
         capsys.readouterr()
         assert main([*base, *extra, "--out", str(tmp_path / "v")]) == 2
         err = capsys.readouterr().err.strip()
@@ -351,3 +534,47 @@ def test_direct_method_accepts_the_camera_distance_and_reads_the_same_pane(captu
     for ch in ("phi_eff_mD", "phi_shear_mD"):
         print("direct / comparative", ch, d[ch]["mean_abs"], c[ch]["mean_abs"])
         assert d[ch]["mean_abs"] == pytest.approx(c[ch]["mean_abs"], rel=0.02)
+
+
+def test_spec_reference_geometry_converts_the_capture_and_states_the_factor(captures, tmp_path, capsys):
+    """A specification whose limits hold at another geometry: the verdict judges the capture converted there, states
+    the factor and the sentence; the wave at Dc 3 m / L 1 m passes 32 mD as captured (about 27 mD) and fails it
+    intrinsically (factor 4/3, about 36 mD); without --camera-distance-m the geometry check fails (never a silent
+    PASS); an area_over criterion cannot be converted and is refused (exit 2)."""
+    import glassdist
+    from glassdist.viewpoint import CaptureGeometry, reference_factor
+
+    comp = captures["wave", 3.0]
+    sc = pane_scene(WAVE, 3.0, 1.0)
+    base = ["analyze", str(comp.parent / "wave_3.png"), "--reference", str(comp.parent / "wave_3_ref.png"),
+            "--pitch-mm", str(sc.backdrop.pitch_mm), "--distance-m", "1", "--pattern", "lines", "--sigma-mm",
+            str(sc.analysis["sigma_mm"]), "--detrend-degree", "2", "-q"]
+    crit = [{"channel": "phi_eff", "statistic": "mean_abs", "max_mD": 32}]
+
+    def spec(name, geometry, criteria=crit):
+        path = tmp_path / f"{name}.json"
+        path.write_text(json.dumps({"name": name, "criteria": criteria, "reference_geometry": geometry}))
+        return str(path)
+
+    captured = _summary(comp)["statistics"]["phi_eff_mD"]["mean_abs"]
+    assert captured < 32
+    plain = spec("plain", {"observer_distance_m": 3, "background_distance_m": 1})  # the capture's own: k = 1
+    assert main([*base, "--camera-distance-m", "3", "--spec", plain, "--out", str(tmp_path / "a")]) == 0
+    intr = spec("intrinsic", {"intrinsic": True})
+    assert main([*base, "--camera-distance-m", "3", "--spec", intr, "--out", str(tmp_path / "b")]) == 3
+    v = _summary(tmp_path / "b")["verdict"]
+    geo = next(c for c in v["checks"] if c["criterion"].startswith("reference geometry"))
+    k = reference_factor(CaptureGeometry(3.0, 1.0), glassdist.acceptance.geometry.ReferenceGeometry(intrinsic=True))
+    assert geo["value"] == pytest.approx(4 / 3) == pytest.approx(k)
+    assert "the difference is geometry (factor 1.333), not glass" in geo["note"]
+    mean = next(c for c in v["checks"] if c["criterion"].startswith("mean"))
+    assert mean["value"] == pytest.approx(captured * 4 / 3, rel=1e-6) and not mean["passed"]
+    assert geo["note"].startswith("at the specification's geometry this pane reads")
+    assert main([*base, "--spec", intr, "--out", str(tmp_path / "c")]) == 3
+    v = _summary(tmp_path / "c")["verdict"]
+    assert "--camera-distance-m" in next(c for c in v["checks"] if c["criterion"].startswith("reference"))["note"]
+    area = spec("area", {"intrinsic": True}, [{"channel": "phi_eff", "statistic": "area_over", "threshold_mD": 50,
+                                               "max_percent": 1}])
+    capsys.readouterr()
+    assert main([*base, "--camera-distance-m", "3", "--spec", area, "--out", str(tmp_path / "d")]) == 2
+    assert "reference_geometry" in capsys.readouterr().err

@@ -4,15 +4,17 @@
 (``glassdist.evaluate_spec``); the engine underneath is
 :func:`glassdist.acceptance.assess.assess`. :func:`write_report` writes the record
 (``report.html`` and the rest of the output folder) through the one output stage,
-:func:`glassdist.storage.writer.write_outputs`.
+:func:`glassdist.storage.writer.write_outputs`. :func:`view` and :func:`compare` are
+``glassdist view`` and ``glassdist compare`` on stored results
+(:mod:`glassdist.viewpoint`).
 """
 
 from __future__ import annotations
 
-__all__ = ["evaluate_spec", "write_report"]
+__all__ = ["compare", "evaluate_spec", "view", "write_report"]
 
 
-def evaluate_spec(result, spec, *, mask=None):
+def evaluate_spec(result, spec, *, mask=None, camera_distance_m=None):
     """The verdict of an acceptance specification on an analysis.
 
     Parameters
@@ -25,6 +27,9 @@ def evaluate_spec(result, spec, *, mask=None):
     mask : ndarray of bool (H, W), optional
         The region the analysis was asked for (``analyze(..., mask=)``): the coverage
         limit ``min_valid_percent`` is then checked against it, not the whole image.
+    camera_distance_m : float, optional
+        The camera-to-pane distance, m: needed by a specification's ``reference_geometry``
+        (the capture converted to the geometry its limits hold at).
 
     Returns
     -------
@@ -62,7 +67,7 @@ def evaluate_spec(result, spec, *, mask=None):
     """
     from .acceptance.assess import assess
 
-    return assess(result, spec, mask=mask).verdict
+    return assess(result, spec, mask=mask, camera_distance_m=camera_distance_m).verdict
 
 
 def write_report(result, out, *, spec=None, image=None, reference=None, mask=None, pane_id=None, site=None,
@@ -119,3 +124,69 @@ def write_report(result, out, *, spec=None, image=None, reference=None, mask=Non
                   metadata={"pane_id": pane_id, "lot": lot, "site": site, "operator": operator}, image_path=image,
                   reference_path=reference, mask_path=mask_path, history=history)
     return Path(out) / "report.html"
+
+
+def _stored(result):
+    from .storage import StoredResult, load_result
+
+    return result if isinstance(result, StoredResult) else load_result(result)
+
+
+def view(result, *, observer_distance_m, background_distance_m, viewing_angle_deg=0.0, viewing_azimuth_deg=0.0,
+         sigma_mm=None, detrend_degree=None):
+    """What ``analyze`` would report on a photo of the pane taken from another point (``glassdist view``).
+
+    Parameters
+    ----------
+    result : str, Path or StoredResult
+        The output folder of an analysis with ``camera_distance_m`` (``--camera-distance-m``), or
+        :func:`load_result` of it.
+    observer_distance_m, background_distance_m : float
+        ``Do``, the observer to the pane centre along the line of sight, and ``Lo``, the pane to the
+        backdrop seen through it, m.
+    viewing_angle_deg, viewing_azimuth_deg : float
+        ``theta`` (line of sight to the pane normal, below 70) and ``psi`` (0: the observer on the
+        capture's image left, looking towards +x; 90: on its image top, looking towards +y).
+    sigma_mm : float, optional
+        The photo's smoothing on its backdrop, mm (default and least: the capture's carried there).
+    detrend_degree : int, optional
+        Default the capture's.
+
+    Returns
+    -------
+    glassdist.viewpoint.ViewPrediction
+        ``.statistics`` as ``analyze`` writes them, the maps on the photo's pixel grid, its
+        ``.camera``, ``.factor`` and ``.warnings``.
+
+    Examples
+    --------
+    >>> import glassdist
+    >>> pred = glassdist.view("out/pane", observer_distance_m=10, background_distance_m=50,
+    ...                       viewing_angle_deg=30)  # doctest: +SKIP
+    >>> pred.statistics["phi_eff_mD"]["mean_abs"], pred.warnings  # doctest: +SKIP
+    """
+    from .viewpoint import predict_view
+
+    return predict_view(_stored(result), observer_distance_m=observer_distance_m,
+                        background_distance_m=background_distance_m, viewing_angle_deg=viewing_angle_deg,
+                        viewing_azimuth_deg=viewing_azimuth_deg, sigma_mm=sigma_mm, detrend_degree=detrend_degree)
+
+
+def compare(result_a, result_b):
+    """Two captures of one pane on the intrinsic axis: their difference and its uncertainty (``glassdist compare``).
+
+    Parameters
+    ----------
+    result_a, result_b : str, Path or StoredResult
+        Output folders of two analyses with ``camera_distance_m`` (normal incidence, the camera
+        aimed at the pane centre), or :func:`load_result` of them.
+
+    Returns
+    -------
+    glassdist.viewpoint.Comparison
+        ``.phi_eff_mean_abs``, ``.phi_shear_mean`` (each ``a``, ``b``, ``difference``,
+        ``expanded_uncertainty``, ``consistent``), ``.consistent``, ``.to_dict()``.
+    """
+    from .viewpoint import compare_results
+
+    return compare_results(_stored(result_a), _stored(result_b))

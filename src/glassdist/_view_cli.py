@@ -18,17 +18,19 @@ def register(subparsers):
     p = subparsers.add_parser(
         "view", help="predict what analyze would report on a photo of the pane taken from another point",
         description="From a result analysed with --camera-distance-m, predict the statistics and maps analyze would "
-        "report on a photo from an observer Do from the pane with the backdrop Lo behind it, aimed at the pane centre "
-        "(normal incidence). Writes summary.json and result.npz to --out.")
+        "report on a photo from an observer Do from the pane centre with the backdrop Lo behind it, aimed at the pane "
+        "centre, along a line of sight at --viewing-angle-deg to the pane normal. Writes summary.json (with the "
+        "photo's camera) and result.npz (on the photo's pixel grid) to --out.")
     p.add_argument("result", type=Path, help="output folder of a 'glassdist analyze' run with --camera-distance-m")
     p.add_argument("--observer-distance-m", type=number_option(DISTANCE_M), required=True,
-                   help="observer (camera) to pane along the normal, Do, m")
+                   help="observer (camera) to the pane centre along the line of sight, Do, m")
     p.add_argument("--background-distance-m", type=number_option(DISTANCE_M), required=True,
                    help="pane to the backdrop seen through it, Lo, m")
     p.add_argument("--viewing-angle-deg", type=float, default=0.0,
-                   help="angle between the line of sight to the pane centre and the pane normal, deg (only 0 so far)")
+                   help="angle between the line of sight to the pane centre and the pane normal, deg (0 to 70; default 0)")
     p.add_argument("--viewing-azimuth-deg", type=float, default=0.0,
-                   help="0: the observer on the -x side of the normal, 90: on the -y side, deg")
+                   help="0: the observer on the capture's -x side (image left) looking towards +x, 90: on its -y side "
+                   "(image top) looking towards +y, deg")
     p.add_argument("--sigma-mm", type=number_option(SIGMA_MM),
                    help="the photo's smoothing on its backdrop, mm (default and least: the capture's carried there)")
     p.add_argument("--detrend-degree", type=int, help="A2 detrend degree of the photo (default the capture's)")
@@ -73,7 +75,7 @@ def _run_view(args) -> int:
     out = prepare_output_dir(args.out)
     members = [(k, np.asarray(getattr(pred, k), np.float32), False) for k in
                ("displacement_detrended_mm", "phi_eff_mD", "phi_shear_mD", "phi_total_mD", "axis_deg")]
-    members.append(("valid", np.asarray(pred.valid, bool), True))
+    members += [("valid", np.asarray(pred.valid, bool), True), ("trusted", np.asarray(pred.trusted, bool), True)]
     atomic_write(out / "result.npz", lambda fh: write_npz(fh, members))
     summary = {**pred.summary(), "source": str(args.result)}
     atomic_write_text(out / "summary.json", json.dumps(to_jsonable(summary), indent=2, allow_nan=False) + "\n")
@@ -82,7 +84,8 @@ def _run_view(args) -> int:
     for w in pred.warnings:
         print(f"glassdist: warning: {w}", file=sys.stderr)
     st = pred.statistics
-    print(f"view from {pred.observer.camera_distance_m:g} m, backdrop {pred.observer.distance_m:g} m behind (normal): "
+    print(f"view from {pred.observer.camera_distance_m:g} m at {pred.viewing_angle_deg:g} deg (azimuth "
+          f"{pred.viewing_azimuth_deg:g} deg), backdrop {pred.observer.distance_m:g} m behind: "
           f"mean |phi_eff| {st['phi_eff_mD']['mean_abs']:.4g} mD, mean phi_shear {st['phi_shear_mD']['mean_abs']:.4g} mD "
           f"(sigma {pred.sigma_mm:.4g} mm, detrend {pred.detrend_degree}); written to {out}")
     return 0

@@ -9,12 +9,13 @@ worst regions on the heatmaps.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from .geometry import MD_STATISTICS
 from .regions import REGION_CHANNELS, all_worst_regions, regions_csv
-from .spec import as_spec, check_capture, spec_channels, spec_limits, spec_verdict
+from .spec import _STAT_TEXT, _SYMBOL, Check, as_spec, check_capture, spec_channels, spec_limits, spec_verdict
 from .stats import CHANNEL_FIELDS, regions_statistics, share_percent, shared_limit
 from .zones import check_pane, measured_region, pane_frame, zone_masks, zone_statistics
 
@@ -117,7 +118,7 @@ def colour_limits(result, spec=None, channels=("phi_eff", "phi_shear"), *, limit
     return {c: float(min(limits[c])) if limits.get(c) else shared for c in channels}
 
 
-def assess(result, spec=None, *, protocol=None, mask=None, metadata=None, camera=False):
+def assess(result, spec=None, *, protocol=None, mask=None, metadata=None, camera=False, camera_distance_m=None):
     """Capture check, statistics, pane frame, zones, worst regions and verdict of one analysis.
 
     Parameters
@@ -137,6 +138,9 @@ def assess(result, spec=None, *, protocol=None, mask=None, metadata=None, camera
         The camera facts of the photograph's EXIF (:func:`glassdist.io.camera_metadata`;
         None: the photo has none), recorded with the metadata; left out when no photo
         is known.
+    camera_distance_m : float, optional
+        The camera-to-pane distance (``--camera-distance-m``): a specification's
+        ``reference_geometry`` converts the capture with it.
 
     Returns
     -------
@@ -171,8 +175,13 @@ def assess(result, spec=None, *, protocol=None, mask=None, metadata=None, camera
     measured_share = share_percent(result.valid, mask)
     verdict = None
     if spec is not None:
-        verdict = spec_verdict(spec, stats, result, spec_path=loaded.path, spec_sha256=loaded.sha256, zones=zones,
-                                trusted_percent=trusted, of_mask=mask is not None)
+        # a specification at a stated geometry judges the capture converted there, and says by what factor
+        geo, k = _geometry_check(spec, stats, result, camera_distance_m)
+        judged, judged_zones = (stats, zones) if geo is None else _converted(stats, zones, k)
+        verdict = spec_verdict(spec, judged, result, spec_path=loaded.path, spec_sha256=loaded.sha256,
+                               zones=judged_zones, trusted_percent=trusted, of_mask=mask is not None)
+        if geo is not None:
+            verdict = replace(verdict, checks=(geo, *verdict.checks))
     regions = all_worst_regions(result, frame, spec, channels=REGION_CHANNELS, statistics=stats, limits=limits)
     meta = {k: v for k, v in (metadata or {}).items() if v is not None}
     if camera is not False:
@@ -193,3 +202,40 @@ def assess(result, spec=None, *, protocol=None, mask=None, metadata=None, camera
                       colour_limits(result, spec, limits=limits), warnings)
 
 
+def _geometry_check(spec, stats, result, camera_distance_m):
+    """``(Check, k)``: the check stating the conversion to ``spec.reference_geometry`` and its factor;
+    ``(None, 1)`` for a specification without one.
+
+    ``k = F_ref / F_cap`` (:func:`glassdist.viewpoint.reference_factor`) for a transmission capture
+    of known camera-to-pane distance; otherwise the check fails (a specification at a stated
+    geometry never passes unconverted; its criteria are then judged as captured, ``k = 1``).
+    """
+    if spec.reference_geometry is None:
+        return None, 1.0
+    ref = spec.reference_geometry
+    label = f"reference geometry: {ref.describe()}"
+    if camera_distance_m is None or getattr(result, "optics", None) is not None:
+        why = ("the capture's camera-to-pane distance is unknown: analyse with --camera-distance-m"
+               if camera_distance_m is None else "a reflection capture cannot be converted")
+        return Check(label, "not converted", "converted", "", "==", False, why), 1.0
+    from ..viewpoint.intrinsic import CaptureGeometry, reference_factor
+
+    capture = CaptureGeometry(float(camera_distance_m), float(result.distance_m))
+    k = reference_factor(capture, ref)
+    c0 = spec.criteria[0]
+    y = float(stats.get(c0.channel, {}).get(c0.stat_key, float("nan")))
+    stat = _STAT_TEXT[c0.statistic].format(c=_SYMBOL[c0.channel])
+    note = (f"at the specification's geometry this pane reads {y * k:.4g} mD; at the capture geometry {y:.4g} mD "
+            f"({stat}, camera {capture.camera_distance_m:g} m, backdrop {capture.distance_m:g} m): the difference "
+            f"is geometry (factor {k:.4g}), not glass")
+    return Check(label, round(k, 6), "converted", "", "factor", True, note), k
+
+
+def _converted(stats: dict, zones: dict | None, k: float):
+    """``(stats, zones)`` with every statistic in mD (:data:`MD_STATISTICS`) multiplied by ``k`` (copies)."""
+    def scale(per_channel):
+        return {ch: {key: v * k if key in MD_STATISTICS else v for key, v in st.items()} if isinstance(st, dict) else st
+                for ch, st in per_channel.items()}
+
+    zones_k = {name: {**z, "statistics": scale(z.get("statistics", {}))} for name, z in (zones or {}).items()}
+    return scale(stats), zones_k

@@ -66,6 +66,7 @@ from pydantic import BaseModel, Field, field_validator, model_validator
 
 from ..errors import InputError
 from ..validation import MODEL_CONFIG, SIGMA_MM, check_input_file, load_mapping, safe_text, validate_model
+from .geometry import ReferenceGeometry, check_convertible
 from .stats import format_limit, share_percent
 
 __all__ = [
@@ -313,6 +314,7 @@ class Spec(BaseModel):
     protocol: Protocol = Protocol()
     pane: Pane | None = None
     zones: tuple[Zone, ...] = ()
+    reference_geometry: ReferenceGeometry | None = None
     worst_regions: WorstRegions = WorstRegions()
     figures: Figures = Figures()
 
@@ -326,6 +328,7 @@ class Spec(BaseModel):
             if c.zone is not None and c.zone not in names:
                 known = ", ".join(names) or "none defined"
                 raise ValueError(f"a criterion names zone '{c.zone}', which is not in 'zones' ({known})")
+        check_convertible(self.reference_geometry, self.criteria)
         return self
 
     def zone(self, name):

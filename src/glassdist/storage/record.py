@@ -285,5 +285,5 @@ def build_record(request: RunRequest, inputs: RunInputs, result) -> RunRecord:
     from ..measures import standard_measures
 
     acc = assess(result, request.spec, protocol=request.protocol, mask=request.mask, metadata=request.metadata,
-                 camera=inputs.camera)
+                 camera=inputs.camera, camera_distance_m=request.camera_distance_m)
     return RunRecord(request, inputs, result, acc, standard_measures(result).to_dict())

@@ -1,4 +1,4 @@
-"""The pane's own distortion and the view from anywhere (normal incidence).
+"""The pane's own distortion and the view from anywhere.
 
 * :mod:`~glassdist.viewpoint.intrinsic`: a capture's reading brought to the pane's
   equivalent thin surface (net deflection on pane coordinates), free of the camera and
@@ -17,8 +17,11 @@ from .intrinsic import (
     capture_factor,
     intrinsic_reading,
     projection_factors,
+    projection_matrix,
+    reference_factor,
 )
 from .view import ViewPrediction, predict_view
 
 __all__ = ["DEFAULT_REFRACTIVE_INDEX", "CaptureGeometry", "Comparison", "IntrinsicReading", "ViewPrediction",
-           "capture_factor", "compare_results", "intrinsic_reading", "predict_view", "projection_factors"]
+           "capture_factor", "compare_results", "intrinsic_reading", "predict_view", "projection_factors",
+           "projection_matrix", "reference_factor"]

@@ -68,6 +68,7 @@ class ChannelDifference:
     consistent: bool
 
     def to_dict(self) -> dict:
+        """JSON-serialisable form (``consistent`` as ``consistent_with_zero``)."""
         return {"a": self.a, "b": self.b, "difference": self.difference, "uncertainty": self.uncertainty,
                 "expanded_uncertainty": self.expanded_uncertainty, "consistent_with_zero": self.consistent}
 
@@ -99,6 +100,7 @@ class Comparison:
         return self.phi_eff_mean_abs.consistent and self.phi_shear_mean.consistent
 
     def to_dict(self) -> dict:
+        """JSON-serialisable form (``glassdist compare --json``)."""
         return {"phi_eff_mD_mean_abs": self.phi_eff_mean_abs.to_dict(),
                 "phi_shear_mD_mean_abs": self.phi_shear_mean.to_dict(),
                 "consistent_with_zero": self.consistent, "common_pane_percent": list(self.common_pane_percent),

@@ -1,4 +1,4 @@
-"""The pane's own distortion: the intrinsic reading of a capture at normal incidence.
+"""The pane's own distortion: the intrinsic reading of a capture.
 
 A capture reads the strain of the backdrop displacement, ``phi = sym(grad delta) / L``
 (gradients with respect to backdrop mm). Both the camera-to-pane distance ``Dc`` and the
@@ -46,6 +46,18 @@ shift of the slab (``-d (1 - 1/n) grad h``, independent of ``L``, relative size
 glass's refractive index (default soda-lime, 1.52), entering only through
 ``M`` (a few per cent at 15 deg field angle, quadratically less near the axis).
 
+Oblique captures (:class:`CaptureGeometry` with ``viewing_angle_deg``, the camera aimed at the
+pane centre along ``a0``): each pixel's line of sight is met with the pane
+(:func:`pane_coordinates`, which needs the focal length in px), the plane of incidence ``t``
+and the incidence ``alpha`` are those of the line from the camera to that pane point, and
+``k = h / (h + L)`` with ``h = Dc cos(theta)`` (pane and backdrop parallel: still a uniform
+scale). The relation above holds unchanged (:func:`projection_matrix`). Two limits of the
+capture itself remain: its smoothing, isotropic in its pixels, is elongated on the pane along
+the plane of incidence (``pane_sigma_mm`` is then the geometric mean), and its detrend, a
+polynomial in its pixels, is projective on the pane, so off the normal it takes a different
+field out of the pane than a normal capture does. ``glassdist analyze`` records normal
+captures so far; the oblique reading is reached from Python.
+
 References
 ----------
 Spencer, G. H. and Murty, M. V. R. K. (1962). *J. Opt. Soc. Am.* 52(6), 672-678.
@@ -75,7 +87,9 @@ __all__ = [
     "intrinsic_section",
     "pane_coordinates",
     "projection_factors",
+    "projection_matrix",
     "reading_of_result",
+    "reference_factor",
     "result_geometry",
     "transfer_tensor",
 ]
@@ -90,21 +104,31 @@ INTRINSIC_FIELDS = ("intrinsic_phi_eff_mD", "intrinsic_phi_shear_mD", "intrinsic
 
 @dataclass(frozen=True)
 class CaptureGeometry:
-    """Where a capture (or a predicted photo) was taken from, at normal incidence.
+    """Where a capture (or a predicted photo) was taken from.
 
     Attributes
     ----------
     camera_distance_m : float
-        Camera (pinhole) to pane along the pane normal, ``Dc``, m.
+        Camera (pinhole) to the pane centre along the line of sight, ``Dc``, m (along the
+        normal at normal incidence).
     distance_m : float
         Pane to backdrop, ``L``, m.
     refractive_index : float
         The glass's ``n`` (enters the oblique factors of off-axis pixels only).
+    viewing_angle_deg, viewing_azimuth_deg : float
+        The line of sight to the pane centre: its angle ``theta`` to the normal and azimuth
+        ``psi`` (``glassdist view``'s convention; 0: normal incidence).
+    focal_length_px : float, optional
+        The camera's focal length in px: needed off the normal, where pixels map to the pane
+        projectively (:func:`pane_coordinates`).
     """
 
     camera_distance_m: float
     distance_m: float
     refractive_index: float = DEFAULT_REFRACTIVE_INDEX
+    viewing_angle_deg: float = 0.0
+    viewing_azimuth_deg: float = 0.0
+    focal_length_px: float | None = None
 
     def __post_init__(self):
         for name in ("camera_distance_m", "distance_m"):
@@ -113,11 +137,29 @@ class CaptureGeometry:
                 raise InputError(f"{name} must be a positive number of metres, got {v!r}")
         if not (1.0 < self.refractive_index < 3.0):
             raise InputError(f"refractive_index must lie in (1, 3), got {self.refractive_index!r}")
+        if not (0.0 <= self.viewing_angle_deg < 70.0):
+            raise InputError(f"the viewing angle must lie in [0, 70) deg, got {self.viewing_angle_deg!r}")
+        if self.viewing_angle_deg > 0 and not (self.focal_length_px and self.focal_length_px > 0):
+            raise InputError("an oblique capture needs the camera's focal length in px (focal_length_px) to place "
+                             "its pixels on the pane")
+
+    @property
+    def sight_direction(self) -> np.ndarray:
+        """The unit line of sight to the pane centre, ``(sin theta cos psi, sin theta sin psi, cos theta)``."""
+        t, p = math.radians(self.viewing_angle_deg), math.radians(self.viewing_azimuth_deg)
+        return np.array([math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)])
+
+    @property
+    def position_mm(self) -> np.ndarray:
+        """The camera in the pane frame (origin the pane centre, z the normal towards the backdrop), mm."""
+        return -1000.0 * self.camera_distance_m * self.sight_direction
 
     @property
     def factor(self) -> float:
-        """``k = Dc / (Dc + L)``: capture reading over intrinsic reading on the axis (:func:`capture_factor`)."""
-        return capture_factor(self.camera_distance_m, self.distance_m)
+        """``k = h / (h + L)``, ``h = Dc cos(theta)``: the pane-to-backdrop scale between parallel planes
+        (:func:`capture_factor` at normal incidence)."""
+        h = self.camera_distance_m * math.cos(math.radians(self.viewing_angle_deg))
+        return capture_factor(h, self.distance_m)
 
 
 def capture_factor(camera_distance_m, distance_m):
@@ -146,23 +188,107 @@ def projection_factors(alpha_rad, n: float = DEFAULT_REFRACTIVE_INDEX):
     return kt / ((n - 1.0) * ca * ca), K0 / ((n - 1.0) * ca)
 
 
+def projection_matrix(directions, n: float = DEFAULT_REFRACTIVE_INDEX):
+    """``M`` (..., 2, 2): backdrop displacement per ``L`` per intrinsic deflection, ``delta = L M dtheta``, at any incidence.
+
+    ``directions``: unit lines of sight (..., 3) in the pane frame (x, y along the pane, z its
+    normal towards the backdrop). With ``t`` the in-plane direction of the line of sight
+    (module notes, steps 2-3),
+
+    .. math::
+
+       M = \\frac{1}{(n - 1)\\cos\\alpha}\\left[K_0 I + \\tan\\alpha\\,\\sin\\beta
+           \\left(\\frac{n^2\\cos\\beta}{\\cos\\alpha} - n\\right) t\\,t^T\\right],
+
+    whose eigenvalues are ``(m_t, m_s)`` of :func:`projection_factors`; ``M = I`` at normal incidence.
+    The deflection comes from the wedge ``Delta g = dtheta / (n - 1)`` through the thin prism,
+    projected over the path ``L / cos(alpha)`` along the line of sight (the ``sec`` factors).
+    """
+    a = np.asarray(directions, float)
+    ca = a[..., 2]
+    sa = np.hypot(a[..., 0], a[..., 1])
+    safe = np.where(sa > 1e-14, sa, 1.0)
+    tx, ty = np.where(sa > 1e-14, a[..., 0] / safe, 1.0), np.where(sa > 1e-14, a[..., 1] / safe, 0.0)
+    sb = sa / n
+    cb = np.sqrt(1.0 - sb * sb)
+    K0 = n * cb - ca
+    c2 = (sa / ca) * sb * (n * n * cb / ca - n)
+    t = np.stack([tx, ty], -1)
+    M = K0[..., None, None] * np.eye(2) + c2[..., None, None] * t[..., :, None] * t[..., None, :]
+    return M / ((n - 1.0) * ca)[..., None, None]
+
+
+def centre_factor(distance_to_centre_m: float, background_distance_m: float, viewing_angle_deg: float = 0.0,
+                  n: float = DEFAULT_REFRACTIVE_INDEX) -> float:
+    """A reading's mean power per unit intrinsic power at the pane centre: ``h / (h + L) (m_t + m_s) / 2``.
+
+    ``h = D cos(theta)``, the observer's height above the pane; ``Dc / (Dc + L)`` at normal
+    incidence (:func:`capture_factor`).
+    """
+    h = distance_to_centre_m * math.cos(math.radians(viewing_angle_deg))
+    mt, ms = projection_factors(math.radians(viewing_angle_deg), n)
+    return float(h / (h + background_distance_m) * 0.5 * (mt + ms))
+
+
+def reference_factor(capture: CaptureGeometry, reference) -> float:
+    """``k``: a statistic at ``reference`` over the same at the capture's (normal) geometry, at the pane centre.
+
+    ``reference``: a :class:`glassdist.acceptance.spec.ReferenceGeometry` (or any object with its
+    attributes). ``k = F_ref / F_cap`` with ``F`` of :func:`centre_factor` (``1`` for the
+    intrinsic reading). Exact for an isotropic power at normal incidence; off the normal the
+    plane of incidence reads ``m_t``, across it ``m_s``, so ``k`` is the mean of the two and a
+    distortion along one direction reads up to ``|m_t - m_s| / (m_t + m_s)`` more or less
+    (``glassdist view`` predicts it in full).
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace
+    >>> ref = SimpleNamespace(intrinsic=False, observer_distance_m=10.0, background_distance_m=3.0, viewing_angle_deg=0.0)
+    >>> round(reference_factor(CaptureGeometry(3.0, 1.0), ref), 4)  # (10 / 13) / (3 / 4)
+    1.0256
+    """
+    cap = centre_factor(capture.camera_distance_m, capture.distance_m, 0.0, capture.refractive_index)
+    if getattr(reference, "intrinsic", False):
+        return 1.0 / cap
+    return centre_factor(reference.observer_distance_m, reference.background_distance_m,
+                         reference.viewing_angle_deg, capture.refractive_index) / cap
+
+
 def pane_coordinates(rows_px, cols_px, image_shape, *, mm_per_px: float, geometry: CaptureGeometry):
     """Pane coordinates ``(x_p, y_p)`` (mm, from the pane centre; x along the columns, y along the rows) of pixels.
 
-    ``x_p = (c - c0) mm_per_px Dc / (Dc + L)`` with ``c0 = (W - 1) / 2`` (the camera aimed at
-    the pane centre); ``rows_px``, ``cols_px`` broadcast against each other.
+    Normal incidence: ``x_p = (c - c0) mm_per_px Dc / (Dc + L)`` with ``c0 = (W - 1) / 2`` (the
+    camera aimed at the pane centre). Oblique: the pixel's line of sight (pinhole at
+    :attr:`CaptureGeometry.position_mm`, ``focal_length_px``, the camera convention of
+    :mod:`glassdist.scene`, no roll) met with the pane plane. ``rows_px``, ``cols_px`` broadcast
+    against each other.
     """
     H, W = image_shape
-    s = mm_per_px * geometry.factor
-    return (np.asarray(cols_px, float) - (W - 1) / 2.0) * s, (np.asarray(rows_px, float) - (H - 1) / 2.0) * s
+    rows, cols = np.broadcast_arrays(np.asarray(rows_px, float), np.asarray(cols_px, float))
+    if geometry.viewing_angle_deg == 0.0:
+        s = mm_per_px * geometry.factor
+        return (cols - (W - 1) / 2.0) * s, (rows - (H - 1) / 2.0) * s
+    from ..scene.geometry import pixel_directions
+    from ..scene.model import Camera
+
+    a0 = geometry.sight_direction
+    cam = Camera(focal_length_mm=float(geometry.focal_length_px) * 36.0 / W, sensor_width_mm=36.0,
+                 pixels=(int(W), int(H)), position_mm=tuple(float(v) for v in geometry.position_mm),
+                 yaw_deg=math.degrees(math.atan2(a0[0], a0[2])), pitch_deg=-math.degrees(math.asin(a0[1])))
+    d = pixel_directions(cam, cols + 0.5, rows + 0.5)
+    o = geometry.position_mm
+    t = -o[2] / d[..., 2]
+    return o[0] + t * d[..., 0], o[1] + t * d[..., 1]
 
 
-def _radial_frame(x_mm, y_mm, camera_distance_m):
-    """Field angle (rad) and the in-plane direction ``t`` (cos, sin) of the lines of sight through pane points."""
-    r = np.hypot(x_mm, y_mm)
-    alpha = np.arctan(r / (1000.0 * camera_distance_m))
+def _radial_frame(x_mm, y_mm, geometry: CaptureGeometry):
+    """Incidence (rad) and the in-plane direction ``t`` (cos, sin) of the lines of sight through pane points."""
+    o = geometry.position_mm
+    dx, dy = np.asarray(x_mm, float) - o[0], np.asarray(y_mm, float) - o[1]
+    r = np.hypot(dx, dy)
+    alpha = np.arctan2(r, -o[2])
     safe = np.where(r > 0, r, 1.0)
-    return alpha, np.where(r > 0, x_mm / safe, 1.0), np.where(r > 0, y_mm / safe, 0.0)
+    return alpha, np.where(r > 0, dx / safe, 1.0), np.where(r > 0, dy / safe, 0.0)
 
 
 def _rotate(T, c, s):
@@ -172,7 +298,9 @@ def _rotate(T, c, s):
 
 
 def transfer_tensor(T, m_from, m_to, c, s):
-    """Carry a tensor between readings with factors ``m_from`` to ``m_to`` per ``(t, s)`` axis: ``T_ij (m_to,i + m_to,j) / (m_from,i + m_from,j)``.
+    """Carry a tensor between readings with factors ``m_from`` to ``m_to`` per ``(t, s)`` axis.
+
+    ``T_ij (m_to,i + m_to,j) / (m_from,i + m_from,j)`` in the ``(t, s)`` frame.
 
     ``m_from``, ``m_to``: pairs ``(m_t, m_s)``; ``(1, 1)`` for the intrinsic reading.
     """
@@ -266,7 +394,7 @@ def intrinsic_reading(phi_eff_mD, phi_shear_mD, axis_deg, *, rows_px, cols_px, i
     k = geometry.factor
     x, y = pane_coordinates(rows_px, cols_px, image_shape, mm_per_px=mm_per_px, geometry=geometry)
     x, y = np.broadcast_arrays(x, y)
-    alpha, c, s = _radial_frame(x, y, geometry.camera_distance_m)
+    alpha, c, s = _radial_frame(x, y, geometry)
     mt, ms = projection_factors(alpha, geometry.refractive_index)
     E = strain_from_channels(phi_eff_mD, phi_shear_mD, axis_deg)
     G = transfer_tensor(E, (mt, ms), (np.ones_like(mt), np.ones_like(ms)), c, s) / k
@@ -306,7 +434,9 @@ def intrinsic_section(reading: IntrinsicReading, trusted) -> dict:
         "camera_distance_m": g.camera_distance_m,
         "distance_m": g.distance_m,
         "refractive_index": g.refractive_index,
-        "incidence": "normal",
+        "incidence": "normal" if g.viewing_angle_deg == 0 else "oblique",
+        "viewing_angle_deg": g.viewing_angle_deg,
+        "viewing_azimuth_deg": g.viewing_azimuth_deg,
         "capture_factor": g.factor,
         "pane_sigma_mm": reading.pane_sigma_mm,
         "pane_mm_per_px": reading.pane_mm_per_px,
@@ -373,7 +503,7 @@ def deflection_mrad(displacement_mm, x_mm, y_mm, geometry: CaptureGeometry) -> n
 
     ``displacement_mm``: backdrop mm (..., 2); ``x_mm``, ``y_mm``: the pane points of its samples.
     """
-    alpha, c, s = _radial_frame(x_mm, y_mm, geometry.camera_distance_m)
+    alpha, c, s = _radial_frame(x_mm, y_mm, geometry)
     mt, ms = projection_factors(alpha, geometry.refractive_index)
     d = np.asarray(displacement_mm, float)
     dt = (c * d[..., 0] + s * d[..., 1]) / (mt * geometry.distance_m)
