@@ -57,7 +57,7 @@ _HOMES = {
 
 # --- typed names for static tools (scripts/lazy_stubs.py writes this block) ---
 if TYPE_CHECKING:
-    from ._api import evaluate_spec, write_report
+    from ._api import compare, evaluate_spec, view, write_report
     from .analyzer import (
         AnalysisResult,
         AnalyzerParams,
