@@ -231,9 +231,17 @@ def warped_reference(pred: np.ndarray, own: np.ndarray | None, grid: F.SamplingG
             continue
         u = own[..., i] / np.maximum(np.abs(own[..., i]), 1e-30)
         re, im = up(u.real), up(u.imag)
-        norm = np.sqrt(re * re + im * im)
+        # (cos ph re - sin ph im) / |re + i im|, in place: the full-resolution temporaries are made once
+        norm = re * re
+        norm += np.square(im)
+        np.sqrt(norm, out=norm)
         np.maximum(norm, np.float32(1e-6), out=norm)
-        out += (np.cos(ph) * re - np.sin(ph) * im) / norm
+        term = np.cos(ph)
+        term *= re
+        im *= np.sin(ph, out=ph)
+        term -= im
+        term /= norm
+        out += term
     return out
 
 
