@@ -53,6 +53,8 @@ from __future__ import annotations
 
 import functools
 import logging
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Callable
 
@@ -80,6 +82,9 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
+
+#: Threads for the photo passes' full-resolution resampling (:func:`_spline_at`): the cores this process may use.
+_THREADS = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 # A sample joins the measured region only where its wrapped residual is the true one with a
 # margin for noise (|residual| well below pi, per carrier), rad.
@@ -224,24 +229,34 @@ def warped_reference(pred: np.ndarray, own: np.ndarray | None, grid: F.SamplingG
 
     for i, c in enumerate((carriers.k1, carriers.k2)):
         ph = up(pred[..., i])
-        ph += np.float32(2 * np.pi * c.fx) * x
-        ph += np.float32(2 * np.pi * c.fy) * y
+        ax, ay = np.float32(2 * np.pi * c.fx), np.float32(2 * np.pi * c.fy)
         if own is None:
-            out += np.cos(ph)
-            continue
-        u = own[..., i] / np.maximum(np.abs(own[..., i]), 1e-30)
-        re, im = up(u.real), up(u.imag)
-        # (cos ph re - sin ph im) / |re + i im|, in place: the full-resolution temporaries are made once
-        norm = re * re
-        norm += np.square(im)
-        np.sqrt(norm, out=norm)
-        np.maximum(norm, np.float32(1e-6), out=norm)
-        term = np.cos(ph)
-        term *= re
-        im *= np.sin(ph, out=ph)
-        term -= im
-        term /= norm
-        out += term
+            re = im = None
+        else:
+            u = own[..., i] / np.maximum(np.abs(own[..., i]), 1e-30)
+            re, im = up(u.real), up(u.imag)
+
+        def block(rows: slice, ph=ph, re=re, im=im, ax=ax, ay=ay) -> None:
+            p_ = ph[rows]
+            p_ += ax * x
+            p_ += ay * y[rows]
+            if re is None or im is None:
+                out[rows] += np.cos(p_)
+                return
+            # (cos ph re - sin ph im) / |re + i im|, in place
+            r_, i_ = re[rows], im[rows]
+            norm = r_ * r_
+            norm += np.square(i_)
+            np.sqrt(norm, out=norm)
+            np.maximum(norm, np.float32(1e-6), out=norm)
+            term = np.cos(p_)
+            term *= r_
+            i_ *= np.sin(p_, out=p_)
+            term -= i_
+            term /= norm
+            out[rows] += term
+
+        _by_rows(H, block)
     return out
 
 
@@ -318,8 +333,37 @@ def _deformed(spline: np.ndarray, u: np.ndarray, grid: F.SamplingGrid) -> tuple[
     wy: np.ndarray = cv2.resize(np.ascontiguousarray(w[..., 1]), (W, H), interpolation=cv2.INTER_LINEAR)
     wx += np.arange(W, dtype=np.float32)[None, :]
     wy += np.arange(H, dtype=np.float32)[:, None]
-    out = ndimage.map_coordinates(spline, [wy, wx], order=3, mode="mirror", prefilter=False, output=np.float32)
-    return out, outside
+    return _spline_at(spline, wy, wx), outside
+
+
+def _spline_at(spline: np.ndarray, wy: np.ndarray, wx: np.ndarray) -> np.ndarray:
+    """The cubic B-spline of coefficients ``spline`` at ``(wy, wx)`` (float32), in row blocks on threads.
+
+    Each output value is computed alone (``scipy.ndimage.map_coordinates`` releases the GIL), so
+    the blocks give the same values as one call, on every core.
+    """
+    out = np.empty(wy.shape, np.float32)
+
+    def block(rows: slice) -> None:
+        ndimage.map_coordinates(spline, [wy[rows], wx[rows]], order=3, mode="mirror", prefilter=False, output=out[rows])
+
+    _by_rows(wy.shape[0], block)
+    return out
+
+
+def _by_rows(n_rows: int, block: Callable[[slice], None]) -> None:
+    """``block(rows)`` over ``n_rows`` rows in :data:`_THREADS` contiguous blocks of at least 64 rows, on threads.
+
+    For element-wise work on full-resolution arrays (numpy's ufuncs and ``map_coordinates``
+    release the GIL): each value is computed as in one call over all rows.
+    """
+    n = min(_THREADS, max(1, n_rows // 64))
+    bounds = [slice(k * n_rows // n, (k + 1) * n_rows // n) for k in range(n)]
+    if n == 1:
+        block(bounds[0])
+        return
+    with ThreadPoolExecutor(n) as pool:
+        list(pool.map(block, bounds))
 
 
 def off_frame(pred: np.ndarray, grid: F.SamplingGrid, carriers: F.CarrierPair) -> np.ndarray:

@@ -274,14 +274,14 @@ def _plane_values(out, moments, xx, yy, cov_idx, min_weight) -> None:
     # only a is needed (Cramer's rule, vectorised; 2x2 and 3x3 in closed form).
     c1s = np.maximum(c1, 1e-12)
 
-    def schur(m, a, b):  # m - a b / c1s
+    def schur(m, a, b, c1s=c1s):  # m - a b / c1s
         t = a * b
         t /= c1s
         return _less(m, t)
 
     a_, b_, d_ = schur(sxx, sx_, sx_), schur(sxy, sx_, sy_), schur(syy, sy_, sy_)
     lam_min = 0.5 * (a_ + d_) - np.hypot(0.5 * (a_ - d_), b_)  # Schur complement's smaller eigenvalue
-    del a_, b_, d_, c1s
+    del a_, b_, d_
     # Only where the plane is well determined; else keep the zeroth-order value.
     good = (c1 > min_weight) & (lam_min > 0.05 * c1 * min(cov_idx[0, 0], cov_idx[1, 1]))
     del lam_min
