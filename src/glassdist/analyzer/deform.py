@@ -236,7 +236,8 @@ def warped_reference(pred: np.ndarray, own: np.ndarray | None, grid: F.SamplingG
             u = own[..., i] / np.maximum(np.abs(own[..., i]), 1e-30)
             re, im = up(u.real), up(u.imag)
 
-        def block(rows: slice, ph=ph, re=re, im=im, ax=ax, ay=ay) -> None:
+        def block(rows: slice, ph: np.ndarray = ph, re: np.ndarray | None = re, im: np.ndarray | None = im,
+                  ax: np.float32 = ax, ay: np.float32 = ay) -> None:
             p_ = ph[rows]
             p_ += ax * x
             p_ += ay * y[rows]
