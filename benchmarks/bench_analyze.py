@@ -26,7 +26,8 @@ its ``src`` folder, e.g. ``git archive main src | tar -x -C /tmp/before``), in t
 case and repeat, one process that loads the image and runs one ``numpy.fft.rfft2`` (the unit,
 timed whole from outside: interpreter start, load, transform), then the two versions in fresh
 processes, their order alternating. Each analysis process reports its wall and CPU seconds
-(``prepare_reference`` and ``analyze``; the pixel-grid fields apart) and its peak RSS, and leaves
+(``prepare_reference`` and ``analyze``; the pixel-grid fields apart) and its peak RSS (after the
+analysis, then with the pixel-grid fields), and leaves
 its fields for the largest difference between the versions. Cases: ``waves`` (the real
 Comparative pair in ``../shared/data/real-checkerboard-water``, 1024 px, F5 with its photo passes;
 skipped where absent) and ``lines8`` / ``lines16`` (a 6000 x 4000 synthetic line grid of 8 or 16 px
@@ -208,11 +209,11 @@ def analysis_worker(task: dict) -> dict:
     r = prepare_reference(ref, pattern=c["pattern"], params=c["params"]) if ref is not None else None
     res = analyze(img, pitch_mm=c["pitch_mm"], distance_m=c["distance_m"], reference=r, pattern=c["pattern"],
                   params=c["params"])
-    out = {"seconds": time.perf_counter() - t0, "cpu_s": time.process_time() - c0}
+    out = {"seconds": time.perf_counter() - t0, "cpu_s": time.process_time() - c0, "peak_rss_mb": _peak_rss_mb()}
     t0 = time.perf_counter()
-    fields = {name: np.asarray(getattr(res, name), np.float64) for name in ("displacement_mm", "phi_eff_mD", "phi_shear_mD")}
+    fields = {name: np.asarray(getattr(res, name)) for name in ("displacement_mm", "phi_eff_mD", "phi_shear_mD")}
     out["pixel_grid_fields_s"] = time.perf_counter() - t0
-    out["peak_rss_mb"] = _peak_rss_mb()
+    out["peak_rss_with_fields_mb"] = _peak_rss_mb()  # the analysis's peak, or the pixel-grid fields' on top of it
     out["valid_fraction"] = float(res.valid_fraction)
     out["phi_eff_p95_abs_mD"] = float(np.nanpercentile(np.abs(fields["phi_eff_mD"]), 95))
     np.savez(task["fields"], **fields)
@@ -297,7 +298,7 @@ def compare_versions(cases, before_src: Path, repeats: int) -> dict:
             for version in ("before", "after"):
                 rs = runs[version]
                 med = {k: float(np.median([x[k] for x in rs])) for k in ("seconds", "cpu_s", "pixel_grid_fields_s",
-                                                                          "peak_rss_mb")}
+                                                                          "peak_rss_mb", "peak_rss_with_fields_mb")}
                 row[version] = dict(med, x_unit=med["seconds"] / unit, runs_s=[x["seconds"] for x in rs],
                                     valid_fraction=rs[0]["valid_fraction"], phi_eff_p95_abs_mD=rs[0]["phi_eff_p95_abs_mD"])
             row["speed_up_wall"] = row["before"]["seconds"] / row["after"]["seconds"]
@@ -406,14 +407,15 @@ def main(argv=None) -> int:
         return 0
     if a.before_src:
         rows = compare_versions(a.cases, a.before_src.resolve(), a.repeats)
+        command = "python benchmarks/bench_analyze.py " + " ".join(sys.argv[1:] if argv is None else argv)
+        for row in rows.values():  # each case keeps the command that measured it, and the machine's load then
+            row.update(command=command, cpu_count=os.cpu_count(), load_average_at_end=list(os.getloadavg()))
         if a.record:
             old = json.loads(a.record.read_text()) if a.record.exists() else {}
-            cases = dict(old.get("cases", {}), **rows)
             a.record.write_text(json.dumps({
                 "what": "analysis alone (prepare_reference + analyze), two versions alternating in fresh processes, "
                         "against one process that loads the image and runs one numpy rfft2 (unit); medians",
-                "command": "python benchmarks/bench_analyze.py " + " ".join(sys.argv[1:] if argv is None else argv),
-                "cpu_count": os.cpu_count(), "load_average_at_end": list(os.getloadavg()), "cases": cases}, indent=1) + "\n")
+                "cases": dict(old.get("cases", {}), **rows)}, indent=1) + "\n")
         return 0
     parse = lambda s: tuple(int(v) for v in s.lower().split("x"))[::-1]  # noqa: E731 - WxH -> (H, W)
     sizes = [parse(s) for s in a.sizes]
