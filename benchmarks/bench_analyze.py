@@ -21,9 +21,24 @@ region), and the displacement error against the known field (Comparative and pee
 a speed-up that costs accuracy shows. ``--full-res-check`` compares the default path with
 the full-resolution path (no decimation) on one size.
 
+``--before-src DIR`` times the analysis alone against another version of the package (``DIR``:
+its ``src`` folder, e.g. ``git archive main src | tar -x -C /tmp/before``), in the same run: for each
+case and repeat, one process that loads the image and runs one ``numpy.fft.rfft2`` (the unit,
+timed whole from outside: interpreter start, load, transform), then the two versions in fresh
+processes, their order alternating. Each analysis process reports its wall and CPU seconds
+(``prepare_reference`` and ``analyze``; the pixel-grid fields apart) and its peak RSS (after the
+analysis, then with the pixel-grid fields), and leaves
+its fields for the largest difference between the versions. Cases: ``waves`` (the real
+Comparative pair in ``../shared/data/real-checkerboard-water``, 1024 px, F5 with its photo passes;
+skipped where absent) and ``lines8`` / ``lines16`` (a 6000 x 4000 synthetic line grid of 8 or 16 px
+period under the roller wave, Direct). Medians over the repeats; ``--record`` merges the cases
+into a JSON record (a case run again replaces its entry).
+
 Usage::
 
     python benchmarks/bench_analyze.py --sizes 2000x1500 6000x4000 --out docs/records/performance/results.json
+    python benchmarks/bench_analyze.py --before-src /tmp/before/src --cases waves --repeats 3 \
+        --record docs/records/performance/analysis_results.json
 """
 
 from __future__ import annotations
@@ -55,7 +70,7 @@ def _wave(X, Y):
     return a * e[0], a * e[1]
 
 
-def make_images(shape, folder: Path) -> None:
+def make_images(shape, folder: Path, pitch_px: float = PITCH_PX) -> None:
     """Write img.npy, ref.npy (float32) for a wave seen through a line grid, in row blocks (low memory)."""
     from glassdist.synthetic import backdrop_pattern
 
@@ -67,8 +82,8 @@ def make_images(shape, folder: Path) -> None:
         y = np.arange(r0, min(H, r0 + 256)) - (H - 1) / 2.0
         X, Y = np.meshgrid(x, y)
         dX, dY = _wave(X, Y)
-        ref[r0 : r0 + len(y)] = backdrop_pattern(X, Y, pitch_mm=PITCH_PX)
-        img[r0 : r0 + len(y)] = backdrop_pattern(X + dX, Y + dY, pitch_mm=PITCH_PX)
+        ref[r0 : r0 + len(y)] = backdrop_pattern(X, Y, pitch_mm=pitch_px)
+        img[r0 : r0 + len(y)] = backdrop_pattern(X + dX, Y + dY, pitch_mm=pitch_px)
     img.flush()
     ref.flush()
 
@@ -182,9 +197,126 @@ def worker(task: dict) -> dict:
     return out
 
 
-def _run_worker(task: dict, python: str | None = None, script: Path | None = None) -> dict:
+def analysis_worker(task: dict) -> dict:
+    """One timed analysis (``--before-src`` mode) in this fresh process: wall and CPU seconds, peak RSS, fields kept."""
+    from glassdist import analyze, prepare_reference
+
+    folder = Path(task["folder"])
+    img = np.load(folder / "img.npy")
+    ref = np.load(folder / "ref.npy") if task["comparative"] else None
+    c = task["case"]
+    t0, c0 = time.perf_counter(), time.process_time()
+    r = prepare_reference(ref, pattern=c["pattern"], params=c["params"]) if ref is not None else None
+    res = analyze(img, pitch_mm=c["pitch_mm"], distance_m=c["distance_m"], reference=r, pattern=c["pattern"],
+                  params=c["params"])
+    out = {"seconds": time.perf_counter() - t0, "cpu_s": time.process_time() - c0, "peak_rss_mb": _peak_rss_mb()}
+    t0 = time.perf_counter()
+    fields = {name: np.asarray(getattr(res, name)) for name in ("displacement_mm", "phi_eff_mD", "phi_shear_mD")}
+    out["pixel_grid_fields_s"] = time.perf_counter() - t0
+    out["peak_rss_with_fields_mb"] = _peak_rss_mb()  # the analysis's peak, or the pixel-grid fields' on top of it
+    out["valid_fraction"] = float(res.valid_fraction)
+    out["phi_eff_p95_abs_mD"] = float(np.nanpercentile(np.abs(fields["phi_eff_mD"]), 95))
+    np.savez(task["fields"], **fields)
+    return out
+
+
+#: ``--before-src`` cases: the image (``waves``: the real pair; else a 6000 x 4000 line grid of that period) and the call
+CASES = {
+    "waves": {"photo": "distorted_waves.bmp", "reference": "reference.png", "comparative": True, "pitch_mm": 5.0,
+              "distance_m": 1.0, "pattern": "checkerboard", "params": {}},
+    "lines8": {"shape": (4000, 6000), "period_px": 8.0, "comparative": False, "pitch_mm": 8.0, "distance_m": L_M,
+               "pattern": "lines", "params": PARAMS},
+    "lines16": {"shape": (4000, 6000), "period_px": 16.0, "comparative": False, "pitch_mm": 16.0, "distance_m": L_M,
+                "pattern": "lines", "params": PARAMS},
+}
+REAL = HERE.parent.parent / "shared" / "data" / "real-checkerboard-water"
+
+
+def _case_images(name: str, folder: Path) -> bool:
+    """Write the case's img.npy (and ref.npy) as float32; False where its photos are absent."""
+    c = CASES[name]
+    if "photo" not in c:
+        make_images(c["shape"], folder, c["period_px"])
+        return True
+    if not (REAL / c["photo"]).exists():
+        print(f"{name}: skipped, {REAL / c['photo']} is absent", file=sys.stderr)
+        return False
+    from glassdist.io import read_image
+
+    np.save(folder / "img.npy", read_image(REAL / c["photo"], dtype=np.float32))
+    np.save(folder / "ref.npy", read_image(REAL / c["reference"], dtype=np.float32))
+    return True
+
+
+def _unit_process(folder: Path) -> float:
+    """Wall seconds of a fresh process that loads the photo and runs one numpy rfft2 (the unit)."""
+    code = f"import numpy as np; np.fft.rfft2(np.load({str(folder / 'img.npy')!r}))"
+    t0 = time.perf_counter()
+    subprocess.run([sys.executable, "-c", code], check=True)
+    return time.perf_counter() - t0
+
+
+def _largest_difference(a: Path, b: Path) -> dict:
+    """Per field: the largest |after - before| over the largest |before| (NaN patterns must agree)."""
+    out = {}
+    with np.load(a) as za, np.load(b) as zb:
+        for k in za.files:
+            x, y = za[k], zb[k]
+            same_nan = bool(np.array_equal(np.isnan(x), np.isnan(y)))
+            ok = np.isfinite(x) & np.isfinite(y)
+            scale = float(np.max(np.abs(x[ok]))) if ok.any() else 0.0
+            diff = float(np.max(np.abs(x[ok] - y[ok]))) if ok.any() else 0.0
+            out[k] = {"nan_pattern_equal": same_nan, "max_abs_diff": diff, "max_abs_diff_rel": diff / scale if scale else 0.0,
+                      "bit_identical": bool(same_nan and np.array_equal(x[ok], y[ok]))}
+    return out
+
+
+def compare_versions(cases, before_src: Path, repeats: int) -> dict:
+    """Each case: the unit, the two versions alternating, ``repeats`` times; medians and the fields' differences."""
+    after_src = HERE.parent / "src"
+    rows = {}
+    for name in cases:
+        with tempfile.TemporaryDirectory() as d:
+            folder = Path(d)
+            if not _case_images(name, folder):
+                continue
+            c = CASES[name]
+            runs: dict[str, list] = {"unit": [], "before": [], "after": []}
+            for r in range(repeats):
+                runs["unit"].append(_unit_process(folder))
+                for version in (("before", "after") if r % 2 == 0 else ("after", "before")):
+                    src = before_src if version == "before" else after_src
+                    task = {"folder": d, "comparative": c["comparative"], "case": {k: v for k, v in c.items() if k in (
+                        "pitch_mm", "distance_m", "pattern", "params")}, "fields": str(folder / f"{version}.npz")}
+                    res = _run_worker(dict(task, kind="analysis"), env_src=src)
+                    if "error" in res:
+                        raise RuntimeError(f"{name} {version}: {res['error']}")
+                    runs[version].append(res)
+            unit = float(np.median(runs["unit"]))
+            row: dict = {"image": list(np.load(folder / "img.npy", mmap_mode="r").shape), "unit_process_s": unit,
+                         "unit_process_runs_s": runs["unit"]}
+            for version in ("before", "after"):
+                rs = runs[version]
+                med = {k: float(np.median([x[k] for x in rs])) for k in ("seconds", "cpu_s", "pixel_grid_fields_s",
+                                                                          "peak_rss_mb", "peak_rss_with_fields_mb")}
+                row[version] = dict(med, x_unit=med["seconds"] / unit, runs_s=[x["seconds"] for x in rs],
+                                    valid_fraction=rs[0]["valid_fraction"], phi_eff_p95_abs_mD=rs[0]["phi_eff_p95_abs_mD"])
+            row["speed_up_wall"] = row["before"]["seconds"] / row["after"]["seconds"]
+            row["speed_up_cpu"] = row["before"]["cpu_s"] / row["after"]["cpu_s"]
+            row["fields_after_vs_before"] = _largest_difference(folder / "before.npz", folder / "after.npz")
+            rows[name] = row
+            print(f"{name}: unit {unit:.2f} s; before {row['before']['seconds']:.2f} s wall "
+                  f"{row['before']['cpu_s']:.2f} s CPU {row['before']['peak_rss_mb']:.0f} MB; after "
+                  f"{row['after']['seconds']:.2f} s wall {row['after']['cpu_s']:.2f} s CPU {row['after']['peak_rss_mb']:.0f} MB",
+                  flush=True)
+    return rows
+
+
+def _run_worker(task: dict, python: str | None = None, script: Path | None = None, env_src: Path | None = None) -> dict:
     cmd = [python or sys.executable, str(script or Path(__file__)), "--worker", json.dumps(task)]
     env = dict(os.environ)
+    if env_src is not None:
+        env["PYTHONPATH"] = str(env_src)
     env.setdefault("PYTHONPATH", str(HERE.parent / "src"))
     p = subprocess.run(cmd, capture_output=True, text=True, env=env)
     if p.returncode != 0:
@@ -262,10 +394,28 @@ def main(argv=None) -> int:
     ap.add_argument("--no-peers", action="store_true")
     ap.add_argument("--full-res-check", default=None, help="WxH size on which to also run the full-resolution path")
     ap.add_argument("--out", type=Path, default=None, help="write the JSON results here")
+    ap.add_argument("--before-src", type=Path, default=None,
+                    help="time the analysis alone against the package in this src folder (module docstring)")
+    ap.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES), help="--before-src cases")
+    ap.add_argument("--repeats", type=int, default=3, help="--before-src: runs of each version per case")
+    ap.add_argument("--record", type=Path, default=None, help="--before-src: JSON record to merge the cases into")
     ap.add_argument("--worker", default=None, help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a.worker:
-        print(json.dumps(worker(json.loads(a.worker))))
+        task = json.loads(a.worker)
+        print(json.dumps(analysis_worker(task) if task["kind"] == "analysis" else worker(task)))
+        return 0
+    if a.before_src:
+        rows = compare_versions(a.cases, a.before_src.resolve(), a.repeats)
+        command = "python benchmarks/bench_analyze.py " + " ".join(sys.argv[1:] if argv is None else argv)
+        for row in rows.values():  # each case keeps the command that measured it, and the machine's load then
+            row.update(command=command, cpu_count=os.cpu_count(), load_average_at_end=list(os.getloadavg()))
+        if a.record:
+            old = json.loads(a.record.read_text()) if a.record.exists() else {}
+            a.record.write_text(json.dumps({
+                "what": "analysis alone (prepare_reference + analyze), two versions alternating in fresh processes, "
+                        "against one process that loads the image and runs one numpy rfft2 (unit); medians",
+                "cases": dict(old.get("cases", {}), **rows)}, indent=1) + "\n")
         return 0
     parse = lambda s: tuple(int(v) for v in s.lower().split("x"))[::-1]  # noqa: E731 - WxH -> (H, W)
     sizes = [parse(s) for s in a.sizes]

@@ -303,6 +303,8 @@ def _decoded(p: Path, data: bytes, max_megapixels, dtype, *, binary: bool = Fals
     """:func:`read_image` of the file ``p`` whose bytes are ``data`` (``binary``: black and white accepted)."""
     raw, bits = _imread_any(p, data, _max_pixels(max_megapixels))
     _check_samples(p, raw, binary=binary)
+    if raw.ndim == 3 and raw.shape[2] >= 3 and np.issubdtype(raw.dtype, np.integer):
+        return _colour_grey(raw, _full_scale(raw.dtype, bits), dtype)
     if raw.ndim == 3 and raw.shape[2] >= 3:
         rgb = raw[..., :3].astype(np.float64)
         grey = 0.299 * rgb[..., 0] + 0.587 * rgb[..., 1] + 0.114 * rgb[..., 2]
@@ -339,6 +341,26 @@ def _scaled_grey(raw: np.ndarray, bits, dtype) -> np.ndarray:
     """
     table = (np.arange(np.iinfo(raw.dtype).max + 1, dtype=np.float64) / _full_scale(raw.dtype, bits)).astype(dtype)
     return table[raw]
+
+
+#: Rows of a colour photo converted to grey at a time (:func:`_colour_grey`): bounds the double-precision work.
+_GREY_ROWS = 256
+
+
+def _colour_grey(raw: np.ndarray, full: float, dtype) -> np.ndarray:
+    """Rec. 601 luma ``(0.299 R + 0.587 G + 0.114 B) / full`` of an integer colour image, as ``dtype``.
+
+    Computed in double precision a block of :data:`_GREY_ROWS` rows at a time, so the only
+    full-size array is the result (a whole-image ``float64`` copy of the three channels is
+    eight times the photo's bytes per channel); the values are those of the whole-image formula.
+    """
+    out = np.empty(raw.shape[:2], dtype)
+    for r0 in range(0, raw.shape[0], _GREY_ROWS):
+        rgb = raw[r0 : r0 + _GREY_ROWS, :, :3].astype(np.float64)
+        grey = 0.299 * rgb[..., 0] + 0.587 * rgb[..., 1] + 0.114 * rgb[..., 2]
+        grey /= full
+        out[r0 : r0 + _GREY_ROWS] = grey
+    return out
 
 
 def read_mask(path: str | os.PathLike, shape: tuple[int, int] | None = None) -> np.ndarray:

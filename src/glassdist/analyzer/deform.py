@@ -53,6 +53,8 @@ from __future__ import annotations
 
 import functools
 import logging
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Callable
 
@@ -80,6 +82,9 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
+
+#: Threads for the photo passes' full-resolution resampling (:func:`_spline_at`): the cores this process may use.
+_THREADS = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 # A sample joins the measured region only where its wrapped residual is the true one with a
 # margin for noise (|residual| well below pi, per carrier), rad.
@@ -111,12 +116,17 @@ def displacement_to_phase(u: np.ndarray, carriers: F.CarrierPair) -> np.ndarray:
 
 def fill_nearest(a: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """``a`` (h, w[, c]) with its samples outside ``valid`` set to the nearest valid one (zeros when none is)."""
+    return _filler(valid)(a)
+
+
+def _filler(valid: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+    """:func:`fill_nearest` for one ``valid``, its nearest-sample indices found once (a pass loop reuses them)."""
     if valid.all():
-        return a
+        return lambda a: a
     if not valid.any():
-        return np.zeros_like(a)
-    idx = ndimage.distance_transform_edt(~valid, return_distances=False, return_indices=True)
-    return a[idx[0], idx[1]]
+        return np.zeros_like
+    iy, ix = ndimage.distance_transform_edt(~valid, return_distances=False, return_indices=True)
+    return lambda a: a[iy, ix]
 
 
 def deformation_grid(grid: F.SamplingGrid, max_deviation: float, period_px: float,
@@ -219,16 +229,35 @@ def warped_reference(pred: np.ndarray, own: np.ndarray | None, grid: F.SamplingG
 
     for i, c in enumerate((carriers.k1, carriers.k2)):
         ph = up(pred[..., i])
-        ph += np.float32(2 * np.pi * c.fx) * x
-        ph += np.float32(2 * np.pi * c.fy) * y
+        ax, ay = np.float32(2 * np.pi * c.fx), np.float32(2 * np.pi * c.fy)
         if own is None:
-            out += np.cos(ph)
-            continue
-        u = own[..., i] / np.maximum(np.abs(own[..., i]), 1e-30)
-        re, im = up(u.real), up(u.imag)
-        norm = np.sqrt(re * re + im * im)
-        np.maximum(norm, np.float32(1e-6), out=norm)
-        out += (np.cos(ph) * re - np.sin(ph) * im) / norm
+            re = im = None
+        else:
+            u = own[..., i] / np.maximum(np.abs(own[..., i]), 1e-30)
+            re, im = up(u.real), up(u.imag)
+
+        def block(rows: slice, ph: np.ndarray = ph, re: np.ndarray | None = re, im: np.ndarray | None = im,
+                  ax: np.float32 = ax, ay: np.float32 = ay) -> None:
+            p_ = ph[rows]
+            p_ += ax * x
+            p_ += ay * y[rows]
+            if re is None or im is None:
+                out[rows] += np.cos(p_)
+                return
+            # (cos ph re - sin ph im) / |re + i im|, in place
+            r_, i_ = re[rows], im[rows]
+            norm = r_ * r_
+            norm += np.square(i_)
+            np.sqrt(norm, out=norm)
+            np.maximum(norm, np.float32(1e-6), out=norm)
+            term = np.cos(p_)
+            term *= r_
+            i_ *= np.sin(p_, out=p_)
+            term -= i_
+            term /= norm
+            out[rows] += term
+
+        _by_rows(H, block)
     return out
 
 
@@ -286,9 +315,13 @@ def deformed_photo(spline: np.ndarray, pred: np.ndarray, grid: F.SamplingGrid, c
         Samples of ``grid`` (reference frame) whose ``s + w(s)`` lies off the photo: there the
         deformed photo is not the photo's.
     """
+    return _deformed(spline, phase_to_displacement_px(pred, carriers).astype(np.float32), grid)
+
+
+def _deformed(spline: np.ndarray, u: np.ndarray, grid: F.SamplingGrid) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`deformed_photo` from the displacement ``u`` (h, w, 2; px, float32) on ``grid``."""
     import cv2
 
-    u = phase_to_displacement_px(pred, carriers).astype(np.float32)
     w = u
     for _ in range(INVERSE_ITERATIONS):
         mx, my = _grid_maps(grid, w)
@@ -301,15 +334,48 @@ def deformed_photo(spline: np.ndarray, pred: np.ndarray, grid: F.SamplingGrid, c
     wy: np.ndarray = cv2.resize(np.ascontiguousarray(w[..., 1]), (W, H), interpolation=cv2.INTER_LINEAR)
     wx += np.arange(W, dtype=np.float32)[None, :]
     wy += np.arange(H, dtype=np.float32)[:, None]
-    out = ndimage.map_coordinates(spline, [wy, wx], order=3, mode="mirror", prefilter=False, output=np.float32)
-    return out, outside
+    return _spline_at(spline, wy, wx), outside
+
+
+def _spline_at(spline: np.ndarray, wy: np.ndarray, wx: np.ndarray) -> np.ndarray:
+    """The cubic B-spline of coefficients ``spline`` at ``(wy, wx)`` (float32), in row blocks on threads.
+
+    Each output value is computed alone (``scipy.ndimage.map_coordinates`` releases the GIL), so
+    the blocks give the same values as one call, on every core.
+    """
+    out = np.empty(wy.shape, np.float32)
+
+    def block(rows: slice) -> None:
+        ndimage.map_coordinates(spline, [wy[rows], wx[rows]], order=3, mode="mirror", prefilter=False, output=out[rows])
+
+    _by_rows(wy.shape[0], block)
+    return out
+
+
+def _by_rows(n_rows: int, block: Callable[[slice], None]) -> None:
+    """``block(rows)`` over ``n_rows`` rows in :data:`_THREADS` contiguous blocks of at least 64 rows, on threads.
+
+    For element-wise work on full-resolution arrays (numpy's ufuncs and ``map_coordinates``
+    release the GIL): each value is computed as in one call over all rows.
+    """
+    n = min(_THREADS, max(1, n_rows // 64))
+    bounds = [slice(k * n_rows // n, (k + 1) * n_rows // n) for k in range(n)]
+    if n == 1:
+        block(bounds[0])
+        return
+    with ThreadPoolExecutor(n) as pool:
+        list(pool.map(block, bounds))
 
 
 def off_frame(pred: np.ndarray, grid: F.SamplingGrid, carriers: F.CarrierPair) -> np.ndarray:
     """Samples ``r`` of ``grid`` (photo frame) whose ``r - u(r)`` lies off the image: the backdrop the photo shows there
     lies beyond the reference's view, no sample of the deformed photo draws from it, and :func:`to_frame` reads
     the edge there (``pred`` (h, w, 2), rad, as for :func:`to_frame`)."""
-    u = phase_to_displacement_px(pred, carriers)
+    return _off_frame(phase_to_displacement_px(pred, carriers), grid)
+
+
+def _off_frame(u: np.ndarray, grid: F.SamplingGrid) -> np.ndarray:
+    """:func:`off_frame` from the displacement ``u`` (h, w, 2; px) on ``grid``."""
     H, W = grid.full_shape
     yy, xx = grid.coords()
     sx, sy = xx - u[..., 0], yy - u[..., 1]
@@ -322,11 +388,27 @@ def to_frame(z: np.ndarray, src: F.SamplingGrid, pred: np.ndarray, grid: F.Sampl
     ``z`` (h', w'), real or complex (bilinear; a complex one as its real and imaginary parts,
     so phase wraps do no harm); ``pred`` (h, w, 2), rad, the displacement the photo was deformed by, on ``grid``.
     """
-    u = phase_to_displacement_px(pred, carriers).astype(np.float32)
+    return _read(z, _frame_maps(src, phase_to_displacement_px(pred, carriers).astype(np.float32), grid))
+
+
+_Maps = tuple[np.ndarray, np.ndarray]
+
+
+def _frame_maps(src: F.SamplingGrid, u: np.ndarray, grid: F.SamplingGrid) -> _Maps:
+    """The remap maps (``src``'s sample indices) of ``r - u(r)`` at ``grid``'s samples (``u`` float32, px), for :func:`_read`.
+
+    A pass reads several signals across the same displacement: the maps are made once for all of them.
+    """
     yy, xx = grid.coords()
     (oy, ox), (sy, sx) = src.offset, src.step
     mx = ((xx[0][None, :] - u[..., 0] - ox) / sx).astype(np.float32)
     my = ((yy[:, 0][:, None] - u[..., 1] - oy) / sy).astype(np.float32)
+    return mx, my
+
+
+def _read(z: np.ndarray, maps: _Maps) -> np.ndarray:
+    """:func:`to_frame` through maps made by :func:`_frame_maps`."""
+    mx, my = maps
     if not np.iscomplexobj(z):
         return _remap(z, mx, my)
     return (_remap(z.real, mx, my) + 1j * _remap(z.imag, mx, my)).astype(np.complex64)
@@ -505,7 +587,9 @@ def rms_update_periods(res: np.ndarray, where: np.ndarray, ks: F.CarrierPair, pe
     """RMS displacement of the residual phases ``res`` (h, w, 2) over ``where``, carrier periods (0 where empty)."""
     if not where.any():
         return 0.0
-    return float(np.sqrt(np.mean(np.sum(phase_to_displacement_px(res[where], ks) ** 2, axis=-1)))) / period
+    # converted on the whole grid, then selected: an (n, 2) @ (2, 2) product goes through BLAS, several times
+    # slower than the stacked (h, w, 2) one, with the same values
+    return float(np.sqrt(np.mean(np.sum(phase_to_displacement_px(res, ks)[where] ** 2, axis=-1)))) / period
 
 
 def low_passed(phase: np.ndarray, measured: np.ndarray, grid: F.SamplingGrid, sigma_px: float) -> np.ndarray:
@@ -539,8 +623,15 @@ def own_shift(own: _OwnPhasors | None, src: F.SamplingGrid, q: np.ndarray, grid:
     """
     if own is None:
         return 0.0
+    return _own_shift_at(own, _frame_maps(src, phase_to_displacement_px(q, ks).astype(np.float32), grid))
+
+
+def _own_shift_at(own: _OwnPhasors | None, maps: _Maps) -> np.ndarray | float:
+    """:func:`own_shift` through the maps of the displacement (:func:`_frame_maps`, from ``own``'s grid)."""
+    if own is None:
+        return 0.0
     unit, here = own
-    return np.stack([np.angle(to_frame(o, src, q, grid, ks) * np.conj(h)) for o, h in zip(unit, here)], axis=-1)
+    return np.stack([np.angle(_read(o, maps) * np.conj(h)) for o, h in zip(unit, here)], axis=-1)
 
 
 # Fixed-point iterations from the Comparative phase to the displacement: each multiplies the error by
@@ -586,35 +677,39 @@ def photo_passes(img: np.ndarray, refm: ReferenceModel | None, demod: Demodulati
     def smoothed(zs: tuple[np.ndarray, ...]) -> list[np.ndarray]:  # F3 on the heterodynes (no coherence needed)
         return [F.smooth_complex(z, p.smoothing_periods * c.period_px, grid) for z, c in zip(zs, (ks.k1, ks.k2))]
 
+    fill = _filler(measured)  # the same samples every pass
     n = 0
     while True:
         n += 1
-        deformed, outside = deformed_photo(spline, q, grid, ks)
+        u = phase_to_displacement_px(q, ks)  # one displacement, read by every step of the pass
+        u32 = u.astype(np.float32)
+        deformed, outside = _deformed(spline, u32, grid)
         bb = basebands(F.compute_spectrum(deformed), ks, covs, grid)
         del deformed
         zs = smoothed(bb if ref_bb is None else tuple(b * np.conj(r) for b, r in zip(bb, ref_bb)))
-        res = np.stack([np.angle(to_frame(z, grid, q, grid, ks)) for z in zs], axis=-1)
+        maps = _frame_maps(grid, u32, grid)
+        res = np.stack([np.angle(_read(z, maps)) for z in zs], axis=-1)
         share: np.ndarray | float = 1.0
-        off = off_frame(q, grid, ks)
+        off = _off_frame(u, grid)
         if outside.any() or off.any():
-            share = _edge_share(outside, off, q, grid, ks, reach_px)
-            het, _ = warped_heterodyne(bb_img, q + own_shift(own_ph, demod.grid, q, grid, ks), own, grid, ks, covs)
+            share = _edge_share(outside, off, maps, grid, reach_px)
+            own_maps = maps if demod.grid == grid or own_ph is None else _frame_maps(demod.grid, u32, grid)
+            het, _ = warped_heterodyne(bb_img, q + _own_shift_at(own_ph, own_maps), own, grid, ks, covs)
             res = share * res + (1.0 - share) * np.stack([np.angle(z) for z in smoothed(het)], axis=-1)
         step = rms_update_periods(res, measured, ks, period)
         log.debug("F5 photo pass %d: RMS update %.4f period", n, step)
         if n >= max_passes or step < p.deformation_tolerance_periods:
-            mods = [to_frame(modulation(b, c.period_px, grid, p), grid, q, grid, ks) for b, c in zip(bb, (ks.k1, ks.k2))]
+            mods = [_read(modulation(b, c.period_px, grid, p), maps) for b, c in zip(bb, (ks.k1, ks.k2))]
             if np.ndim(share):  # blended with the photo's own where the residual is the warped reference's
                 w_ = np.squeeze(share, -1)
                 mods = [w_ * m_ + (1.0 - w_) * m0 for m_, m0 in zip(mods, img_mods())]
             mods = [m_.astype(np.float32) for m_ in mods]
             q = q + res
             return q + own_shift(own_ph, demod.grid, q, grid, ks), n, mods
-        q = q + fill_nearest(np.where(measured[..., None], res, 0.0), measured)
+        q = q + fill(np.where(measured[..., None], res, 0.0))
 
 
-def _edge_share(outside: np.ndarray, off: np.ndarray, q: np.ndarray, grid: F.SamplingGrid, ks: F.CarrierPair,
-                reach_px: float) -> np.ndarray:
+def _edge_share(outside: np.ndarray, off: np.ndarray, maps: _Maps, grid: F.SamplingGrid, reach_px: float) -> np.ndarray:
     """The deformed photo's share of a photo pass's residual, (h, w, 1) in [0, 1].
 
     None within ``reach_px`` (three of Block F's kernel widths) of where it draws from off the photo
@@ -628,7 +723,7 @@ def _edge_share(outside: np.ndarray, off: np.ndarray, q: np.ndarray, grid: F.Sam
 
     share = np.ones(grid.shape, np.float32)
     if outside.any():
-        share = to_frame(ramp(outside).astype(np.float32), grid, q, grid, ks)
+        share = _read(ramp(outside).astype(np.float32), maps)
     if off.any():
         share = np.minimum(share, ramp(off).astype(np.float32))
     return share[..., None]

@@ -293,7 +293,7 @@ def demodulate(img: np.ndarray, refm: ReferenceModel | None, p: AnalyzerParams) 
     """
     spec = F.compute_spectrum(img)
     if refm is None:
-        carriers = F.find_carriers(spec, min_period_px=p.min_period_px)
+        carriers = F.find_carriers(spec, min_period_px=p.min_period_px, image=img)
         F.check_image_size(img.shape, max(carriers.k1.period_px, carriers.k2.period_px))
         covs = covariances(carriers, p)
         grid = F.sampling_grid(img.shape, list(covs), p.decimation)

@@ -342,7 +342,7 @@ def _carrier_band(spectrum: Spectrum, min_period_px: float) -> tuple[np.ndarray,
 GRID_FILL_MIN = 0.8
 
 
-def _grid_filled_spectrum(spectrum: Spectrum) -> Spectrum | None:
+def _grid_filled_spectrum(spectrum: Spectrum, image: np.ndarray | None = None) -> Spectrum | None:
     """The spectrum of the grid-filled part of the photo, apodised, where the grid fills under :data:`GRID_FILL_MIN`.
 
     A grid filling only part of the frame (a mirror in dark surroundings, a screen with its
@@ -360,13 +360,20 @@ def _grid_filled_spectrum(spectrum: Spectrum) -> Spectrum | None:
     is near 2 %): the outline's content is left within a few bins of DC, and the carriers,
     broadened by the taper's narrow spectrum, stay where they were.
 
+    ``image``: the photo ``spectrum`` was computed from, if at hand (else it is transformed back
+    from ``spectrum``, less its mean: every test above and the apodised image's spectrum are the same
+    for any offset).
+
     Returns None (search the photo's own spectrum) where no such outline is found.
     """
     import cv2
     from skimage.filters import threshold_otsu
 
     H, W = spectrum.shape
-    img = sfft.irfft2(spectrum.rfft, s=(H, W), workers=_WORKERS).astype(np.float32, copy=False)
+    if image is not None and np.shape(image) == (H, W):
+        img = np.asarray(image, dtype=np.float32)
+    else:
+        img = sfft.irfft2(spectrum.rfft, s=(H, W), workers=_WORKERS).astype(np.float32, copy=False)
     b = max(1, min(H, W) // 256)
     size = (max(1, W // b), max(1, H // b))
     crop = img[: size[1] * b, : size[0] * b]  # whole blocks: OpenCV's fast integer-factor area resize
@@ -496,7 +503,8 @@ def _refine_carrier(spectrum: Spectrum, ky: float, kx: float, strength: float) -
     return Carrier((kx + dx) / W, (ky + dy) / H, strength)
 
 
-def find_carriers(spectrum: Spectrum, *, min_period_px: float = 3.0, max_peaks: int = 40) -> CarrierPair:
+def find_carriers(spectrum: Spectrum, *, min_period_px: float = 3.0, max_peaks: int = 40,
+                  image: np.ndarray | None = None) -> CarrierPair:
     """F1: locate the two grid carriers in the 2-D spectrum, refined to sub-bin precision.
 
     ``k1`` is the strongest peak away from DC; ``k2`` the strongest peak more than
@@ -511,6 +519,9 @@ def find_carriers(spectrum: Spectrum, *, min_period_px: float = 3.0, max_peaks: 
         Shortest carrier period accepted, px (finer peaks are ignored).
     max_peaks : int
         Number of spectral peaks considered.
+    image : ndarray (H, W), optional
+        The image ``spectrum`` was computed from: the test for a grid filling only part of the
+        frame reads it instead of transforming the spectrum back (one inverse FFT of the photo less).
 
     Returns
     -------
@@ -535,7 +546,7 @@ def find_carriers(spectrum: Spectrum, *, min_period_px: float = 3.0, max_peaks: 
     [8.0, 10.0]
     """
     H, W = spectrum.shape
-    filled = _grid_filled_spectrum(spectrum)
+    filled = _grid_filled_spectrum(spectrum, image)
     if filled is not None:  # the grid fills part of the frame: its outline must not pass for a carrier
         spectrum = filled
     work, ky, band = _carrier_band(spectrum, min_period_px)

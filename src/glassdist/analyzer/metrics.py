@@ -240,32 +240,73 @@ def _normalised(moments, xx, yy, cov_idx, min_weight):
         c1, cf = moments[0], moments[1]
         out = cf / c1
         if xx is not None:
-            _, _, cx, cy, cxx, cxy, cyy, cxf, cyf = moments
-            # Moments about each sample (shifted to its own position).
-            sx_ = cx - xx * c1
-            sy_ = cy - yy * c1
-            sxx = cxx - 2 * xx * cx + xx**2 * c1
-            sxy = cxy - xx * cy - yy * cx + xx * yy * c1
-            syy = cyy - 2 * yy * cy + yy**2 * c1
-            sxf = cxf - xx * cf
-            syf = cyf - yy * cf
-            # Weighted least-squares plane a + b x + c y about each sample: normal equations
-            # [[c1, sx, sy], [sx, sxx, sxy], [sy, sxy, syy]] (a, b, c) = (cf, sxf, syf), of which
-            # only a is needed (Cramer's rule, vectorised; 2x2 and 3x3 in closed form).
-            c1s = np.maximum(c1, 1e-12)
-            a_ = sxx - sx_ * sx_ / c1s
-            b_ = sxy - sx_ * sy_ / c1s
-            d_ = syy - sy_ * sy_ / c1s
-            lam_min = 0.5 * (a_ + d_) - np.hypot(0.5 * (a_ - d_), b_)  # Schur complement's smaller eigenvalue
-            # Only where the plane is well determined; else keep the zeroth-order value.
-            good = (c1 > min_weight) & (lam_min > 0.05 * c1 * min(cov_idx[0, 0], cov_idx[1, 1]))
-            if good.any():
-                m00 = sxx * syy - sxy * sxy
-                det = c1 * m00 - sx_ * (sx_ * syy - sxy * sy_) + sy_ * (sx_ * sxy - sxx * sy_)
-                det0 = cf * m00 - sx_ * (sxf * syy - sxy * syf) + sy_ * (sxf * sxy - sxx * syf)
-                out[good] = det0[good] / det[good]
+            _plane_values(out, moments, xx, yy, cov_idx, min_weight)
     out[c1 < min_weight] = np.nan
     return out
+
+
+def _less(a: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """``a - t``, written into ``t`` (a temporary): the moments are large, and a new array per step costs its page faults."""
+    return np.subtract(a, t, out=t)
+
+
+def _plane_values(out, moments, xx, yy, cov_idx, min_weight) -> None:
+    """Order 1 of :func:`_normalised`: ``out`` set to the fitted plane's value where the plane is well determined.
+
+    Each quantity is the closed form in its comment, by the same operations in the same order
+    (only the temporaries are reused).
+    """
+    c1, cf, cx, cy, cxx, cxy, cyy, cxf, cyf = moments
+    # Moments about each sample (shifted to its own position).
+    sx_ = _less(cx, xx * c1)  # cx - xx c1
+    sy_ = _less(cy, yy * c1)  # cy - yy c1
+    sxx = _less(cxx, 2 * xx * cx)  # cxx - 2 xx cx + xx^2 c1
+    sxx += xx**2 * c1
+    sxy = _less(cxy, xx * cy)  # cxy - xx cy - yy cx + xx yy c1
+    sxy -= yy * cx
+    sxy += xx * yy * c1
+    syy = _less(cyy, 2 * yy * cy)  # cyy - 2 yy cy + yy^2 c1
+    syy += yy**2 * c1
+    sxf = _less(cxf, xx * cf)  # cxf - xx cf
+    syf = _less(cyf, yy * cf)  # cyf - yy cf
+    # Weighted least-squares plane a + b x + c y about each sample: normal equations
+    # [[c1, sx, sy], [sx, sxx, sxy], [sy, sxy, syy]] (a, b, c) = (cf, sxf, syf), of which
+    # only a is needed (Cramer's rule, vectorised; 2x2 and 3x3 in closed form).
+    c1s = np.maximum(c1, 1e-12)
+
+    def schur(m, a, b, c1s=c1s):  # m - a b / c1s
+        t = a * b
+        t /= c1s
+        return _less(m, t)
+
+    a_, b_, d_ = schur(sxx, sx_, sx_), schur(sxy, sx_, sy_), schur(syy, sy_, sy_)
+    lam_min = 0.5 * (a_ + d_) - np.hypot(0.5 * (a_ - d_), b_)  # Schur complement's smaller eigenvalue
+    del a_, b_, d_
+    # Only where the plane is well determined; else keep the zeroth-order value.
+    good = (c1 > min_weight) & (lam_min > 0.05 * c1 * min(cov_idx[0, 0], cov_idx[1, 1]))
+    del lam_min
+    if not good.any():
+        return
+    m00 = sxx * syy  # sxx syy - sxy^2
+    m00 -= sxy * sxy
+    # det = c1 m00 - sx (sx syy - sxy sy) + sy (sx sxy - sxx sy); det0 the same with (cf, sxf, syf) for (c1, sx, sy)
+    det = _cramer(c1, m00, sx_, sy_, sx_, sy_, sxx, sxy, syy)
+    det0 = _cramer(cf, m00, sxf, syf, sx_, sy_, sxx, sxy, syy)
+    out[good] = det0[good] / det[good]
+
+
+def _cramer(a0, m00, p, q, sx_, sy_, sxx, sxy, syy):
+    """``a0 m00 - sx (p syy - sxy q) + sy (p sxy - sxx q)``, with few temporaries."""
+    r = a0 * m00
+    t = p * syy
+    t -= sxy * q
+    t *= sx_
+    r -= t
+    np.multiply(p, sxy, out=t)
+    t -= sxx * q
+    np.multiply(sy_, t, out=t)
+    r += t
+    return r
 
 
 def masked_gaussian(

@@ -462,7 +462,7 @@ def prepare_reference(reference: np.ndarray, *, params: AnalyzerParams | dict[st
             settled = settle_pattern(p, ref)
             p, warn = settled.params, warn + settled.warnings
         spec = F.compute_spectrum(ref)
-        carriers = F.find_carriers(spec, min_period_px=p.min_period_px)
+        carriers = F.find_carriers(spec, min_period_px=p.min_period_px, image=ref)
         F.check_image_size(ref.shape, max(carriers.k1.period_px, carriers.k2.period_px))
         covs = covariances(carriers, p)
         grid = F.sampling_grid(ref.shape, list(covs), p.decimation)
