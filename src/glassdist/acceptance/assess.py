@@ -185,7 +185,7 @@ def assess(result, spec=None, *, protocol=None, mask=None, metadata=None, camera
         from .spec import px_per_period
 
         proto["used"] = {"method": result.method, "pitch_mm": result.pitch_mm, "distance_m": result.distance_m,
-                         "pattern": getattr(getattr(result, "params", None), "pattern", None),
+                         "pattern": result.pattern,
                          "sigma_mm": result.sigma_mm, "detrend_degree": result.detrend_degree,
                          "px_per_period": px_per_period(result)}
     warnings = (frame.warning,) if frame.warning and zones_def else ()

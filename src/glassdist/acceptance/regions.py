@@ -184,7 +184,7 @@ def region_thresholds(result, spec=None, channels=REGION_CHANNELS, *, statistics
         elif statistics is not None and ch in statistics:
             out[ch] = (float(statistics[ch]["p95_abs"]), "p95")
         else:
-            f = np.abs(np.asarray(getattr(result, CHANNEL_FIELDS[ch]), dtype=np.float64))
+            f = np.abs(np.asarray(result.pixel_field(CHANNEL_FIELDS[ch]), dtype=np.float64))
             ok = valid & np.isfinite(f)
             out[ch] = (float(np.percentile(f[ok], 95)) if ok.any() else float("nan"), "p95")
     return out

@@ -748,7 +748,7 @@ def _sigma_setting(protocol, values: dict, sources: dict, from_file: dict, param
 
 def px_per_period(result):
     """Shortest carrier period of the photo in px (the capture limit ``min_px_per_period`` is on it)."""
-    return float(min(result.carriers.k1.period_px, result.carriers.k2.period_px))
+    return float(result.px_per_period)
 
 
 def check_lens_source(protocol, *, lens_photo: bool, camera_file: bool, spec_label="the specification") -> None:
@@ -792,30 +792,28 @@ def check_capture(protocol, result, *, spec_label="the specification"):
 def _protocol_checks(protocol, result):
     checks = []
     if protocol.method is not None:
-        got = getattr(result, "method", None)
+        got = result.method
         checks.append(Check(f"protocol: method = {protocol.method}", got, protocol.method, "", "==", got == protocol.method))
     for key, unit in (("pitch_mm", "mm"), ("distance_m", "m")):
         want = getattr(protocol, key)
         if want is not None:
-            got = float(getattr(result, key, float("nan")))
+            got = float(result.pitch_mm if key == "pitch_mm" else result.distance_m)
             ok = math.isclose(got, want, rel_tol=1e-6)
             checks.append(Check(f"protocol: {key} = {want:g} {unit}", got, want, unit, "==", ok,
                                 "" if ok else f"rerun the analysis with the specification's {_OPTION[key]}"))
     if protocol.pattern is not None:
-        params = getattr(result, "params", None)
-        got = getattr(params, "pattern", None)
-        checks.append(Check(f"protocol: pattern = {protocol.pattern}", got, protocol.pattern, "", "==",
-                            got == protocol.pattern))
+        checks.append(Check(f"protocol: pattern = {protocol.pattern}", result.pattern, protocol.pattern, "", "==",
+                            result.pattern == protocol.pattern))
     want_sigma = protocol.sigma_mm
     if want_sigma is None and protocol.sigma_periods is not None:
-        want_sigma = protocol.sigma_periods * float(getattr(result, "carrier_period_mm", float("nan")))
+        want_sigma = protocol.sigma_periods * float(result.carrier_period_mm)
     if want_sigma is not None:
-        got = float(getattr(result, "sigma_mm", float("nan")))
+        got = float(result.sigma_mm)
         ok = math.isclose(got, want_sigma, rel_tol=1e-6)
         checks.append(Check(f"protocol: sigma_mm = {want_sigma:.4g} mm", got, want_sigma, "mm", "==", ok,
                             "" if ok else "rerun the analysis with the specification's --sigma-mm"))
     if protocol.detrend_degree is not None:
-        got = getattr(result, "detrend_degree", None)
+        got = result.detrend_degree
         ok = got == protocol.detrend_degree
         checks.append(Check(f"protocol: detrend_degree = {protocol.detrend_degree}", got, protocol.detrend_degree, "",
                             "==", ok, "" if ok else "rerun the analysis with the specification's --detrend-degree"))

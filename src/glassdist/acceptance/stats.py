@@ -14,7 +14,13 @@ Statistics are taken over the valid analysis region only (``valid`` and finite):
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Mapping, Sequence
+from typing import TYPE_CHECKING, Any
+
 import numpy as np
+
+if TYPE_CHECKING:
+    from ..analyzer.result import Result
 
 __all__ = [
     "CHANNEL_FIELDS",
@@ -127,56 +133,45 @@ def share_percent(region, asked=None):
     return float(100.0 * np.count_nonzero(region & asked) / max(np.count_nonzero(asked), 1))
 
 
-def result_statistics(result, *, over_limits_mD=None):
+def result_statistics(result: Result, *, over_limits_mD: Mapping[str, Sequence[float]] | None = None
+                      ) -> dict[str, dict[str, Any]]:
     """Statistics of every channel of an analysis result.
 
     Parameters
     ----------
-    result : AnalysisResult
-        Needs ``phi_eff_mD``, ``phi_shear_mD``, ``valid``; ``phi_total_mD`` when present.
+    result : Result
+        An :class:`~glassdist.analyzer.result.AnalysisResult` or a
+        :class:`~glassdist.storage.StoredResult`; its ``valid`` region.
     over_limits_mD : dict, optional
         ``{channel: [T, ...]}`` thresholds (mD) for the area-over statistics.
 
     Returns
     -------
     dict
-        ``{channel: acceptance_statistics(...)}`` for each channel present.
+        ``{channel: acceptance_statistics(...)}`` for each channel the result holds.
     """
     over_limits_mD = over_limits_mD or {}
-    stats = {}
-    for name, attr in CHANNEL_FIELDS.items():
-        field = getattr(result, attr, None)
-        if field is None:
-            continue
-        stats[name] = acceptance_statistics(field, result.valid, over_limits_mD=over_limits_mD.get(name, ()))
-    return stats
+    return {name: acceptance_statistics(result.pixel_field(attr), result.valid,
+                                        over_limits_mD=over_limits_mD.get(name, ()))
+            for name, attr in CHANNEL_FIELDS.items() if _holds(result, attr)}
 
 
-def _on_analysis_grid(result) -> bool:
-    return hasattr(result, "pixel_rows") and getattr(result, "_deferred", None) is not None
+def _holds(result: Result, name: str) -> bool:
+    return any(f.name == name for f in result.field_specs())
 
 
-def pixel_blocks(result, attrs, max_pixels=1 << 21):
+def pixel_blocks(result: Result, attrs: Sequence[str], max_pixels: int = 1 << 21
+                 ) -> Iterator[tuple[slice, dict[str, np.ndarray]]]:
     """``(rows, {attr: field[rows]})``: fields ``attrs`` of ``result`` on the pixel grid, by blocks of image rows.
 
-    An :class:`~glassdist.analyzer.result.AnalysisResult` brings them there block by block
-    (:meth:`~glassdist.analyzer.result.AnalysisResult.pixel_rows`); any other object with the
-    fields as (H, W) attributes gives them whole, as one block.
+    The result brings them there block by block (:meth:`~glassdist.analyzer.result.Result.pixel_rows`):
+    no full-size copy of a field is needed.
     """
-    if _on_analysis_grid(result):
-        yield from result.pixel_rows(list(attrs), max_pixels)
-    else:
-        yield slice(None), {a: np.asarray(getattr(result, a)) for a in attrs}
+    yield from result.pixel_rows(list(attrs), max_pixels)
 
 
-def _held(result, attr) -> bool:
-    specs = getattr(result, "field_specs", None)
-    if specs is not None and getattr(result, "_deferred", None) is not None:
-        return any(f.name == attr for f in specs())
-    return getattr(result, attr, None) is not None
-
-
-def _grid_brackets(result, regions, names) -> dict:
+def _grid_brackets(result: Result, regions: Mapping[str, np.ndarray], names: Mapping[str, str]
+                   ) -> dict[tuple[str, str], tuple[float, float]]:
     """``{(key, channel): (lo, hi)}``: where each region's 95th percentile lies, from the analysis-grid samples in it.
 
     The pixel-grid fields interpolate the analysis grid, so its samples' quantiles bracket
@@ -198,13 +193,15 @@ def _grid_brackets(result, regions, names) -> dict:
     return out
 
 
-def regions_statistics(result, regions, *, channels=tuple(CHANNEL_FIELDS), over_limits_mD=None, max_pixels=1 << 21):
+def regions_statistics(result: Result, regions: Mapping[str, np.ndarray], *,
+                       channels: Sequence[str] = tuple(CHANNEL_FIELDS),
+                       over_limits_mD: Mapping[str, Sequence[float]] | None = None,
+                       max_pixels: int = 1 << 21) -> dict[str, dict[str, dict[str, Any]]]:
     """Statistics of ``channels`` of ``result`` over each of ``regions``, in one pass over the pixel grid.
 
     Parameters
     ----------
-    result : AnalysisResult
-        Or any object with the channels as (H, W) attributes (taken whole).
+    result : Result
     regions : dict of key -> ndarray of bool (H, W)
     channels : sequence of str
         Names of :data:`STATISTIC_FIELDS` (those the result holds are reported).
@@ -223,16 +220,17 @@ def regions_statistics(result, regions, *, channels=tuple(CHANNEL_FIELDS), over_
     from ..analyzer.metrics import percentile, streamed_statistics
 
     over_limits_mD = over_limits_mD or {}
-    names = {ch: STATISTIC_FIELDS[ch] for ch in channels if _held(result, STATISTIC_FIELDS[ch])}
-    brackets = _grid_brackets(result, regions, names) if _on_analysis_grid(result) else {}
+    names = {ch: STATISTIC_FIELDS[ch] for ch in channels if _holds(result, STATISTIC_FIELDS[ch])}
+    brackets = _grid_brackets(result, regions, names)
     to_channel = {attr: ch for ch, attr in names.items()}
     blocks = ((rows, {to_channel[a]: b for a, b in fields.items()})
               for rows, fields in pixel_blocks(result, list(names.values()), max_pixels))
-    out = streamed_statistics(blocks, regions, over_limits=over_limits_mD, brackets=brackets)
+    out: dict[str, dict[str, dict[str, Any]]] = streamed_statistics(blocks, regions, over_limits=over_limits_mD,
+                                                                   brackets=brackets)
     for key, per in out.items():
         for ch, st in per.items():
             if st["p95_abs"] is None:  # the bracket missed: the whole field, once
-                f = getattr(result, names[ch])
+                f = result.pixel_field(names[ch])
                 st["p95_abs"] = percentile(np.abs(f[np.asarray(regions[key], bool) & np.isfinite(f)]), 95.0)
             st.update({format_limit(t): pct for t, pct in st.pop("over_percent", {}).items()})
     return out

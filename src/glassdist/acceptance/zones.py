@@ -362,12 +362,12 @@ def check_pane(pane, zones, result, *, spec_label="the specification"):
                 f"the pane of {spec_label} has a corner at ({x:.6g}, {y:.6g}) px, outside the {W} x {H} px photo: "
                 f"its '{key}' were written for another photo; give the corners of the pane in this photo, or as "
                 "fractions of the image ('corners_frac') to serve every resolution")
-        s = float(getattr(result, "mm_per_px", float("nan")))
+        s = float(result.mm_per_px)
         d = np.hypot(*(c[[1, 2, 3, 2]] - c[[0, 3, 0, 1]]).T)  # top, bottom, left, right edges, px
         span = ((d[0] + d[1]) / 2 * s, (d[2] + d[3]) / 2 * s)
         size = tuple(float(v) for v in pane.size_mm)
         ratio = (span[0] / size[0], span[1] / size[1])
-        optics = "reflection" if getattr(result, "optics", None) is not None else "transmission"
+        optics = "reflection" if result.optics is not None else "transmission"
         r_lo, r_hi = PANE_SCALE_RANGE[optics]
         aspect = max(ratio) / max(min(ratio), 1e-300)
         if math.isfinite(s) and (not all(r_lo <= r <= r_hi for r in ratio) or aspect > _PANE_ASPECT_RATIO):
@@ -408,7 +408,7 @@ def pane_frame(result, pane=None):
     valid = np.asarray(result.valid, dtype=bool)
     if pane is not None:
         return pane_frame_from_corners(pane.corners_in(valid.shape), pane.size_mm, valid.shape)
-    grow = float(getattr(result, "margin_px", (0.0, 0.0))[0])
+    grow = float(result.margin_px[0])
     return pane_frame_from_region(valid, float(result.mm_per_px), grow_px=grow)
 
 
@@ -452,8 +452,7 @@ def zone_masks(frame, zones):
 
 def measured_region(result):
     """The pixels statistics and verdicts use: the result's trusted pixels (quality label 0), else its valid region."""
-    return np.asarray(getattr(result, "trusted", None) if getattr(result, "trusted", None) is not None
-                      else result.valid, dtype=bool)
+    return np.asarray(result.trusted, dtype=bool)
 
 
 def region_statistics(result, region, *, over_limits_mD=None, channels=tuple(CHANNEL_FIELDS)):
