@@ -28,6 +28,9 @@ from glassdist.synthetic import lens_displacement, synthetic_capture
 SRC = Path(__file__).resolve().parents[1] / "src" / "glassdist"
 
 
+Analysed = tuple[AnalysisResult, StoredResult, StoredResult]
+
+
 def _as_result(r: AnalysisResult | StoredResult) -> Result:
     """Type-checked: mypy holds both classes to the protocol here."""
     return r
@@ -38,7 +41,7 @@ def _members() -> list[str]:
 
 
 @pytest.fixture(scope="module")
-def analysed(tmp_path_factory: pytest.TempPathFactory) -> tuple[AnalysisResult, StoredResult, StoredResult]:
+def analysed(tmp_path_factory: pytest.TempPathFactory) -> Analysed:
     cap = synthetic_capture((240, 300), pitch_mm=6.0, mm_per_px=1.0, rng=5,
                             displacement=lens_displacement(-0.04, 2.0, center_mm=(10.0, -5.0), radius_mm=70.0))
     res = glassdist.analyze(cap.image, pitch_mm=6.0, distance_m=2.0, reference=cap.reference)
@@ -68,7 +71,7 @@ def test_both_classes_implement_every_member(cls: type) -> None:
 
 
 @pytest.mark.parametrize("layout", [1, 2])
-def test_a_stored_result_answers_as_the_analysis_did(analysed: tuple, layout: int) -> None:
+def test_a_stored_result_answers_as_the_analysis_did(analysed: Analysed, layout: int) -> None:
     res, stored = _as_result(analysed[0]), _as_result(analysed[layout])
     assert isinstance(analysed[layout], Result)
     for name in ("method", "pattern", "mm_per_px", "pitch_mm", "distance_m", "sigma_mm", "carrier_period_mm",
@@ -86,12 +89,12 @@ def test_a_stored_result_answers_as_the_analysis_did(analysed: tuple, layout: in
 
 
 @pytest.mark.parametrize("layout", [1, 2])
-def test_acceptance_judges_a_stored_result_as_the_analysis(analysed: tuple, layout: int) -> None:
+def test_acceptance_judges_a_stored_result_as_the_analysis(analysed: Analysed, layout: int) -> None:
     res, stored = analysed[0], analysed[layout]
     assert result_statistics(stored) == result_statistics(res)
     regions = {"trusted": res.trusted, "left": res.trusted & (np.arange(300) < 150)[None, :]}
     assert regions_statistics(stored, regions) == regions_statistics(res, regions)
-    spec = Spec(name="s", criteria=[{"channel": "phi_eff", "statistic": "p95_abs", "max_mD": 1000}])
+    spec = Spec.model_validate({"name": "s", "criteria": [{"channel": "phi_eff", "statistic": "p95_abs", "max_mD": 1000}]})
     a, b = assess(res, spec), assess(stored, spec)
     assert a.verdict is not None and b.verdict is not None
     assert b.verdict.to_dict() == a.verdict.to_dict() and b.stats == a.stats
@@ -110,7 +113,7 @@ def test_the_reflection_geometry_is_a_typed_record() -> None:
     assert on_disk.optics == o
 
 
-def test_with_grid_fields_keeps_the_class(analysed: tuple) -> None:
+def test_with_grid_fields_keeps_the_class(analysed: Analysed) -> None:
     res, stored = analysed[0], analysed[1]
     f = res.grid_fields()
     assert type(res.with_grid_fields(f)) is AnalysisResult
@@ -155,5 +158,5 @@ def test_no_module_reaches_around_the_result_contract() -> None:
     assert found == []
 
 
-def test_every_field_of_a_stored_file_is_a_registered_field(analysed: tuple) -> None:
+def test_every_field_of_a_stored_file_is_a_registered_field(analysed: Analysed) -> None:
     assert set(analysed[1].fields) <= {f.name for f in FIELDS}
