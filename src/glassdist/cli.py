@@ -26,7 +26,7 @@ from .errors import GlassdistError, InputError
 from .history.options import add_recording_options, recording
 from .validation import DISTANCE_M, PITCH_MM, SIGMA_MM, check_sigma_extent, number_option, safe_text
 
-__all__ = ["main", "build_parser", "exit_status"]
+__all__ = ["main", "build_parser", "exit_status", "run_request", "run_request_json"]
 
 log = logging.getLogger("glassdist")
 
@@ -482,20 +482,41 @@ class _ReaderGone:
         return getattr(self._stream, name)
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point; returns the exit code."""
+def main(argv: list[str] | None = None, *, record_as: dict | None = None) -> int:
+    """Entry point; returns the exit code. ``record_as``: the history context of a batch's or web app's child."""
     streams = sys.stdout, sys.stderr
     with open(os.devnull, "w") as null:  # None: a descriptor closed at start (``2>&-``), written to nowhere
         sys.stdout, sys.stderr = (_ReaderGone(null if s is None else s) for s in streams)
         try:
-            return _main(argv)
+            return _main(argv, record_as)
         finally:
             sys.stdout, sys.stderr = streams
 
 
-def _main(argv: list[str] | None) -> int:
+def run_request(request) -> int:
+    """Run an :class:`~glassdist.jobs.request.AnalyzeRequest` as ``glassdist analyze`` runs its options; the exit code."""
+    return main(request.options(), record_as=None if request.record_as is None else request.record_as.model_dump())
+
+
+def run_request_json(text: str) -> int:
+    """:func:`run_request` of a request serialised as JSON (what a child process of a batch or the web app is sent)."""
+    from pydantic import ValidationError
+
+    from .jobs.request import AnalyzeRequest
+
+    try:
+        request = AnalyzeRequest.model_validate_json(text)
+    except ValidationError as exc:
+        print(f"glassdist: error: the run request is not valid ({safe_text(exc, 400)})", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    return run_request(request)
+
+
+def _main(argv: list[str] | None, record_as: dict | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    if record_as is not None:
+        args.record_as = record_as
     logging.basicConfig(level=logging.DEBUG if args.debug else logging.ERROR, format="%(levelname)s: %(message)s")
     if not getattr(args, "func", None):
         parser.print_help()
