@@ -198,13 +198,13 @@ def _read_inputs(args):
             args.parser.error(f"the following arguments are required: {', '.join(missing)}")
     spec = load_spec(args.spec) if args.spec is not None else None
     pinned = spec.spec.protocol if spec is not None else None
+    from_file = load_params(args.params) if args.params is not None else None  # the file, read and checked once
 
     def protocol_with(pattern):
         return resolve_protocol(
             pinned, reference_given=args.reference is not None, pitch_mm=args.pitch_mm,
             distance_m=args.distance_m, pattern=pattern, sigma_mm=args.sigma_mm, detrend_degree=args.detrend_degree,
-            params=load_params(args.params) if args.params is not None else None,
-            spec_label=f"the specification '{args.spec}'")
+            params=from_file, spec_label=f"the specification '{args.spec}'")
 
     protocol = protocol_with(None if args.pattern == "auto" else args.pattern)
     paths = list(args.image)
@@ -235,7 +235,8 @@ def _read_inputs(args):
                          "a photo of the grid taken without the glass, or leave out --reference (Direct Method)")
     if protocol.sources["pattern"] == "default":  # neither given nor pinned: the photo decides
         protocol = _pattern_from_photo(protocol, protocol_with, reference if reference is not None else image)
-    params = load_params(args.params, **protocol.params_overrides)
+    params = load_params(None if from_file is None else from_file.model_dump(exclude_unset=True),
+                         **protocol.params_overrides)
     optics = _optics(args, pinned, protocol.distance_m)
     if optics is not None and params.sigma_mm is not None and not (pinned is not None and pinned.sigma_periods):
         params = load_params({**params.model_dump(exclude_unset=True)}, sigma_mm=params.sigma_mm * optics.magnification)
