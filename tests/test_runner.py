@@ -267,7 +267,7 @@ def test_a_child_killed_from_outside_says_which_signal(tmp_path, monkeypatch, ho
 
 
 def test_a_typed_request_runs_as_its_command_line_forked_or_in_a_fresh_process(pair, tmp_path, monkeypatch):
-    """run_analysis: the request (JSON) runs as its options do, forked or as ``python -m glassdist._childserver
+    """run_request: the request (JSON) runs as its options do, forked or as ``python -m glassdist._childserver
     --request``: spec FAIL (exit 3) recorded with the request's context; a refused value (exit 2), one line."""
     from glassdist.history import HistoryFilter, open_store, query_runs
     from glassdist.jobs.request import AnalyzeRequest, RecordAs
@@ -279,12 +279,12 @@ def test_a_typed_request_runs_as_its_command_line_forked_or_in_a_fresh_process(p
                               pattern="lines", spec="strict.json", out=tmp_path / name, db=str(db),
                               record_as=RecordAs(source="web", job=f"job-{name}"), **kw)
 
-    forked = runner.run_analysis(request("f"), cwd=pair)
+    forked = runner.run_request(request("f"), cwd=pair)
     monkeypatch.setenv("GLASSDIST_CHILD", "process")
-    process = runner.run_analysis(request("p"), cwd=pair)
-    bad = runner.run_analysis(request("b", sigma_mm=-1.0), cwd=pair)
+    process = runner.run_request(request("p"), cwd=pair)
+    bad = runner.run_request(request("b", sigma_mm=-1.0), cwd=pair)
     monkeypatch.delenv("GLASSDIST_CHILD")
-    bad_forked = runner.run_analysis(request("c", sigma_mm=-1.0), cwd=pair)
+    bad_forked = runner.run_request(request("c", sigma_mm=-1.0), cwd=pair)
     assert forked.exit_code == process.exit_code == 3 and "VERDICT: FAIL" in forked.log
     assert forked.log.startswith(f"$ {sys.executable} -m glassdist analyze --pitch-mm=2.0 --distance-m=1.0 ")
     assert (tmp_path / "f" / "result.npz").read_bytes() == (tmp_path / "p" / "result.npz").read_bytes()

@@ -7,8 +7,8 @@ talks to it over its stdin and stdout, one JSON line each way:
 * for each request ``{"args": [...], "env": {...}, "cwd": path or null, "out": path,
   "err": path, "status": path}`` it forks a child and writes ``{"pid": N}``. The child takes
   the request's environment and working folder, writes its stdout and stderr to ``out``
-  and ``err``, runs ``glassdist ARGS`` (or, given ``"request"``, the serialised
-  :class:`~glassdist.jobs.request.AnalyzeRequest`) and writes its exit status to ``status`` (written
+  and ``err``, runs ``glassdist ARGS`` (or, given ``"request"``, the serialised request of
+  :mod:`glassdist.jobs.request`) and writes its exit status to ``status`` (written
   to a temporary name, then renamed: present means complete);
 * for ``{"wait": N}``, asked of a child that ended without writing its status (a signal
   killed it), it reaps child N and writes ``{"exit": code}``, negative for a signal as
@@ -156,7 +156,7 @@ def serve() -> None:
 def run_one() -> int:
     """``python -m glassdist._childserver --request``: the serialised request on stdin, run once, without a server.
 
-    Where no server serves :func:`glassdist.jobs.runner.run_analysis` (not Linux,
+    Where no server serves :func:`glassdist.jobs.runner.run_request` (not Linux,
     ``GLASSDIST_CHILD=process``): the exit status is that of ``glassdist analyze``.
     """
     from glassdist.cli import exit_status, run_request_json

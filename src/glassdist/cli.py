@@ -495,18 +495,18 @@ def main(argv: list[str] | None = None, *, record_as: dict | None = None) -> int
 
 
 def run_request(request) -> int:
-    """Run an :class:`~glassdist.jobs.request.AnalyzeRequest` as ``glassdist analyze`` runs its options; the exit code."""
-    return main(request.options(), record_as=None if request.record_as is None else request.record_as.model_dump())
+    """Run a request of :mod:`glassdist.jobs.request` as its command runs its options; the exit code."""
+    return main(request.options(), record_as=request.history_context())
 
 
 def run_request_json(text: str) -> int:
     """:func:`run_request` of a request serialised as JSON (what a child process of a batch or the web app is sent)."""
     from pydantic import ValidationError
 
-    from .jobs.request import AnalyzeRequest
+    from .jobs.request import parse_request
 
     try:
-        request = AnalyzeRequest.model_validate_json(text)
+        request = parse_request(text)
     except ValidationError as exc:
         print(f"glassdist: error: the run request is not valid ({safe_text(exc, 400)})", file=sys.stderr)
         return EXIT_BAD_INPUT

@@ -9,9 +9,9 @@ worst regions on the heatmaps.
 
 from __future__ import annotations
 
-import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
@@ -125,7 +125,7 @@ def colour_limits(result: Result, spec: Spec | None = None, channels: Sequence[s
     return {c: float(min(limits[c])) if limits.get(c) else shared for c in channels}
 
 
-def assess(result: Result, spec: LoadedSpec | Spec | Mapping[str, Any] | str | os.PathLike[str] | None = None, *,
+def assess(result: Result, spec: LoadedSpec | Spec | Mapping[str, Any] | str | Path | None = None, *,
            protocol: ResolvedProtocol | None = None, mask: np.ndarray | None = None,
            metadata: Mapping[str, Any] | None = None, camera: dict[str, Any] | None | Literal[False] = False
            ) -> Acceptance:
@@ -193,12 +193,10 @@ def assess(result: Result, spec: LoadedSpec | Spec | Mapping[str, Any] | str | o
         proto = protocol.to_dict()
     if proto is not None or judged is not None:
         proto = proto or {"pinned": judged.protocol.model_dump(exclude_none=True) if judged is not None else {}}
-        from .spec import px_per_period
-
         proto["used"] = {"method": result.method, "pitch_mm": result.pitch_mm, "distance_m": result.distance_m,
                          "pattern": result.pattern,
                          "sigma_mm": result.sigma_mm, "detrend_degree": result.detrend_degree,
-                         "px_per_period": px_per_period(result)}
+                         "px_per_period": result.px_per_period}
     warnings = (frame.warning,) if frame.warning and zones_def else ()
     return Acceptance(stats, frame, zones, masks, worst, verdict, measured_share, trusted, proto, meta,
                       colour_limits(result, judged, limits=limits), warnings)

@@ -58,11 +58,9 @@ from __future__ import annotations
 
 import hashlib
 import math
-import os
-from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, Mapping
 
 from pydantic import BaseModel, Field, field_validator, model_validator
 
@@ -78,7 +76,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "Criterion", "Protocol", "Pane", "Zone", "WorstRegions", "Figures", "Spec", "Check", "Verdict", "ResolvedProtocol",
-    "LoadedSpec", "load_spec", "as_spec", "spec_verdict", "spec_channels", "spec_limits", "resolve_protocol", "check_capture", "px_per_period",
+    "LoadedSpec", "load_spec", "as_spec", "spec_verdict", "spec_channels", "spec_limits", "resolve_protocol", "check_capture",
 ]
 
 _SYMBOL = {"phi_eff": "phi_eff", "phi_shear": "phi_shear", "phi_total": "phi_total",
@@ -111,15 +109,7 @@ class Criterion(BaseModel):
     @property
     def stat_key(self) -> str:
         """Key of the statistic in :func:`glassdist.acceptance.stats.acceptance_statistics`'s dict."""
-        if self.statistic == "area_over" and self.threshold_mD is not None:  # set: checked by the model
-            return format_limit(self.threshold_mD)
-        return str(self.statistic)
-
-    @property
-    def limit(self) -> float:
-        """The largest allowed value: ``max_percent`` (percent) for ``area_over``, else ``max_mD`` (mD)."""
-        limit = self.max_percent if self.statistic == "area_over" else self.max_mD
-        return float("nan") if limit is None else float(limit)  # never None: the model requires it
+        return format_limit(self.threshold_mD or 0.0) if self.statistic == "area_over" else str(self.statistic)
 
     def describe(self) -> str:
         """Text of the criterion, e.g. ``p95 |phi_eff| <= 60 mD``."""
@@ -454,7 +444,7 @@ class LoadedSpec:
         return f"the specification '{self.path}'" if self.path else "the specification"
 
 
-def load_spec(path: str | os.PathLike[str]) -> LoadedSpec:
+def load_spec(path: str | Path) -> LoadedSpec:
     """Read and validate a specification JSON file (read once: its SHA-256 is of the bytes parsed).
 
     Parameters
@@ -480,7 +470,7 @@ def load_spec(path: str | os.PathLike[str]) -> LoadedSpec:
     return LoadedSpec(spec, digest.hexdigest(), str(path))
 
 
-def as_spec(spec: LoadedSpec | Spec | Mapping[str, Any] | str | os.PathLike[str]) -> LoadedSpec:
+def as_spec(spec: LoadedSpec | Spec | Mapping[str, Any] | str | Path) -> LoadedSpec:
     """A :class:`LoadedSpec` from a LoadedSpec, a Spec, a dict of its JSON form, or a JSON file.
 
     Raises
@@ -764,11 +754,6 @@ def _sigma_setting(protocol: Protocol, values: dict[str, Any], sources: dict[str
     return periods * p_c, ("params" if "sigma_periods" in from_file else "default"), False
 
 
-def px_per_period(result: Result) -> float:
-    """Shortest carrier period of the photo in px (the capture limit ``min_px_per_period`` is on it)."""
-    return float(result.px_per_period)
-
-
 def check_lens_source(protocol: Protocol | None, *, lens_photo: bool, camera_file: bool,
                       spec_label: str = "the specification") -> None:
     """Refuse a run without the lens calibration source the protocol requires (``lens_calibration``).
@@ -800,7 +785,7 @@ def check_capture(protocol: Protocol | None, result: Result, *, spec_label: str 
     """
     if protocol is None or protocol.min_px_per_period is None:
         return
-    got = px_per_period(result)
+    got = result.px_per_period  # the shortest carrier period in px
     if got < protocol.min_px_per_period:
         raise InputError(
             f"the photo has {got:.3g} px per grid carrier period but the protocol of {spec_label} requires at least "
@@ -811,9 +796,8 @@ def check_capture(protocol: Protocol | None, result: Result, *, spec_label: str 
 def _protocol_checks(protocol: Protocol, result: Result) -> list[Check]:
     checks: list[Check] = []
     if protocol.method is not None:
-        method = result.method
-        checks.append(Check(f"protocol: method = {protocol.method}", method, protocol.method, "", "==",
-                            method == protocol.method))
+        checks.append(Check(f"protocol: method = {protocol.method}", result.method, protocol.method, "", "==",
+                            result.method == protocol.method))
     for key, unit in (("pitch_mm", "mm"), ("distance_m", "m")):
         want = getattr(protocol, key)
         if want is not None:
@@ -882,10 +866,8 @@ def spec_verdict(spec: Spec, stats: Mapping[str, Mapping[str, Any]], result: Res
     zones = zones or {}
     checks = _protocol_checks(spec.protocol, result)
     if spec.min_valid_percent is not None:
-        if trusted_percent is None:
-            from .zones import measured_region
-
-            trusted_percent = share_percent(measured_region(result))
+        if trusted_percent is None:  # the statistics' pixels (zones.measured_region): the trusted ones
+            trusted_percent = share_percent(result.trusted)
         cov = float(trusted_percent)
         where = "the mask" if of_mask else "the image"
         checks.append(Check(f"trusted area >= {spec.min_valid_percent:g} % of {where}", cov,
@@ -897,9 +879,7 @@ def spec_verdict(spec: Spec, stats: Mapping[str, Mapping[str, Any]], result: Res
             checks.append(Check(f"trusted area >= {z.min_valid_percent:g} % of zone '{z.name}'", cov,
                                 z.min_valid_percent, "%", ">=", ok, "zone not in the photo" if math.isnan(cov) else ""))
     if trusted_percent is None:
-        from .zones import measured_region
-
-        trusted_percent = share_percent(measured_region(result))
+        trusted_percent = share_percent(result.trusted)
     for c in spec.criteria:
         if c.zone is None:
             source, covers, cov = stats, "the mask" if of_mask else "the image", float(trusted_percent)
@@ -908,7 +888,7 @@ def spec_verdict(spec: Spec, stats: Mapping[str, Mapping[str, Any]], result: Res
             source, covers = judged.get("statistics", {}), f"zone '{c.zone}'"
             cov = float(judged.get("trusted_percent", float("nan")))
         value = float(source.get(c.channel, {}).get(c.stat_key, float("nan")))
-        limit = c.limit
+        limit = (c.max_percent if c.statistic == "area_over" else c.max_mD) or 0.0  # never None: the model requires it
         unit = "%" if c.statistic == "area_over" else "mD"
         ok = (not math.isnan(value)) and value <= limit
         checks.append(Check(c.describe(), value, limit, unit, "<=", ok,

@@ -1,22 +1,23 @@
-"""One run of ``glassdist analyze`` asked of a child process, typed: what a batch pane or a web job sends.
+"""A run asked of a child process, typed: what a batch pane, a web job or a sweep's variant sends.
 
-The parent (:mod:`glassdist.jobs.batch`, the web app) builds an :class:`AnalyzeRequest`;
-:func:`glassdist.jobs.runner.run_analysis` sends it, serialised as JSON, to a child process
-of its own, which reads it back (:meth:`AnalyzeRequest.model_validate_json`) and runs it as
-``glassdist analyze`` runs its options (:func:`glassdist.cli.run_request`): the same checks
-(the options' ranges, the files, the specification's protocol), the same exit status (0, 2, 3,
-1) and the same history record, whose context (:class:`RecordAs`: a pane of a batch, a job of
-the web app) the request carries as a field rather than as a command-line option.
+The parent (:mod:`glassdist.jobs.batch`, the web app, :mod:`glassdist.virtual.sweep`) builds an
+:class:`AnalyzeRequest` (``glassdist analyze``) or a :class:`ValidateRequest` (``glassdist
+validate``); :func:`glassdist.jobs.runner.run_request` sends it, serialised as JSON, to a child
+process of its own, which reads it back (:func:`parse_request`) and runs it as the command runs
+its options (:func:`glassdist.cli.run_request`): the same checks (the options' ranges, the
+files, the specification's protocol), the same exit status (0, 2, 3, 1) and the same history
+record, whose context (:class:`RecordAs`: a pane of a batch, a job of the web app) the request
+carries as a field rather than as a command-line option.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Any, Literal, Union
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, TypeAdapter
 
-__all__ = ["AnalyzeRequest", "RecordAs"]
+__all__ = ["AnalyzeRequest", "ChildRequest", "RecordAs", "ValidateRequest", "parse_request"]
 
 _FROZEN = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
 
@@ -84,6 +85,7 @@ class AnalyzeRequest(BaseModel):
 
     model_config = _FROZEN
 
+    command: Literal["analyze"] = "analyze"
     images: tuple[Path, ...] = Field(min_length=1)
     out: Path
     reference: Path | None = None
@@ -121,3 +123,59 @@ class AnalyzeRequest(BaseModel):
                 args.append(f"{flag}={value!r}" if isinstance(value, float) else f"{flag}={value}")
         args += [flag for flag, on in (("--report", self.report), ("--export", self.export)) if on]
         return args + [f"--out={self.out}", "--", *(str(p) for p in self.images)]
+
+    def history_context(self) -> dict[str, Any] | None:
+        """The run's context in the history (:class:`RecordAs` as a mapping), or None: a command-line run."""
+        return None if self.record_as is None else self.record_as.model_dump()
+
+
+class ValidateRequest(BaseModel):
+    """One run of ``glassdist validate`` (a variant of ``glassdist sweep``): the scene rendered, analysed, compared.
+
+    Attributes
+    ----------
+    scene : path
+        The variant's scene file.
+    out : path
+        The output folder.
+    method : {'direct', 'comparative'}
+    engine : str
+        The render engine (``exact``, ``cycles``).
+    spp : int, optional
+        Samples per pixel (None: the scene's).
+    """
+
+    model_config = _FROZEN
+
+    command: Literal["validate"] = "validate"
+    scene: Path
+    out: Path
+    method: Literal["direct", "comparative"] = "direct"
+    engine: str = "exact"
+    spp: int | None = Field(None, ge=1)
+
+    def options(self) -> list[str]:
+        """The ``glassdist validate`` command line of this request (``--name=value``, the scene after ``--``)."""
+        spp = [] if self.spp is None else [f"--spp={self.spp}"]
+        return ["validate", f"--method={self.method}", f"--engine={self.engine}", "--no-progress", *spp,
+                f"--out={self.out}", "--", str(self.scene)]
+
+    def history_context(self) -> dict[str, Any] | None:
+        """None: a validation is not recorded in the results history."""
+        return None
+
+
+#: what a child process is sent: one request of either command, told apart by ``command``
+ChildRequest = Annotated[Union[AnalyzeRequest, ValidateRequest], Field(discriminator="command")]
+_CHILD_REQUEST: TypeAdapter[AnalyzeRequest | ValidateRequest] = TypeAdapter(ChildRequest)
+
+
+def parse_request(text: str) -> AnalyzeRequest | ValidateRequest:
+    """The request a child process was sent (its JSON text), validated.
+
+    Raises
+    ------
+    pydantic.ValidationError
+        Not a request of either command.
+    """
+    return _CHILD_REQUEST.validate_json(text)

@@ -1,8 +1,8 @@
 """Child ``glassdist`` processes and the job folders they write into: shared by batch, sweep and the web app.
 
 * :func:`run_glassdist` runs ``glassdist ARGS`` in a child process of its own (this
-  interpreter, this glassdist) and returns a :class:`PaneOutcome`; :func:`run_analysis`
-  sends a typed :class:`~glassdist.jobs.request.AnalyzeRequest` the same way. On Linux the child
+  interpreter, this glassdist) and returns a :class:`PaneOutcome`; :func:`run_request`
+  sends a typed request (:mod:`glassdist.jobs.request`) the same way. On Linux the child
   is forked from a server that has imported the stack once (:mod:`glassdist._childserver`:
   2.2-2.5 s of every fresh start saved); elsewhere, or with ``GLASSDIST_CHILD=process``,
   it is ``python -m glassdist ARGS``;
@@ -24,7 +24,7 @@ from pathlib import Path
 from ..errors import InputError
 from ..storage import EXIT_SPEC_FAIL
 
-__all__ = ["PaneOutcome", "lock_job_folder", "place_folder", "prepare_job_folder", "read_json", "run_analysis",
+__all__ = ["PaneOutcome", "lock_job_folder", "place_folder", "prepare_job_folder", "read_json", "run_request",
            "run_glassdist", "subprocess_runner"]
 
 @dataclass(frozen=True)
@@ -36,12 +36,12 @@ class PaneOutcome:
     error: str = ""
 
 
-def run_analysis(request, *, cwd=None, timeout_s=None):
-    """Run an :class:`~glassdist.jobs.request.AnalyzeRequest` in a child process of its own.
+def run_request(request, *, cwd=None, timeout_s=None):
+    """Run a request of :mod:`glassdist.jobs.request` (``analyze``, ``validate``) in a child process of its own.
 
-    The request goes to the child serialised (JSON), and the child runs it as ``glassdist
-    analyze`` runs its options (:func:`glassdist.cli.run_request`); ``cwd``, ``timeout_s`` and
-    the outcome as for :func:`run_glassdist`, the log's first line the equivalent command.
+    The request goes to the child serialised (JSON), and the child runs it as its command runs
+    its options (:func:`glassdist.cli.run_request`); ``cwd``, ``timeout_s`` and the outcome as
+    for :func:`run_glassdist`, the log's first line the equivalent command.
     """
     return _run_child(request.options(), cwd, timeout_s, request=request.model_dump_json())
 
@@ -297,7 +297,7 @@ def subprocess_runner(pane, out_dir, *, report=False, export=False, cwd=None):
     PaneOutcome
         Exit code, combined output, and the error line (last line of stderr) on failure.
     """
-    return run_analysis(pane.request(out_dir, report=report, export=export), cwd=cwd)
+    return run_request(pane.request(out_dir, report=report, export=export), cwd=cwd)
 
 
 def read_json(path):

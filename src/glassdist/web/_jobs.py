@@ -326,12 +326,12 @@ class JobStore:
         return job
 
     def _run(self, job: Job) -> None:
-        from ..jobs.runner import run_analysis
+        from ..jobs.runner import run_request
         from ..storage import EXIT_SPEC_FAIL
 
         job.state, job.started = "running", time.time()
         try:
-            outcome = run_analysis(job.request, cwd=job.folder, timeout_s=self.timeout_s)
+            outcome = run_request(job.request, cwd=job.folder, timeout_s=self.timeout_s)
             job.exit_code, job.log = outcome.exit_code, outcome.log
             job.error = form_language(outcome.error, job.names, job.display)
             job.state = "done" if outcome.exit_code in (0, EXIT_SPEC_FAIL) else "failed"
