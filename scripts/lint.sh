@@ -1,13 +1,13 @@
 #!/usr/bin/env bash
 # Lint and type-check: ruff (pyflakes, pycodestyle, isort, pydocstyle for public names) and mypy (strict on
-# the analyzer), as configured in pyproject.toml. Exit status non-zero on any finding.
+# the analyzer and the acceptance), as configured in pyproject.toml. Exit status non-zero on any finding.
 #   scripts/lint.sh            the analyzer (the scope CI holds clean)
 #   scripts/lint.sh PATH...    ruff on other paths too (mypy's files stay those of pyproject.toml)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python}
 paths=("$@")
-[ ${#paths[@]} -eq 0 ] && paths=(src/glassdist/analyzer tests/test_analyzer_work_once.py tests/test_code_layout.py)
+[ ${#paths[@]} -eq 0 ] && paths=(src/glassdist/analyzer tests/test_analyzer_work_once.py tests/test_code_layout.py tests/test_result_contract.py)
 status=0
 "$PY" -m ruff check "${paths[@]}" || status=1
 "$PY" -m mypy || status=1

@@ -84,8 +84,7 @@ def test_params_file_contradicting_a_pin_is_refused():
 
 
 def test_capture_limit_is_an_input_error():
-    carriers = SimpleNamespace(k1=SimpleNamespace(period_px=6.0), k2=SimpleNamespace(period_px=6.5))
-    res = SimpleNamespace(carriers=carriers)
+    res = SimpleNamespace(px_per_period=6.0)  # the shorter of the carrier periods 6.0 and 6.5 px
     check_capture(Protocol(min_px_per_period=6.0), res)
     with pytest.raises(InputError, match="6 px per grid carrier period .* at least 8"):
         check_capture(Protocol(min_px_per_period=8.0), res)
@@ -148,8 +147,28 @@ class _PixelGridResult(SimpleNamespace):
     ``carriers``): the production code has no second path for it.
     """
 
+    def field_specs(self):
+        from glassdist.analyzer.result import FIELDS
+
+        return tuple(f for f in FIELDS if f.name in self.__dict__)
+
     def grid_field(self, name):
         return getattr(self, name)
+
+    pixel_field = grid_field
+
+    def pixel_rows(self, names, max_pixels=1 << 21):
+        from glassdist.analyzer.result import row_blocks
+
+        return row_blocks({n: self.pixel_field(n) for n in names}, max_pixels)
+
+    @property
+    def px_per_period(self):
+        return float(min(self.carriers.k1.period_px, self.carriers.k2.period_px))
+
+    @property
+    def pattern(self):
+        return self.params.pattern
 
     @property
     def grid_valid(self):
@@ -157,7 +176,15 @@ class _PixelGridResult(SimpleNamespace):
 
     @property
     def grid_trusted(self):
-        return getattr(self, "trusted", self.valid)
+        return self.trusted
+
+    @property
+    def trusted(self):
+        return self.__dict__.get("trusted_px", self.valid)
+
+    @trusted.setter
+    def trusted(self, value):
+        self.__dict__["trusted_px"] = value
 
     @property
     def analysis_grid(self):
@@ -171,7 +198,8 @@ def _field_result(shape=(200, 260)):
     eff[:, :130] = 10.0  # left half 10 mD, right half 0
     return _PixelGridResult(phi_eff_mD=eff, phi_shear_mD=np.abs(eff) / 2, phi_total_mD=np.abs(eff),
                            valid=np.ones(shape, bool), method="comparative", sigma_mm=2.0, detrend_degree=2,
-                           mm_per_px=2.0, carrier_period_mm=5.0, pitch_mm=5.0, distance_m=1.0,
+                           mm_per_px=2.0, carrier_period_mm=5.0, pitch_mm=5.0, distance_m=1.0, optics=None,
+                           margin_px=(0.0, 0.0),
                            params=SimpleNamespace(border_periods=1.5, pattern="lines"),
                            carriers=SimpleNamespace(k1=SimpleNamespace(period_px=2.5), k2=SimpleNamespace(period_px=2.5)))
 

@@ -187,10 +187,15 @@ def test_manifest_paths_defaults_and_comments(tmp_path):
     assert panes[0].reference == tmp_path / "m" / "ref.png"
     assert panes[1].pitch_mm == 7.0 and panes[1].distance_m == 2.0 and panes[1].detrend_degree == 4
     assert panes[1].spec == (tmp_path.cwd() / "spec.json").absolute()  # option paths: from where the user is
-    args = panes[1].analyze_args(tmp_path / "o", report=True)
-    # options as --name=value, the image last after '--' (a cell such as '-h' cannot become an option)
+    request = panes[1].request(tmp_path / "o", report=True)
+    assert request.images == (tmp_path / "m" / "two.bmp",) and request.detrend_degree == 4 and request.report
+    assert request.record_as is not None and request.record_as.source == "batch"
+    assert request.record_as.out_dir == str(tmp_path / "two") and request.record_as.job == str(tmp_path.parent)
+    # the child parses options as --name=value, the image last after '--' (a cell '-h' cannot become an option)
+    args = request.options()
     assert args[0] == "analyze" and args[-2:] == ["--", str(tmp_path / "m" / "two.bmp")]
     assert "--detrend-degree=4" in args and "--report" in args and f"--out={tmp_path / 'o'}" in args
+    assert type(request).model_validate_json(request.model_dump_json()) == request  # what the child reads back
 
 
 @pytest.mark.parametrize(

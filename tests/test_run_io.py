@@ -86,20 +86,27 @@ class IOCounter:
 
 @pytest.fixture(scope="module")
 def counted_run(tmp_path_factory):
-    """One factory run (Comparative, the bundled photos, the example specification, with the report), counted."""
+    """One factory run (Comparative, the bundled photos, the example specification, with the report), counted.
+
+    With a ``--params`` file setting what the specification pins (``detrend_degree`` 2): read once, where the
+    options' resolution, the specification's checks and the analysis all take its values.
+    """
     from glassdist.acceptance.spec import check_capture, spec_limits
     from glassdist.analyzer.pattern import detect_pattern
     from glassdist.fs import file_sha256
     from glassdist.io import camera_metadata, read_image, read_photo
 
     out = tmp_path_factory.mktemp("factory") / "out"
+    params = out.parent / "params.json"
+    params.write_text('{"detrend_degree": 2}')
     counter = IOCounter([spec_limits, check_capture, file_sha256, read_photo, read_image, camera_metadata,
                          detect_pattern])
     mp = pytest.MonkeyPatch()
     counter.patch(mp)
     try:
         code = cli.main(["analyze", str(EXAMPLES / "factory_pane.png"), "--reference", str(EXAMPLES / "factory_reference.png"),
-                         "--spec", str(FACTORY_SPEC), "--report", "--no-history", "--quiet", "--out", str(out)])
+                         "--spec", str(FACTORY_SPEC), "--params", str(params), "--report", "--no-history", "--quiet",
+                         "--out", str(out)])
     finally:
         counter.stop()
         mp.undo()
@@ -116,6 +123,7 @@ def test_the_run_is_the_documented_factory_run(counted_run):
 def test_each_input_is_read_once_and_hashed_from_the_bytes_read(counted_run):
     counter, _, out = counted_run
     assert counter.reads_of(FACTORY_SPEC) == 1
+    assert counter.reads_of(out.parent / "params.json") == 1  # parsed once: the protocol's and the analysis's values
     assert counter.reads_of(EXAMPLES / "factory_pane.png") == 1  # decode, SHA-256 and EXIF from one read
     assert counter.reads_of(EXAMPLES / "factory_reference.png") == 1
     summary = json.loads((out / "summary.json").read_text())

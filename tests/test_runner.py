@@ -264,3 +264,32 @@ def test_a_child_killed_from_outside_says_which_signal(tmp_path, monkeypatch, ho
     (out,) = outcome
     assert out.exit_code == -15, out.log
     assert out.error == "glassdist: error: the child process was killed by SIGTERM before it finished"
+
+
+def test_a_typed_request_runs_as_its_command_line_forked_or_in_a_fresh_process(pair, tmp_path, monkeypatch):
+    """run_request: the request (JSON) runs as its options do, forked or as ``python -m glassdist._childserver
+    --request``: spec FAIL (exit 3) recorded with the request's context; a refused value (exit 2), one line."""
+    from glassdist.history import HistoryFilter, open_store, query_runs
+    from glassdist.jobs.request import AnalyzeRequest, RecordAs
+
+    db = tmp_path / "history.sqlite"
+
+    def request(name, **kw):
+        return AnalyzeRequest(images=("pane.png",), reference="reference.png", pitch_mm=2.0, distance_m=1.0,
+                              pattern="lines", spec="strict.json", out=tmp_path / name, db=str(db),
+                              record_as=RecordAs(source="web", job=f"job-{name}"), **kw)
+
+    forked = runner.run_request(request("f"), cwd=pair)
+    monkeypatch.setenv("GLASSDIST_CHILD", "process")
+    process = runner.run_request(request("p"), cwd=pair)
+    bad = runner.run_request(request("b", sigma_mm=-1.0), cwd=pair)
+    monkeypatch.delenv("GLASSDIST_CHILD")
+    bad_forked = runner.run_request(request("c", sigma_mm=-1.0), cwd=pair)
+    assert forked.exit_code == process.exit_code == 3 and "VERDICT: FAIL" in forked.log
+    assert forked.log.startswith(f"$ {sys.executable} -m glassdist analyze --pitch-mm=2.0 --distance-m=1.0 ")
+    assert (tmp_path / "f" / "result.npz").read_bytes() == (tmp_path / "p" / "result.npz").read_bytes()
+    with open_store(str(db)) as store:
+        runs = query_runs(store, HistoryFilter())
+    assert sorted((r["source"], r["job"]) for r in runs) == [("web", "job-f"), ("web", "job-p")]
+    assert bad.exit_code == bad_forked.exit_code == 2 and bad.error == bad_forked.error
+    assert "--sigma-mm" in bad.error and "must be positive" in bad.error

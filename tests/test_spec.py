@@ -19,15 +19,17 @@ def _write(tmp_path, data, name="spec.json"):
     return p
 
 
-def _known_result(shape=(100, 100)):
+def _known_result(shape=(100, 100), valid=None):
     """phi_eff = -50 mD on 30 % of the pixels, 0 elsewhere; phi_shear = 10 mD on 2 %, 1 mD elsewhere."""
+    from glassdist.storage import StoredResult
+
     eff = np.zeros(shape)
     eff[:30] = -50.0
     shear = np.ones(shape)
     shear[-2:] = 10.0
-    return SimpleNamespace(
-        phi_eff_mD=eff, phi_shear_mD=shear, phi_total_mD=np.hypot(eff, shear), valid=np.ones(shape, bool),
-        method="comparative", sigma_mm=2.0, detrend_degree=2,
+    return StoredResult.on_pixel_grid(
+        {"phi_eff_mD": eff, "phi_shear_mD": shear, "phi_total_mD": np.hypot(eff, shear)},
+        np.ones(shape, bool) if valid is None else valid, method="comparative", sigma_mm=2.0, detrend_degree=2,
     )
 
 
@@ -51,7 +53,7 @@ def _verdict(tmp_path, spec, result=None):
 
 def test_statistics_match_closed_form():
     r = _known_result()
-    s = acceptance_statistics(r.phi_eff_mD, r.valid, over_limits_mD=[40, 60])
+    s = acceptance_statistics(r.pixel_field("phi_eff_mD"), r.valid, over_limits_mD=[40, 60])
     assert s["mean_abs"] == pytest.approx(15.0)
     assert s["mean"] == pytest.approx(-15.0)
     assert s["std"] == pytest.approx(np.sqrt(0.3 * 0.7) * 50.0)
@@ -98,8 +100,7 @@ def test_each_criterion_can_fail(tmp_path):
 
 
 def test_empty_region_fails_and_coverage_is_checked(tmp_path):
-    r = _known_result()
-    r.valid = np.zeros_like(r.valid)
+    r = _known_result(valid=np.zeros((100, 100), bool))
     v = _verdict(tmp_path, dict(SPEC, min_valid_percent=10), r)
     assert not any(c.passed for c in v.checks)
     assert "no valid pixel" in v.checks[1].note

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import html
 import json
 import shutil
 import socket
@@ -16,6 +17,7 @@ import pytest
 pytest.importorskip("fastapi", reason="the web application needs glassdist[web]")
 uvicorn = pytest.importorskip("uvicorn", reason="the web application needs glassdist[web]")
 
+from glassdist.jobs.request import RecordAs  # noqa: E402
 from glassdist.web import create_app  # noqa: E402
 from glassdist.web._jobs import LABELS, form_language  # noqa: E402
 
@@ -78,15 +80,22 @@ def test_errors_limits_and_no_path_traversal(server, pair, tmp_path):
         assert r.status_code == 413 and "larger than the 8 MB" in r.text
         assert len(list(app.state.store.root.iterdir())) == 0  # refused uploads leave nothing behind
 
-        # a client file name is never a path; a field value never becomes an option
-        r = client.post(f"{url}/jobs", files={"image": ("../../evil.png", (pair / "reference.png").read_bytes())},
+        # a field value never becomes an option: the request reads it as its field's type, and refuses it in
+        # the form's words (the field as the form names it; the value as typed, quoted, left as it is)
+        before = len(app.state.store.recent())
+        r = client.post(f"{url}/jobs", files={"image": ("pane.png", (pair / "reference.png").read_bytes())},
                         data={"pitch_mm": "--out=/tmp/x", "distance_m": "1"}, follow_redirects=False)
+        assert r.status_code == 400 and len(app.state.store.recent()) == before
+        assert "\u201cgrid pitch, mm\u201d: must be a number, got '--out=/tmp/x'" in html.unescape(r.text)
+        # a client file name is never a path
+        r = client.post(f"{url}/jobs", files={"image": ("../../evil.png", (pair / "reference.png").read_bytes())},
+                        data={"pitch_mm": "-5", "distance_m": "1"}, follow_redirects=False)
         assert r.status_code == 303
         job_id = r.headers["location"].rsplit("/", 1)[1]
         status = _wait(client, url, job_id)
         assert status["state"] == "failed" and status["error"].count("\n") == 0
-        # the field as the form names it; the value as typed (quoted) is left as it is
-        assert status["error"] == "\u201cgrid pitch, mm\u201d: must be a number, got '--out=/tmp/x'"
+        # a range the analysis checks, as on the command line, in the form's words
+        assert status["error"] == "\u201cgrid pitch, mm\u201d: must be positive, got -5.0"
         job = app.state.store.get(job_id)
         assert sorted(p.name for p in job.folder.iterdir()) == ["image.png"]
         assert not (tmp_path.parent / "evil.png").exists()
@@ -402,8 +411,8 @@ def test_contract_spec_with_the_form_as_it_loads_in_headless_chromium(server, pa
         assert page.inner_text("#verdict") == "FAIL"
         job = app.state.store.get(page.url.rsplit("/", 1)[1])
         # only the photo, the specification and the output folder: no field, no report, no export
-        assert [a for a in job.args if not a.startswith("--record-as=")] == [
-            "analyze", "--spec", "spec.json", "--out", "out", "--", "image.png"]
+        assert job.request.options() == ["analyze", "--spec=spec.json", "--out=out", "--", "image.png"]
+        assert job.request.record_as == RecordAs(source="web", job=job.id)  # recorded as this web job
         assert not any(n.startswith(("report", "fields", "tiff")) for n in job.outputs())
 
 

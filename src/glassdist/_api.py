@@ -19,8 +19,9 @@ def evaluate_spec(result, spec, *, mask=None, camera_distance_m=None):
 
     Parameters
     ----------
-    result : AnalysisResult
-        From :func:`glassdist.analyze`.
+    result : Result
+        From :func:`glassdist.analyze`, or a run read back by :func:`glassdist.load_result`
+        (any :class:`~glassdist.analyzer.result.Result`).
     spec : Spec, dict or path
         The specification (its JSON form as a dict, or the JSON file); see
         ``docs/user-guide/factory-acceptance.md``.

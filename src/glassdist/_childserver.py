@@ -7,7 +7,8 @@ talks to it over its stdin and stdout, one JSON line each way:
 * for each request ``{"args": [...], "env": {...}, "cwd": path or null, "out": path,
   "err": path, "status": path}`` it forks a child and writes ``{"pid": N}``. The child takes
   the request's environment and working folder, writes its stdout and stderr to ``out``
-  and ``err``, runs ``glassdist ARGS`` and writes its exit status to ``status`` (written
+  and ``err``, runs ``glassdist ARGS`` (or, given ``"request"``, the serialised request of
+  :mod:`glassdist.jobs.request`) and writes its exit status to ``status`` (written
   to a temporary name, then renamed: present means complete);
 * for ``{"wait": N}``, asked of a child that ended without writing its status (a signal
   killed it), it reaps child N and writes ``{"exit": code}``, negative for a signal as
@@ -73,10 +74,10 @@ def _child(request: dict) -> None:
         sys.stdin = open(0, closefd=False)  # noqa: SIM115 - the process's own descriptors
         sys.stdout = open(1, "w", encoding="utf-8", errors="replace", buffering=1, closefd=False)  # noqa: SIM115
         sys.stderr = open(2, "w", encoding="utf-8", errors="replace", buffering=1, closefd=False)  # noqa: SIM115
-        from glassdist.cli import exit_status, main
+        from glassdist.cli import exit_status, main, run_request_json
 
         try:
-            code = main(request["args"])
+            code = run_request_json(request["request"]) if "request" in request else main(request["args"])
         except SystemExit as exc:  # argparse: --help, --version, option errors
             code = exit_status(exc)
         except KeyboardInterrupt:  # before main's own handler could see it
@@ -152,5 +153,19 @@ def serve() -> None:
     _reap(children, block=True)
 
 
+def run_one() -> int:
+    """``python -m glassdist._childserver --request``: the serialised request on stdin, run once, without a server.
+
+    Where no server serves :func:`glassdist.jobs.runner.run_request` (not Linux,
+    ``GLASSDIST_CHILD=process``): the exit status is that of ``glassdist analyze``.
+    """
+    from glassdist.cli import exit_status, run_request_json
+
+    try:
+        return run_request_json(sys.stdin.read())
+    except SystemExit as exc:  # argparse: option errors
+        return exit_status(exc)
+
+
 if __name__ == "__main__":
-    serve()
+    sys.exit(run_one()) if sys.argv[1:] == ["--request"] else serve()

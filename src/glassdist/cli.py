@@ -26,7 +26,7 @@ from .errors import GlassdistError, InputError
 from .history.options import add_recording_options, recording
 from .validation import DISTANCE_M, PITCH_MM, SIGMA_MM, check_sigma_extent, number_option, safe_text
 
-__all__ = ["main", "build_parser", "exit_status"]
+__all__ = ["main", "build_parser", "exit_status", "run_request", "run_request_json"]
 
 log = logging.getLogger("glassdist")
 
@@ -198,13 +198,13 @@ def _read_inputs(args):
             args.parser.error(f"the following arguments are required: {', '.join(missing)}")
     spec = load_spec(args.spec) if args.spec is not None else None
     pinned = spec.spec.protocol if spec is not None else None
+    from_file = load_params(args.params) if args.params is not None else None  # the file, read and checked once
 
     def protocol_with(pattern):
         return resolve_protocol(
             pinned, reference_given=args.reference is not None, pitch_mm=args.pitch_mm,
             distance_m=args.distance_m, pattern=pattern, sigma_mm=args.sigma_mm, detrend_degree=args.detrend_degree,
-            params=load_params(args.params) if args.params is not None else None,
-            spec_label=f"the specification '{args.spec}'")
+            params=from_file, spec_label=f"the specification '{args.spec}'")
 
     protocol = protocol_with(None if args.pattern == "auto" else args.pattern)
     paths = list(args.image)
@@ -235,7 +235,8 @@ def _read_inputs(args):
                          "a photo of the grid taken without the glass, or leave out --reference (Direct Method)")
     if protocol.sources["pattern"] == "default":  # neither given nor pinned: the photo decides
         protocol = _pattern_from_photo(protocol, protocol_with, reference if reference is not None else image)
-    params = load_params(args.params, **protocol.params_overrides)
+    params = load_params(None if from_file is None else from_file.model_dump(exclude_unset=True),
+                         **protocol.params_overrides)
     optics = _optics(args, pinned, protocol.distance_m)
     if optics is not None and params.sigma_mm is not None and not (pinned is not None and pinned.sigma_periods):
         params = load_params({**params.model_dump(exclude_unset=True)}, sigma_mm=params.sigma_mm * optics.magnification)
@@ -482,20 +483,41 @@ class _ReaderGone:
         return getattr(self._stream, name)
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point; returns the exit code."""
+def main(argv: list[str] | None = None, *, record_as: dict | None = None) -> int:
+    """Entry point; returns the exit code. ``record_as``: the history context of a batch's or web app's child."""
     streams = sys.stdout, sys.stderr
     with open(os.devnull, "w") as null:  # None: a descriptor closed at start (``2>&-``), written to nowhere
         sys.stdout, sys.stderr = (_ReaderGone(null if s is None else s) for s in streams)
         try:
-            return _main(argv)
+            return _main(argv, record_as)
         finally:
             sys.stdout, sys.stderr = streams
 
 
-def _main(argv: list[str] | None) -> int:
+def run_request(request) -> int:
+    """Run a request of :mod:`glassdist.jobs.request` as its command runs its options; the exit code."""
+    return main(request.options(), record_as=request.history_context())
+
+
+def run_request_json(text: str) -> int:
+    """:func:`run_request` of a request serialised as JSON (what a child process of a batch or the web app is sent)."""
+    from pydantic import ValidationError
+
+    from .jobs.request import parse_request
+
+    try:
+        request = parse_request(text)
+    except ValidationError as exc:
+        print(f"glassdist: error: the run request is not valid ({safe_text(exc, 400)})", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    return run_request(request)
+
+
+def _main(argv: list[str] | None, record_as: dict | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    if record_as is not None:
+        args.record_as = record_as
     logging.basicConfig(level=logging.DEBUG if args.debug else logging.ERROR, format="%(levelname)s: %(message)s")
     if not getattr(args, "func", None):
         parser.print_help()

@@ -32,12 +32,16 @@ The angle a ray is turned by the glass follows from delta in the far-background 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy import ndimage
 
 from .analyzer.captures import sample_field
 from .analyzer.metrics import derivative
+
+if TYPE_CHECKING:
+    from .analyzer.result import Optics
 
 __all__ = [
     "RollWave",
@@ -798,7 +802,7 @@ REFLECTION_MEANING = {
 }
 
 
-def reflected_roll_wave(rw: RollWave, optics: dict) -> dict:
+def reflected_roll_wave(rw: RollWave, optics: Optics) -> dict:
     """The roll wave in reflection: period on the pane, reflective power amplitude, implied surface height.
 
     ``rw`` is :func:`roll_wave` of the board displacement on pane mm with
@@ -810,8 +814,8 @@ def reflected_roll_wave(rw: RollWave, optics: dict) -> dict:
     plane of incidence along an image axis, the camera (aimed at the view's centre) sees the
     pane foreshortened by ``cos(theta)`` along it (:func:`standard_measures`).
     """
-    theta = np.radians(optics["incidence_deg"])
-    b = np.radians(rw.direction_deg - optics["plane_of_incidence_deg"])
+    theta = np.radians(optics.incidence_deg)
+    b = np.radians(rw.direction_deg - optics.plane_of_incidence_deg)
     F = float(np.cos(b) ** 2 / np.cos(theta) + np.sin(b) ** 2 * np.cos(theta))
     k = 2 * np.pi / rw.period_mm
     A = rw.power_amplitude_mD * 1e-6 / (2 * k * k * F)
@@ -850,21 +854,21 @@ def standard_measures(result, *, gauge_mm: float = 4.0, directions_deg=(0.0, 90.
     yy, xx = g.coords()
     H, W = result.valid.shape
     inside = result.valid[np.clip(np.rint(yy).astype(int), 0, H - 1), np.clip(np.rint(xx).astype(int), 0, W - 1)]
-    inside &= getattr(result, "grid_trusted", np.ones(inside.shape, bool))
+    inside &= result.grid_trusted
     d = np.where(inside[..., None], np.asarray(result.grid_field("displacement_detrended_mm"), dtype=float), np.nan)
     phi = np.where(inside, np.asarray(result.grid_field("phi_eff_mD"), dtype=float), np.nan)
     sy, sx = g.step
     step = (sy * result.mm_per_px, sx * result.mm_per_px)
     L = result.distance_m
-    optics = getattr(result, "optics", None)
+    optics = result.optics
     rw_step = gl_step = step
     if optics is not None:
-        gl_step = (step[0] * optics["magnification"], step[1] * optics["magnification"])  # board mm per sample  # reflection: D / cos(theta) turns the board displacement into reflective power
-        cos_t = float(np.cos(np.radians(optics["incidence_deg"])))
-        L = optics["board_distance_m"] / cos_t
+        gl_step = (step[0] * optics.magnification, step[1] * optics.magnification)  # board mm per sample  # reflection: D / cos(theta) turns the board displacement into reflective power
+        cos_t = float(np.cos(np.radians(optics.incidence_deg)))
+        L = optics.board_distance_m / cos_t
         # a camera aimed at the view's centre sees the pane foreshortened by cos(theta) along the plane of
         # incidence: pane mm per px mm_per_px / sqrt(cos) along it, x sqrt(cos) across (image axes only)
-        psi = np.radians(optics["plane_of_incidence_deg"])
+        psi = np.radians(optics.plane_of_incidence_deg)
         f = np.sqrt(cos_t)
         if abs(np.sin(psi)) < 1e-9:
             rw_step = (step[0] * f, step[1] / f)

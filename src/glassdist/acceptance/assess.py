@@ -9,7 +9,10 @@ worst regions on the heatmaps.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
@@ -17,7 +20,11 @@ from .geometry import MD_STATISTICS
 from .regions import REGION_CHANNELS, all_worst_regions, regions_csv
 from .spec import _STAT_TEXT, _SYMBOL, Check, as_spec, check_capture, spec_channels, spec_limits, spec_verdict
 from .stats import CHANNEL_FIELDS, regions_statistics, share_percent, shared_limit
-from .zones import check_pane, measured_region, pane_frame, zone_masks, zone_statistics
+from .zones import PaneFrame, check_pane, measured_region, pane_frame, zone_masks, zone_statistics
+
+if TYPE_CHECKING:
+    from ..analyzer.result import Result
+    from .spec import LoadedSpec, ResolvedProtocol, Spec, Verdict
 
 __all__ = ["Acceptance", "assess", "colour_limits", "METADATA_KEYS"]
 
@@ -58,20 +65,20 @@ class Acceptance:
     warnings : tuple of str
     """
 
-    stats: dict
-    frame: object
-    zones: dict
-    masks: dict
-    regions: dict
-    verdict: object
+    stats: dict[str, dict[str, Any]]
+    frame: PaneFrame
+    zones: dict[str, dict[str, Any]]
+    masks: dict[str, np.ndarray]
+    regions: dict[str, dict[str, Any]]
+    verdict: Verdict | None
     measured_percent: float
     trusted_percent: float
-    protocol: dict | None
-    metadata: dict
-    colour_limits: dict
-    warnings: tuple = field(default=())
+    protocol: dict[str, Any] | None
+    metadata: dict[str, Any]
+    colour_limits: dict[str, float]
+    warnings: tuple[str, ...] = field(default=())
 
-    def summary(self):
+    def summary(self) -> dict[str, Any]:
         """Additions to ``summary.json``: ``protocol``, ``pane``, ``zones``, ``worst_regions``, ``metadata``,
         ``measured_percent``, ``trusted_percent``, ``colour_limits_mD``."""
         return {
@@ -87,12 +94,13 @@ class Acceptance:
             "colour_limits_mD": self.colour_limits,
         }
 
-    def regions_csv(self):
+    def regions_csv(self) -> str:
         """``worst_regions.csv`` text."""
         return regions_csv(self.regions)
 
 
-def colour_limits(result, spec=None, channels=("phi_eff", "phi_shear"), *, limits=None):
+def colour_limits(result: Result, spec: Spec | None = None, channels: Sequence[str] = ("phi_eff", "phi_shear"), *,
+                  limits: Mapping[str, Sequence[float]] | None = None) -> dict[str, float]:
     """Colour limit (mD) of each heatmap: the spec's choice (``figures.colour_limit``), else a shared p99.
 
     The shared p99 is taken where the heatmaps are drawn from: the trusted samples of the
@@ -112,13 +120,16 @@ def colour_limits(result, spec=None, channels=("phi_eff", "phi_shear"), *, limit
     choice = spec.figures.colour_limit if spec is not None else "auto"
     if choice == "auto":
         return {c: shared for c in channels}
-    if choice != "spec":
+    if choice != "spec" or spec is None:
         return {c: float(choice) for c in channels}
     limits = spec_limits(spec) if limits is None else limits
     return {c: float(min(limits[c])) if limits.get(c) else shared for c in channels}
 
 
-def assess(result, spec=None, *, protocol=None, mask=None, metadata=None, camera=False, camera_distance_m=None):
+def assess(result: Result, spec: LoadedSpec | Spec | Mapping[str, Any] | str | Path | None = None, *,
+           protocol: ResolvedProtocol | None = None, mask: np.ndarray | None = None,
+           metadata: Mapping[str, Any] | None = None, camera: dict[str, Any] | None | Literal[False] = False,
+           camera_distance_m: float | None = None) -> Acceptance:
     """Capture check, statistics, pane frame, zones, worst regions and verdict of one analysis.
 
     Parameters
@@ -154,55 +165,54 @@ def assess(result, spec=None, *, protocol=None, mask=None, metadata=None, camera
         (:func:`~glassdist.acceptance.zones.check_pane`).
     """
     loaded = as_spec(spec) if spec is not None else None
-    spec = loaded.spec if loaded is not None else None
+    judged = loaded.spec if loaded is not None else None
     limits = loaded.limits if loaded is not None else {}
-    if loaded is not None:  # a capture outside the protocol is not judged (exit 2)
-        check_capture(spec.protocol, result, spec_label=loaded.label)
-        check_pane(spec.pane, spec.zones, result, spec_label=loaded.label)
+    if loaded is not None and judged is not None:  # a capture outside the protocol is not judged (exit 2)
+        check_capture(judged.protocol, result, spec_label=loaded.label)
+        check_pane(judged.pane, judged.zones, result, spec_label=loaded.label)
     # the power channels always; the uncertainty channels where a criterion judges them
-    channels = tuple(dict.fromkeys((*CHANNEL_FIELDS, *(spec_channels(spec) if spec is not None else ()))))
+    channels = tuple(dict.fromkeys((*CHANNEL_FIELDS, *(spec_channels(judged) if judged is not None else ()))))
     measured = measured_region(result)
-    frame = pane_frame(result, spec.pane if spec is not None else None)
-    zones_def = spec.zones if spec is not None else ()
+    frame = pane_frame(result, judged.pane if judged is not None else None)
+    zones_def = judged.zones if judged is not None else ()
     masks = zone_masks(frame, zones_def)
     # the whole region and every zone in one pass over the pixel grid
-    regions = {None: measured, **{z.name: measured & masks[z.name] for z in zones_def}}
+    regions: dict[str | None, np.ndarray] = {None: measured, **{z.name: measured & masks[z.name] for z in zones_def}}
     per_region = regions_statistics(result, regions, over_limits_mD=limits, channels=channels)
     stats = per_region.pop(None)
     zones = zone_statistics(result, frame, zones_def, over_limits_mD=limits, masks=masks, channels=channels,
-                            statistics=per_region)
+                            statistics={k: v for k, v in per_region.items() if k is not None})
     trusted = share_percent(measured, mask)
     measured_share = share_percent(result.valid, mask)
     verdict = None
-    if spec is not None:
+    if loaded is not None and judged is not None:
         # a specification at a stated geometry judges the capture converted there, and says by what factor
-        geo, k = _geometry_check(spec, stats, result, camera_distance_m)
-        judged, judged_zones = (stats, zones) if geo is None else _converted(stats, zones, k)
-        verdict = spec_verdict(spec, judged, result, spec_path=loaded.path, spec_sha256=loaded.sha256,
+        geo, k = _geometry_check(judged, stats, result, camera_distance_m)
+        judged_stats, judged_zones = (stats, zones) if geo is None else _converted(stats, zones, k)
+        verdict = spec_verdict(judged, judged_stats, result, spec_path=loaded.path, spec_sha256=loaded.sha256,
                                zones=judged_zones, trusted_percent=trusted, of_mask=mask is not None)
         if geo is not None:
             verdict = replace(verdict, checks=(geo, *verdict.checks))
-    regions = all_worst_regions(result, frame, spec, channels=REGION_CHANNELS, statistics=stats, limits=limits)
+    worst = all_worst_regions(result, frame, judged, channels=REGION_CHANNELS, statistics=stats, limits=limits)
     meta = {k: v for k, v in (metadata or {}).items() if v is not None}
     if camera is not False:
         meta["camera"] = camera
     proto = None
     if protocol is not None:
         proto = protocol.to_dict()
-    if proto is not None or spec is not None:
-        proto = proto or {"pinned": spec.protocol.model_dump(exclude_none=True)}
-        from .spec import px_per_period
-
+    if proto is not None or judged is not None:
+        proto = proto or {"pinned": judged.protocol.model_dump(exclude_none=True) if judged is not None else {}}
         proto["used"] = {"method": result.method, "pitch_mm": result.pitch_mm, "distance_m": result.distance_m,
-                         "pattern": getattr(getattr(result, "params", None), "pattern", None),
+                         "pattern": result.pattern,
                          "sigma_mm": result.sigma_mm, "detrend_degree": result.detrend_degree,
-                         "px_per_period": px_per_period(result)}
+                         "px_per_period": result.px_per_period}
     warnings = (frame.warning,) if frame.warning and zones_def else ()
-    return Acceptance(stats, frame, zones, masks, regions, verdict, measured_share, trusted, proto, meta,
-                      colour_limits(result, spec, limits=limits), warnings)
+    return Acceptance(stats, frame, zones, masks, worst, verdict, measured_share, trusted, proto, meta,
+                      colour_limits(result, judged, limits=limits), warnings)
 
 
-def _geometry_check(spec, stats, result, camera_distance_m):
+def _geometry_check(spec: Spec, stats: dict[str, Any], result: Result,
+                    camera_distance_m: float | None) -> tuple[Check | None, float]:
     """``(Check, k)``: the check stating the conversion to ``spec.reference_geometry`` and its factor;
     ``(None, 1)`` for a specification without one.
 
@@ -214,7 +224,7 @@ def _geometry_check(spec, stats, result, camera_distance_m):
         return None, 1.0
     ref = spec.reference_geometry
     label = f"reference geometry: {ref.describe()}"
-    if camera_distance_m is None or getattr(result, "optics", None) is not None:
+    if camera_distance_m is None or result.optics is not None:
         why = ("the capture's camera-to-pane distance is unknown: analyse with --camera-distance-m"
                if camera_distance_m is None else "a reflection capture cannot be converted")
         return Check(label, "not converted", "converted", "", "==", False, why), 1.0
@@ -231,9 +241,10 @@ def _geometry_check(spec, stats, result, camera_distance_m):
     return Check(label, round(k, 6), "converted", "", "factor", True, note), k
 
 
-def _converted(stats: dict, zones: dict | None, k: float):
+def _converted(stats: dict[str, Any], zones: dict[str, Any] | None, k: float
+               ) -> tuple[dict[str, Any], dict[str, Any]]:
     """``(stats, zones)`` with every statistic in mD (:data:`MD_STATISTICS`) multiplied by ``k`` (copies)."""
-    def scale(per_channel):
+    def scale(per_channel: dict[str, Any]) -> dict[str, Any]:
         return {ch: {key: v * k if key in MD_STATISTICS else v for key, v in st.items()} if isinstance(st, dict) else st
                 for ch, st in per_channel.items()}
 

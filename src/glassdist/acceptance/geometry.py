@@ -11,6 +11,9 @@ geometry (factor k), not glass."
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Any
+
 from pydantic import BaseModel, Field, model_validator
 
 from ..validation import MODEL_CONFIG
@@ -39,7 +42,7 @@ class ReferenceGeometry(BaseModel):
     viewing_azimuth_deg: float = Field(0.0, ge=-360, le=360)
 
     @model_validator(mode="after")
-    def _one_kind(self):
+    def _one_kind(self) -> ReferenceGeometry:
         given = self.observer_distance_m is not None and self.background_distance_m is not None
         if self.intrinsic == given or (not given and (self.observer_distance_m or self.background_distance_m)):
             raise ValueError("'reference_geometry' takes either 'intrinsic': true or both 'observer_distance_m' and "
@@ -54,7 +57,7 @@ class ReferenceGeometry(BaseModel):
                 f"{self.viewing_angle_deg:g} deg")
 
 
-def check_convertible(reference, criteria) -> None:
+def check_convertible(reference: ReferenceGeometry | None, criteria: Sequence[Any]) -> None:
     """With a ``reference`` geometry, raise ValueError unless every criterion is a statistic in mD of a power channel
     (what one factor converts)."""
     if reference is None:

@@ -21,12 +21,20 @@ from __future__ import annotations
 
 import csv
 import io
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy import ndimage
 
 from .stats import CHANNEL_FIELDS, pixel_blocks
+
+if TYPE_CHECKING:
+    from ..analyzer.result import Result
+    from .spec import Spec
+    from .zones import PaneFrame
 
 __all__ = ["WorstRegion", "worst_regions", "region_thresholds", "all_worst_regions", "regions_csv"]
 
@@ -50,7 +58,7 @@ class WorstRegion:
     centroid_px: tuple[float, float]
     units: str = "pane_mm"
 
-    def to_dict(self):
+    def to_dict(self) -> dict[str, Any]:
         """JSON form (``extent_mm`` as ``[u_min, u_max, v_min, v_max]``)."""
         d = asdict(self)
         for k in ("centroid_mm", "extent_mm", "centroid_px"):
@@ -58,14 +66,15 @@ class WorstRegion:
         return d
 
 
-def _per_label(ufunc, values, labels, n):
+def _per_label(ufunc: np.ufunc, values: np.ndarray, labels: np.ndarray, n: int) -> np.ndarray:
     """``ufunc`` (np.minimum or np.maximum) of ``values`` over each label 1..n (unbuffered ``ufunc.at``)."""
     out = np.full(n, np.inf if ufunc is np.minimum else -np.inf)
     ufunc.at(out, labels - 1, values)
     return out
 
 
-def worst_regions(field, valid, frame, threshold_mD, *, channel="phi_eff", max_count=10, min_area_mm2=0.0):
+def worst_regions(field: ArrayLike, valid: ArrayLike, frame: PaneFrame, threshold_mD: float, *, channel: str = "phi_eff",
+                  max_count: int = 10, min_area_mm2: float = 0.0) -> tuple[WorstRegion, ...]:
     """Connected regions where ``|field| > threshold_mD``, worst first.
 
     Parameters
@@ -99,13 +108,14 @@ def worst_regions(field, valid, frame, threshold_mD, *, channel="phi_eff", max_c
     >>> r.area_mm2, r.centroid_mm, r.peak_mD
     (50.0, (20.0, 7.5), 7.0)
     """
-    field = np.asarray(field)
-    over = np.asarray(valid, dtype=bool) & (np.abs(field) > threshold_mD)  # NaN compares False
-    return _regions_of(over, field[over], frame, threshold_mD, channel=channel, max_count=max_count,
+    f = np.asarray(field)
+    over = np.asarray(valid, dtype=bool) & (np.abs(f) > threshold_mD)  # NaN compares False
+    return _regions_of(over, f[over], frame, threshold_mD, channel=channel, max_count=max_count,
                        min_area_mm2=min_area_mm2)
 
 
-def _over_threshold(result, attr, valid, threshold_mD, max_pixels=1 << 21):
+def _over_threshold(result: Result, attr: str, valid: np.ndarray, threshold_mD: float, max_pixels: int = 1 << 21
+                    ) -> tuple[np.ndarray, np.ndarray]:
     """``(over, values)``: the pixels of ``valid`` where ``|result.attr| > threshold_mD`` and their signed values
     (raster order), taken block by block of image rows (no full-size copy of the field)."""
     over = np.zeros(valid.shape, bool)
@@ -119,7 +129,8 @@ def _over_threshold(result, attr, valid, threshold_mD, max_pixels=1 << 21):
     return over, np.concatenate(values) if values else np.empty(0, np.float32)
 
 
-def _regions_of(over, signed, frame, threshold_mD, *, channel, max_count, min_area_mm2):
+def _regions_of(over: np.ndarray, signed: np.ndarray, frame: PaneFrame, threshold_mD: float, *, channel: str,
+                max_count: int, min_area_mm2: float) -> tuple[WorstRegion, ...]:
     """:func:`worst_regions` of the pixels ``over`` (bool (H, W)) with their signed values ``signed`` (raster order)."""
     labels, n = ndimage.label(over, structure=np.ones((3, 3), bool))
     if n == 0:
@@ -154,7 +165,9 @@ def _regions_of(over, signed, frame, threshold_mD, *, channel, max_count, min_ar
     return tuple(out)
 
 
-def region_thresholds(result, spec=None, channels=REGION_CHANNELS, *, statistics=None, limits=None):
+def region_thresholds(result: Result, spec: Spec | None = None, channels: Sequence[str] = REGION_CHANNELS, *,
+                      statistics: Mapping[str, Mapping[str, Any]] | None = None,
+                      limits: Mapping[str, Sequence[float]] | None = None) -> dict[str, tuple[float, str]]:
     """Threshold (mD) per channel: the specification's, else the 95th percentile of ``|phi|``.
 
     ``statistics``, the channels' statistics over the analysed region already computed
@@ -168,14 +181,13 @@ def region_thresholds(result, spec=None, channels=REGION_CHANNELS, *, statistics
         the spec), ``"spec limit"`` or ``"p95"``.
     """
     from .spec import spec_limits
-
     from .zones import measured_region
 
     if limits is None:
         limits = spec_limits(spec) if spec is not None else {}
-    given = dict(spec.worst_regions.threshold_mD) if spec is not None else {}
+    given = {str(k): float(v) for k, v in spec.worst_regions.threshold_mD.items()} if spec is not None else {}
     valid = measured_region(result)
-    out = {}
+    out: dict[str, tuple[float, str]] = {}
     for ch in channels:
         if ch in given:
             out[ch] = (float(given[ch]), "worst_regions")
@@ -184,13 +196,15 @@ def region_thresholds(result, spec=None, channels=REGION_CHANNELS, *, statistics
         elif statistics is not None and ch in statistics:
             out[ch] = (float(statistics[ch]["p95_abs"]), "p95")
         else:
-            f = np.abs(np.asarray(getattr(result, CHANNEL_FIELDS[ch]), dtype=np.float64))
+            f = np.abs(np.asarray(result.pixel_field(CHANNEL_FIELDS[ch]), dtype=np.float64))
             ok = valid & np.isfinite(f)
             out[ch] = (float(np.percentile(f[ok], 95)) if ok.any() else float("nan"), "p95")
     return out
 
 
-def all_worst_regions(result, frame, spec=None, *, channels=REGION_CHANNELS, statistics=None, limits=None):
+def all_worst_regions(result: Result, frame: PaneFrame, spec: Spec | None = None, *, channels: Sequence[str] = REGION_CHANNELS,
+                      statistics: Mapping[str, Mapping[str, Any]] | None = None,
+                      limits: Mapping[str, Sequence[float]] | None = None) -> dict[str, dict[str, Any]]:
     """Worst regions of each channel over the analysed region, with the thresholds used.
 
     ``statistics``, ``limits`` as for :func:`region_thresholds`.
@@ -205,10 +219,12 @@ def all_worst_regions(result, frame, spec=None, *, channels=REGION_CHANNELS, sta
     settings = spec.worst_regions if spec is not None else None
     valid = measured_region(result)
     out = {}
-    kw = dict(max_count=settings.max_count if settings else 10, min_area_mm2=settings.min_area_mm2 if settings else 0.0)
+    max_count = settings.max_count if settings else 10
+    min_area_mm2 = settings.min_area_mm2 if settings else 0.0
     for ch, (t, source) in region_thresholds(result, spec, channels, statistics=statistics, limits=limits).items():
         regions = () if not np.isfinite(t) else _regions_of(*_over_threshold(result, CHANNEL_FIELDS[ch], valid, t),
-                                                             frame, t, channel=ch, **kw)
+                                                             frame, t, channel=ch, max_count=max_count,
+                                                             min_area_mm2=min_area_mm2)
         out[ch] = {"threshold_mD": t, "threshold_source": source, "regions": regions}
     return out
 
@@ -218,7 +234,7 @@ _CSV_FIELDS = ("channel", "number", "threshold_mD", "centroid_x_mm", "centroid_y
                "centroid_y_px", "units")
 
 
-def regions_csv(found):
+def regions_csv(found: Mapping[str, Mapping[str, Any]]) -> str:
     """CSV text of :func:`all_worst_regions`' output, one row per region."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")

@@ -58,9 +58,9 @@ from __future__ import annotations
 
 import hashlib
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Any, Literal, Mapping
 
 from pydantic import BaseModel, Field, field_validator, model_validator
 
@@ -69,9 +69,15 @@ from ..validation import MODEL_CONFIG, SIGMA_MM, check_input_file, load_mapping,
 from .geometry import ReferenceGeometry, check_convertible
 from .stats import format_limit, share_percent
 
+if TYPE_CHECKING:
+    import numpy as np
+
+    from ..analyzer.params import AnalyzerParams
+    from ..analyzer.result import Result
+
 __all__ = [
     "Criterion", "Protocol", "Pane", "Zone", "WorstRegions", "Figures", "Spec", "Check", "Verdict", "ResolvedProtocol",
-    "LoadedSpec", "load_spec", "as_spec", "spec_verdict", "spec_channels", "spec_limits", "resolve_protocol", "check_capture", "px_per_period",
+    "LoadedSpec", "load_spec", "as_spec", "spec_verdict", "spec_channels", "spec_limits", "resolve_protocol", "check_capture",
 ]
 
 _SYMBOL = {"phi_eff": "phi_eff", "phi_shear": "phi_shear", "phi_total": "phi_total",
@@ -93,7 +99,7 @@ class Criterion(BaseModel):
     zone: str | None = Field(None, description="name of a zone of the spec's 'zones' (default: the analysed region)")
 
     @model_validator(mode="after")
-    def _check_limits(self):
+    def _check_limits(self) -> Criterion:
         if self.statistic == "area_over":
             if self.threshold_mD is None or self.max_percent is None or self.max_mD is not None:
                 raise ValueError("an 'area_over' criterion needs 'threshold_mD' and 'max_percent' (and no 'max_mD')")
@@ -102,11 +108,11 @@ class Criterion(BaseModel):
         return self
 
     @property
-    def stat_key(self):
+    def stat_key(self) -> str:
         """Key of the statistic in :func:`glassdist.acceptance.stats.acceptance_statistics`'s dict."""
-        return format_limit(self.threshold_mD) if self.statistic == "area_over" else self.statistic
+        return format_limit(self.threshold_mD or 0.0) if self.statistic == "area_over" else str(self.statistic)
 
-    def describe(self):
+    def describe(self) -> str:
         """Text of the criterion, e.g. ``p95 |phi_eff| <= 60 mD``."""
         if self.label:
             return self.label
@@ -153,7 +159,7 @@ class Protocol(BaseModel):
                           "camera file (--camera-file) or either, not from the photo alone")
 
     @model_validator(mode="after")
-    def _one_sigma(self):
+    def _one_sigma(self) -> Protocol:
         if self.sigma_mm is not None and self.sigma_periods is not None:
             raise ValueError("give 'sigma_mm' or 'sigma_periods', not both")
         return self
@@ -193,7 +199,7 @@ class Pane(BaseModel):
     size_mm: tuple[float, float]
 
     @model_validator(mode="after")
-    def _check(self):
+    def _check(self) -> Pane:
         import numpy as np
 
         if not all(np.isfinite(v) and v > 0 for v in self.size_mm):
@@ -220,7 +226,7 @@ class Pane(BaseModel):
         """``"corners_frac"`` or ``"corners_px"``: the form the corners were given in."""
         return "corners_px" if self.corners_px is not None else "corners_frac"
 
-    def corners_in(self, shape):
+    def corners_in(self, shape: tuple[int, ...]) -> np.ndarray:
         """The corners on a photo of ``shape`` ``(H, W)``, px (array (4, 2) of ``x, y``, pixel centres at integers)."""
         import numpy as np
 
@@ -250,7 +256,7 @@ class Zone(BaseModel):
     min_valid_percent: float | None = Field(None, ge=0, le=100)
 
     @model_validator(mode="after")
-    def _one_shape(self):
+    def _one_shape(self) -> Zone:
         given = [k for k in ("edge_band_mm", "inset_mm", "polygon_mm") if getattr(self, k) is not None]
         if len(given) != 1:
             raise ValueError(f"zone '{self.name}' needs exactly one of 'edge_band_mm', 'inset_mm', 'polygon_mm'")
@@ -261,13 +267,13 @@ class Zone(BaseModel):
                 raise ValueError(f"zone '{self.name}': 'polygon_mm' must be finite numbers")
         return self
 
-    def describe(self):
+    def describe(self) -> str:
         """Text of the zone's definition, e.g. ``band 50 mm along the pane outline``."""
         if self.edge_band_mm is not None:
             return f"band {self.edge_band_mm:g} mm along the pane outline"
         if self.inset_mm is not None:
             return f"pane minus a {self.inset_mm:g} mm border"
-        return f"polygon of {len(self.polygon_mm)} vertices (pane mm)"
+        return f"polygon of {len(self.polygon_mm or ())} vertices (pane mm)"
 
 
 class WorstRegions(BaseModel):
@@ -296,7 +302,7 @@ class Figures(BaseModel):
 
     @field_validator("colour_limit")
     @classmethod
-    def _positive(cls, v):
+    def _positive(cls, v: str | float) -> str | float:
         if not isinstance(v, str) and not (math.isfinite(v) and v > 0):
             raise ValueError("'colour_limit' must be 'auto', 'spec' or a positive number of mD")
         return v
@@ -319,7 +325,7 @@ class Spec(BaseModel):
     figures: Figures = Figures()
 
     @model_validator(mode="after")
-    def _check_zones(self):
+    def _check_zones(self) -> Spec:
         names = [z.name for z in self.zones]
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:
@@ -331,7 +337,7 @@ class Spec(BaseModel):
         check_convertible(self.reference_geometry, self.criteria)
         return self
 
-    def zone(self, name):
+    def zone(self, name: str) -> Zone:
         """The :class:`Zone` called ``name``."""
         return next(z for z in self.zones if z.name == name)
 
@@ -356,7 +362,7 @@ class Check:
     covers_percent: float | None = None
     covers: str = ""
 
-    def line(self):
+    def line(self) -> str:
         """One line for the console, e.g. ``PASS  p95 |phi_eff| <= 60 mD  (value 41.2 mD; over the trusted 71.97 % of zone 'vision')``."""
         if isinstance(self.value, float):
             value = "not computable" if math.isnan(self.value) else f"{self.value:.4g} {self.unit}".rstrip()
@@ -380,23 +386,23 @@ class Verdict:
     checks: tuple[Check, ...]
 
     @property
-    def passed(self):
+    def passed(self) -> bool:
         """True when every check passed."""
         return all(c.passed for c in self.checks)
 
     @property
-    def label(self):
+    def label(self) -> str:
         """``"PASS"`` or ``"FAIL"``."""
         return "PASS" if self.passed else "FAIL"
 
-    def lines(self):
+    def lines(self) -> list[str]:
         """Console lines: one per check, then ``VERDICT: PASS|FAIL (n/m criteria passed) spec '<name>'``."""
         n_ok = sum(c.passed for c in self.checks)
         return [c.line() for c in self.checks] + [
             f"VERDICT: {self.label} ({n_ok}/{len(self.checks)} criteria passed) spec '{safe_text(self.spec_name)}'"
         ]
 
-    def to_dict(self):
+    def to_dict(self) -> dict[str, Any]:
         """JSON-serialisable form (NaN values become ``null``)."""
         checks = []
         for c in self.checks:
@@ -430,11 +436,10 @@ class LoadedSpec:
     spec: Spec
     sha256: str = ""
     path: str = ""
-    limits: dict = None
+    limits: dict[str, list[float]] = field(init=False)
 
-    def __post_init__(self):
-        if self.limits is None:
-            object.__setattr__(self, "limits", spec_limits(self.spec))
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "limits", spec_limits(self.spec))  # derived once, from the model
 
     @property
     def label(self) -> str:
@@ -442,7 +447,7 @@ class LoadedSpec:
         return f"the specification '{self.path}'" if self.path else "the specification"
 
 
-def load_spec(path) -> LoadedSpec:
+def load_spec(path: str | Path) -> LoadedSpec:
     """Read and validate a specification JSON file (read once: its SHA-256 is of the bytes parsed).
 
     Parameters
@@ -468,7 +473,7 @@ def load_spec(path) -> LoadedSpec:
     return LoadedSpec(spec, digest.hexdigest(), str(path))
 
 
-def as_spec(spec) -> LoadedSpec:
+def as_spec(spec: LoadedSpec | Spec | Mapping[str, Any] | str | Path) -> LoadedSpec:
     """A :class:`LoadedSpec` from a LoadedSpec, a Spec, a dict of its JSON form, or a JSON file.
 
     Raises
@@ -480,19 +485,19 @@ def as_spec(spec) -> LoadedSpec:
         return spec
     if isinstance(spec, Spec):
         return LoadedSpec(spec)
-    if isinstance(spec, dict):
+    if isinstance(spec, Mapping):
         data = {k: v for k, v in spec.items() if k != "$comment"}
         return LoadedSpec(validate_model(Spec, data, "specification", "the given mapping",
                                          "see docs/user-guide/factory-acceptance.md for the format"))
     return load_spec(spec)
 
 
-def spec_channels(spec):
+def spec_channels(spec: Spec) -> tuple[str, ...]:
     """Channels the criteria of ``spec`` judge (those of :data:`glassdist.acceptance.stats.STATISTIC_FIELDS`), in order."""
     return tuple(dict.fromkeys(c.channel for c in spec.criteria))
 
 
-def spec_limits(spec):
+def spec_limits(spec: Spec) -> dict[str, list[float]]:
     """Thresholds per channel (mD) a spec draws masks and area statistics for.
 
     Returns
@@ -501,10 +506,10 @@ def spec_limits(spec):
         ``{channel: sorted list of limits}``, the ``threshold_mD`` of area criteria
         and the ``max_mD`` of the ``max_abs`` / ``p95_abs`` criteria.
     """
-    out = {}
+    out: dict[str, set[float]] = {}
     for c in spec.criteria:
         lim = c.threshold_mD if c.statistic == "area_over" else c.max_mD
-        if c.statistic in ("area_over", "max_abs", "p95_abs"):
+        if c.statistic in ("area_over", "max_abs", "p95_abs") and lim is not None:
             out.setdefault(c.channel, set()).add(float(lim))
     return {k: sorted(v) for k, v in out.items()}
 
@@ -514,17 +519,17 @@ _OPTION = {"pitch_mm": "--pitch-mm", "distance_m": "--distance-m", "pattern": "-
 _UNIT = {"pitch_mm": " mm", "distance_m": " m", "sigma_mm": " mm", "sigma_periods": " periods"}
 
 
-def _text(v):
+def _text(v: object) -> str:
     return f"{v:g}" if isinstance(v, float) else str(v)
 
 
-def _same(a, b):
+def _same(a: Any, b: Any) -> bool:
     if isinstance(a, float) or isinstance(b, float):
         return math.isclose(float(a), float(b), rel_tol=1e-9, abs_tol=1e-12)
-    return a == b
+    return bool(a == b)
 
 
-def _carrier_period_mm(pitch_mm, pattern):
+def _carrier_period_mm(pitch_mm: float, pattern: str) -> float:
     return pitch_mm * math.sqrt(2.0) if pattern == "checkerboard" else pitch_mm
 
 
@@ -557,11 +562,11 @@ class ResolvedProtocol:
     pattern: str
     detrend_degree: int
     sigma_mm: float
-    params_overrides: dict
-    pinned: dict
-    sources: dict
+    params_overrides: dict[str, Any]
+    pinned: dict[str, Any]
+    sources: dict[str, str]
 
-    def to_dict(self):
+    def to_dict(self) -> dict[str, Any]:
         """JSON form recorded in ``summary.json`` under ``"protocol"``."""
         return {
             "pinned": dict(self.pinned),
@@ -571,8 +576,10 @@ class ResolvedProtocol:
         }
 
 
-def resolve_protocol(protocol=None, *, reference_given, pitch_mm=None, distance_m=None, pattern=None, sigma_mm=None,
-                     detrend_degree=None, params=None, spec_label="the specification"):
+def resolve_protocol(protocol: Protocol | None = None, *, reference_given: bool, pitch_mm: float | None = None,
+                     distance_m: float | None = None, pattern: str | None = None, sigma_mm: float | None = None,
+                     detrend_degree: int | None = None, params: AnalyzerParams | None = None,
+                     spec_label: str = "the specification") -> ResolvedProtocol:
     """Merge the analysis options with a specification's pinned protocol.
 
     An omitted option takes the pinned value; an option (or a value set in the
@@ -636,7 +643,7 @@ def resolve_protocol(protocol=None, *, reference_given, pitch_mm=None, distance_
                              "detrend_degree": sources["detrend_degree"], "sigma_mm": sources["sigma_mm"]})
 
 
-def _checked_method(protocol, reference_given: bool, spec_label: str) -> str:
+def _checked_method(protocol: Protocol, reference_given: bool, spec_label: str) -> str:
     """The analysis method the inputs give (``'comparative'`` with a reference), refused when the protocol pins the other."""
     method = "comparative" if reference_given else "direct"
     if protocol.method is not None and protocol.method != method:
@@ -645,16 +652,17 @@ def _checked_method(protocol, reference_given: bool, spec_label: str) -> str:
     return method
 
 
-def _file_settings(params) -> dict:
+def _file_settings(params: AnalyzerParams | None) -> dict[str, Any]:
     """The settings a ``--params`` file sets explicitly (``pattern``, ``sigma_mm``, ``sigma_periods``, ``detrend_degree``)."""
-    from_file = {}
+    from_file: dict[str, Any] = {}
     if params is not None:
         from_file = {k: getattr(params, k) for k in ("pattern", "sigma_mm", "sigma_periods", "detrend_degree")
                      if k in params.model_fields_set}
     return from_file
 
 
-def _merged_settings(given: dict, pinned: dict, from_file: dict, spec_label: str) -> tuple[dict, dict]:
+def _merged_settings(given: dict[str, Any], pinned: dict[str, Any], from_file: dict[str, Any], spec_label: str
+                     ) -> tuple[dict[str, Any], dict[str, str]]:
     """Each option's value from the option, else the pin, else the parameter file, else the default.
 
     Parameters
@@ -708,8 +716,8 @@ def _merged_settings(given: dict, pinned: dict, from_file: dict, spec_label: str
     return values, sources
 
 
-def _sigma_setting(protocol, values: dict, sources: dict, from_file: dict, params, p_c: float,
-                   spec_label: str) -> tuple[float, str, bool]:
+def _sigma_setting(protocol: Protocol, values: dict[str, Any], sources: dict[str, str], from_file: dict[str, Any],
+                   params: AnalyzerParams | None, p_c: float, spec_label: str) -> tuple[float, str, bool]:
     """The smoothing scale: the protocol's ``sigma_periods`` carrier periods, else the option's or the file's.
 
     Parameters
@@ -749,12 +757,8 @@ def _sigma_setting(protocol, values: dict, sources: dict, from_file: dict, param
     return periods * p_c, ("params" if "sigma_periods" in from_file else "default"), False
 
 
-def px_per_period(result):
-    """Shortest carrier period of the photo in px (the capture limit ``min_px_per_period`` is on it)."""
-    return float(min(result.carriers.k1.period_px, result.carriers.k2.period_px))
-
-
-def check_lens_source(protocol, *, lens_photo: bool, camera_file: bool, spec_label="the specification") -> None:
+def check_lens_source(protocol: Protocol | None, *, lens_photo: bool, camera_file: bool,
+                      spec_label: str = "the specification") -> None:
     """Refuse a run without the lens calibration source the protocol requires (``lens_calibration``).
 
     Raises
@@ -773,7 +777,7 @@ def check_lens_source(protocol, *, lens_photo: bool, camera_file: bool, spec_lab
                          f"(lens_calibration = {want}); give {need}")
 
 
-def check_capture(protocol, result, *, spec_label="the specification"):
+def check_capture(protocol: Protocol | None, result: Result, *, spec_label: str = "the specification") -> None:
     """Refuse a capture outside the protocol's capture limits.
 
     Raises
@@ -784,7 +788,7 @@ def check_capture(protocol, result, *, spec_label="the specification"):
     """
     if protocol is None or protocol.min_px_per_period is None:
         return
-    got = px_per_period(result)
+    got = result.px_per_period  # the shortest carrier period in px
     if got < protocol.min_px_per_period:
         raise InputError(
             f"the photo has {got:.3g} px per grid carrier period but the protocol of {spec_label} requires at least "
@@ -792,41 +796,40 @@ def check_capture(protocol, result, *, spec_label="the specification"):
             "length or a coarser grid")
 
 
-def _protocol_checks(protocol, result):
-    checks = []
+def _protocol_checks(protocol: Protocol, result: Result) -> list[Check]:
+    checks: list[Check] = []
     if protocol.method is not None:
-        got = getattr(result, "method", None)
-        checks.append(Check(f"protocol: method = {protocol.method}", got, protocol.method, "", "==", got == protocol.method))
+        checks.append(Check(f"protocol: method = {protocol.method}", result.method, protocol.method, "", "==",
+                            result.method == protocol.method))
     for key, unit in (("pitch_mm", "mm"), ("distance_m", "m")):
         want = getattr(protocol, key)
         if want is not None:
-            got = float(getattr(result, key, float("nan")))
+            got = float(result.pitch_mm if key == "pitch_mm" else result.distance_m)
             ok = math.isclose(got, want, rel_tol=1e-6)
             checks.append(Check(f"protocol: {key} = {want:g} {unit}", got, want, unit, "==", ok,
                                 "" if ok else f"rerun the analysis with the specification's {_OPTION[key]}"))
     if protocol.pattern is not None:
-        params = getattr(result, "params", None)
-        got = getattr(params, "pattern", None)
-        checks.append(Check(f"protocol: pattern = {protocol.pattern}", got, protocol.pattern, "", "==",
-                            got == protocol.pattern))
+        checks.append(Check(f"protocol: pattern = {protocol.pattern}", result.pattern, protocol.pattern, "", "==",
+                            result.pattern == protocol.pattern))
     want_sigma = protocol.sigma_mm
     if want_sigma is None and protocol.sigma_periods is not None:
-        want_sigma = protocol.sigma_periods * float(getattr(result, "carrier_period_mm", float("nan")))
+        want_sigma = protocol.sigma_periods * float(result.carrier_period_mm)
     if want_sigma is not None:
-        got = float(getattr(result, "sigma_mm", float("nan")))
-        ok = math.isclose(got, want_sigma, rel_tol=1e-6)
-        checks.append(Check(f"protocol: sigma_mm = {want_sigma:.4g} mm", got, want_sigma, "mm", "==", ok,
+        sigma = float(result.sigma_mm)
+        ok = math.isclose(sigma, want_sigma, rel_tol=1e-6)
+        checks.append(Check(f"protocol: sigma_mm = {want_sigma:.4g} mm", sigma, want_sigma, "mm", "==", ok,
                             "" if ok else "rerun the analysis with the specification's --sigma-mm"))
     if protocol.detrend_degree is not None:
-        got = getattr(result, "detrend_degree", None)
-        ok = got == protocol.detrend_degree
-        checks.append(Check(f"protocol: detrend_degree = {protocol.detrend_degree}", got, protocol.detrend_degree, "",
+        degree = result.detrend_degree
+        ok = degree == protocol.detrend_degree
+        checks.append(Check(f"protocol: detrend_degree = {protocol.detrend_degree}", degree, protocol.detrend_degree, "",
                             "==", ok, "" if ok else "rerun the analysis with the specification's --detrend-degree"))
     return checks
 
 
-def spec_verdict(spec, stats, result, *, spec_path="", spec_sha256="", zones=None, trusted_percent=None,
-                 of_mask=False):
+def spec_verdict(spec: Spec, stats: Mapping[str, Mapping[str, Any]], result: Result, *, spec_path: str = "",
+                 spec_sha256: str = "", zones: Mapping[str, Mapping[str, Any]] | None = None,
+                 trusted_percent: float | None = None, of_mask: bool = False) -> Verdict:
     """Check every criterion of ``spec`` against an analysis whose statistics are already computed.
 
     The engine under :func:`glassdist.acceptance.assess.assess`; from a result alone use
@@ -866,10 +869,8 @@ def spec_verdict(spec, stats, result, *, spec_path="", spec_sha256="", zones=Non
     zones = zones or {}
     checks = _protocol_checks(spec.protocol, result)
     if spec.min_valid_percent is not None:
-        if trusted_percent is None:
-            from .zones import measured_region
-
-            trusted_percent = share_percent(measured_region(result))
+        if trusted_percent is None:  # the statistics' pixels (zones.measured_region): the trusted ones
+            trusted_percent = share_percent(result.trusted)
         cov = float(trusted_percent)
         where = "the mask" if of_mask else "the image"
         checks.append(Check(f"trusted area >= {spec.min_valid_percent:g} % of {where}", cov,
@@ -881,18 +882,16 @@ def spec_verdict(spec, stats, result, *, spec_path="", spec_sha256="", zones=Non
             checks.append(Check(f"trusted area >= {z.min_valid_percent:g} % of zone '{z.name}'", cov,
                                 z.min_valid_percent, "%", ">=", ok, "zone not in the photo" if math.isnan(cov) else ""))
     if trusted_percent is None:
-        from .zones import measured_region
-
-        trusted_percent = share_percent(measured_region(result))
+        trusted_percent = share_percent(result.trusted)
     for c in spec.criteria:
         if c.zone is None:
             source, covers, cov = stats, "the mask" if of_mask else "the image", float(trusted_percent)
         else:
-            z = zones.get(c.zone) or {}
-            source, covers = z.get("statistics", {}), f"zone '{c.zone}'"
-            cov = float(z.get("trusted_percent", float("nan")))
+            judged = zones.get(c.zone) or {}
+            source, covers = judged.get("statistics", {}), f"zone '{c.zone}'"
+            cov = float(judged.get("trusted_percent", float("nan")))
         value = float(source.get(c.channel, {}).get(c.stat_key, float("nan")))
-        limit = c.max_percent if c.statistic == "area_over" else c.max_mD
+        limit = (c.max_percent if c.statistic == "area_over" else c.max_mD) or 0.0  # never None: the model requires it
         unit = "%" if c.statistic == "area_over" else "mD"
         ok = (not math.isnan(value)) and value <= limit
         checks.append(Check(c.describe(), value, limit, unit, "<=", ok,

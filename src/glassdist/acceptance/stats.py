@@ -14,7 +14,14 @@ Statistics are taken over the valid analysis region only (``valid`` and finite):
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Hashable, TypeVar
+
 import numpy as np
+from numpy.typing import ArrayLike
+
+if TYPE_CHECKING:
+    from ..analyzer.result import Result
 
 __all__ = [
     "CHANNEL_FIELDS",
@@ -31,6 +38,8 @@ __all__ = [
     "format_limit",
 ]
 
+K = TypeVar("K", bound=Hashable)
+
 #: channel name -> attribute of the analysis result holding its field (mD)
 CHANNEL_FIELDS = {"phi_eff": "phi_eff_mD", "phi_shear": "phi_shear_mD", "phi_total": "phi_total_mD"}
 
@@ -44,7 +53,7 @@ STATISTIC_FIELDS = {**CHANNEL_FIELDS, **UNCERTAINTY_FIELDS}
 STATISTICS = ("mean_abs", "mean", "std", "p95_abs", "max_abs")
 
 
-def _values(field, valid):
+def _values(field: ArrayLike, valid: ArrayLike | None) -> np.ndarray:
     field = np.asarray(field, dtype=np.float64)
     ok = np.isfinite(field)
     if valid is not None:
@@ -52,12 +61,12 @@ def _values(field, valid):
     return field[ok]
 
 
-def format_limit(limit_mD):
+def format_limit(limit_mD: float) -> str:
     """Name suffix of an area-over statistic: ``area_over_<limit>`` (``12.5`` -> ``12.5``, ``100.0`` -> ``100``)."""
     return f"area_over_{float(limit_mD):g}"
 
 
-def area_over_percent(field, valid=None, limit_mD=0.0):
+def area_over_percent(field: ArrayLike, valid: ArrayLike | None = None, limit_mD: float = 0.0) -> float:
     """Percentage of the valid region where ``|field| > limit_mD``.
 
     Parameters
@@ -80,7 +89,8 @@ def area_over_percent(field, valid=None, limit_mD=0.0):
     return float(100.0 * np.count_nonzero(np.abs(v) > limit_mD) / v.size)
 
 
-def acceptance_statistics(field, valid=None, *, over_limits_mD=()):
+def acceptance_statistics(field: ArrayLike, valid: ArrayLike | None = None, *,
+                          over_limits_mD: Sequence[float] = ()) -> dict[str, Any]:
     """Statistics of one channel over the valid region, as the acceptance reports them (``area_over_<T>`` keys).
 
     Parameters
@@ -101,12 +111,13 @@ def acceptance_statistics(field, valid=None, *, over_limits_mD=()):
     """
     from ..analyzer.metrics import channel_statistics as base_statistics
 
-    out = base_statistics(field, valid, over_limits=over_limits_mD)
+    out: dict[str, Any] = base_statistics(np.asarray(field), None if valid is None else np.asarray(valid, dtype=bool),
+                                          over_limits=over_limits_mD)
     out.update({format_limit(t): pct for t, pct in out.pop("over_percent", {}).items()})
     return out
 
 
-def share_percent(region, asked=None):
+def share_percent(region: ArrayLike, asked: ArrayLike | None = None) -> float:
     """Share (percent) of the region asked for that ``region`` covers.
 
     The one definition behind ``measured_percent`` (``region``: the valid pixels) and
@@ -120,63 +131,52 @@ def share_percent(region, asked=None):
     asked : array_like of bool, shape (H, W), optional
         The region asked for (the user mask); default the whole image.
     """
-    region = np.asarray(region, dtype=bool)
+    r = np.asarray(region, dtype=bool)
     if asked is None:
-        return float(100.0 * np.count_nonzero(region) / max(region.size, 1))
-    asked = np.asarray(asked, dtype=bool)
-    return float(100.0 * np.count_nonzero(region & asked) / max(np.count_nonzero(asked), 1))
+        return float(100.0 * np.count_nonzero(r) / max(r.size, 1))
+    a = np.asarray(asked, dtype=bool)
+    return float(100.0 * np.count_nonzero(r & a) / max(int(np.count_nonzero(a)), 1))
 
 
-def result_statistics(result, *, over_limits_mD=None):
+def result_statistics(result: Result, *, over_limits_mD: Mapping[str, Sequence[float]] | None = None
+                      ) -> dict[str, dict[str, Any]]:
     """Statistics of every channel of an analysis result.
 
     Parameters
     ----------
-    result : AnalysisResult
-        Needs ``phi_eff_mD``, ``phi_shear_mD``, ``valid``; ``phi_total_mD`` when present.
+    result : Result
+        An :class:`~glassdist.analyzer.result.AnalysisResult` or a
+        :class:`~glassdist.storage.StoredResult`; its ``valid`` region.
     over_limits_mD : dict, optional
         ``{channel: [T, ...]}`` thresholds (mD) for the area-over statistics.
 
     Returns
     -------
     dict
-        ``{channel: acceptance_statistics(...)}`` for each channel present.
+        ``{channel: acceptance_statistics(...)}`` for each channel the result holds.
     """
     over_limits_mD = over_limits_mD or {}
-    stats = {}
-    for name, attr in CHANNEL_FIELDS.items():
-        field = getattr(result, attr, None)
-        if field is None:
-            continue
-        stats[name] = acceptance_statistics(field, result.valid, over_limits_mD=over_limits_mD.get(name, ()))
-    return stats
+    return {name: acceptance_statistics(result.pixel_field(attr), result.valid,
+                                        over_limits_mD=over_limits_mD.get(name, ()))
+            for name, attr in CHANNEL_FIELDS.items() if _holds(result, attr)}
 
 
-def _on_analysis_grid(result) -> bool:
-    return hasattr(result, "pixel_rows") and getattr(result, "_deferred", None) is not None
+def _holds(result: Result, name: str) -> bool:
+    return any(f.name == name for f in result.field_specs())
 
 
-def pixel_blocks(result, attrs, max_pixels=1 << 21):
+def pixel_blocks(result: Result, attrs: Sequence[str], max_pixels: int = 1 << 21
+                 ) -> Iterator[tuple[slice, dict[str, np.ndarray]]]:
     """``(rows, {attr: field[rows]})``: fields ``attrs`` of ``result`` on the pixel grid, by blocks of image rows.
 
-    An :class:`~glassdist.analyzer.result.AnalysisResult` brings them there block by block
-    (:meth:`~glassdist.analyzer.result.AnalysisResult.pixel_rows`); any other object with the
-    fields as (H, W) attributes gives them whole, as one block.
+    The result brings them there block by block (:meth:`~glassdist.analyzer.result.Result.pixel_rows`):
+    no full-size copy of a field is needed.
     """
-    if _on_analysis_grid(result):
-        yield from result.pixel_rows(list(attrs), max_pixels)
-    else:
-        yield slice(None), {a: np.asarray(getattr(result, a)) for a in attrs}
+    yield from result.pixel_rows(list(attrs), max_pixels)
 
 
-def _held(result, attr) -> bool:
-    specs = getattr(result, "field_specs", None)
-    if specs is not None and getattr(result, "_deferred", None) is not None:
-        return any(f.name == attr for f in specs())
-    return getattr(result, attr, None) is not None
-
-
-def _grid_brackets(result, regions, names) -> dict:
+def _grid_brackets(result: Result, regions: Mapping[K, np.ndarray], names: Mapping[str, str]
+                   ) -> dict[tuple[K, str], tuple[float, float]]:
     """``{(key, channel): (lo, hi)}``: where each region's 95th percentile lies, from the analysis-grid samples in it.
 
     The pixel-grid fields interpolate the analysis grid, so its samples' quantiles bracket
@@ -198,13 +198,15 @@ def _grid_brackets(result, regions, names) -> dict:
     return out
 
 
-def regions_statistics(result, regions, *, channels=tuple(CHANNEL_FIELDS), over_limits_mD=None, max_pixels=1 << 21):
+def regions_statistics(result: Result, regions: Mapping[K, np.ndarray], *,
+                       channels: Sequence[str] = tuple(CHANNEL_FIELDS),
+                       over_limits_mD: Mapping[str, Sequence[float]] | None = None,
+                       max_pixels: int = 1 << 21) -> dict[K, dict[str, dict[str, Any]]]:
     """Statistics of ``channels`` of ``result`` over each of ``regions``, in one pass over the pixel grid.
 
     Parameters
     ----------
-    result : AnalysisResult
-        Or any object with the channels as (H, W) attributes (taken whole).
+    result : Result
     regions : dict of key -> ndarray of bool (H, W)
     channels : sequence of str
         Names of :data:`STATISTIC_FIELDS` (those the result holds are reported).
@@ -223,22 +225,23 @@ def regions_statistics(result, regions, *, channels=tuple(CHANNEL_FIELDS), over_
     from ..analyzer.metrics import percentile, streamed_statistics
 
     over_limits_mD = over_limits_mD or {}
-    names = {ch: STATISTIC_FIELDS[ch] for ch in channels if _held(result, STATISTIC_FIELDS[ch])}
-    brackets = _grid_brackets(result, regions, names) if _on_analysis_grid(result) else {}
+    names = {ch: STATISTIC_FIELDS[ch] for ch in channels if _holds(result, STATISTIC_FIELDS[ch])}
+    brackets = _grid_brackets(result, regions, names)
     to_channel = {attr: ch for ch, attr in names.items()}
     blocks = ((rows, {to_channel[a]: b for a, b in fields.items()})
               for rows, fields in pixel_blocks(result, list(names.values()), max_pixels))
-    out = streamed_statistics(blocks, regions, over_limits=over_limits_mD, brackets=brackets)
+    out: dict[K, dict[str, dict[str, Any]]] = streamed_statistics(blocks, dict(regions),
+                                                                   over_limits=dict(over_limits_mD), brackets=brackets)
     for key, per in out.items():
         for ch, st in per.items():
             if st["p95_abs"] is None:  # the bracket missed: the whole field, once
-                f = getattr(result, names[ch])
+                f = result.pixel_field(names[ch])
                 st["p95_abs"] = percentile(np.abs(f[np.asarray(regions[key], bool) & np.isfinite(f)]), 95.0)
             st.update({format_limit(t): pct for t, pct in st.pop("over_percent", {}).items()})
     return out
 
 
-def shared_limit(*fields, valid=None, percentile=99.0):
+def shared_limit(*fields: ArrayLike, valid: ArrayLike | None = None, percentile: float = 99.0) -> float:
     """Colour limit ``V`` (mD) shared by several channels.
 
     Parameters

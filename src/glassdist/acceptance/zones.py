@@ -31,21 +31,27 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from functools import cached_property, partial
+from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .stats import CHANNEL_FIELDS, regions_statistics
+
+if TYPE_CHECKING:
+    from ..analyzer.result import Result
+    from .spec import Pane, Zone
 
 __all__ = ["PaneFrame", "check_pane", "PANE_SCALE_RANGE", "distance_to_outside", "fill_holes", "grow_region", "pane_frame", "pane_frame_from_corners", "pane_frame_from_region", "zone_masks",
            "zone_statistics", "measured_region", "region_statistics"]
 
 
-def _apply(H, x, y):
+def _apply(H: np.ndarray, x: ArrayLike, y: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """``H`` applied to points ``(x, y)`` (arrays), returns ``(u, v)``."""
-    x = np.asarray(x, dtype=np.float64)
-    y = np.asarray(y, dtype=np.float64)
-    w = H[2, 0] * x + H[2, 1] * y + H[2, 2]
-    return (H[0, 0] * x + H[0, 1] * y + H[0, 2]) / w, (H[1, 0] * x + H[1, 1] * y + H[1, 2]) / w
+    xa = np.asarray(x, dtype=np.float64)
+    ya = np.asarray(y, dtype=np.float64)
+    w = H[2, 0] * xa + H[2, 1] * ya + H[2, 2]
+    return (H[0, 0] * xa + H[0, 1] * ya + H[0, 2]) / w, (H[1, 0] * xa + H[1, 1] * ya + H[1, 2]) / w
 
 
 @dataclass(frozen=True)
@@ -76,13 +82,13 @@ class PaneFrame:
 
     px_to_mm: np.ndarray
     inside: np.ndarray
-    edge_distance: object  # ndarray, or a function returning it
+    edge_distance: np.ndarray | Callable[[], np.ndarray]  # or a function returning it
     source: str
     units: str
-    outline_px: tuple = ()
-    size_mm: tuple | None = None
+    outline_px: tuple[np.ndarray, ...] = ()
+    size_mm: tuple[float, float] | None = None
     warning: str = ""
-    _mm_to_px: np.ndarray = field(default=None, repr=False, compare=False)
+    _mm_to_px: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @cached_property
     def edge_distance_mm(self) -> np.ndarray:
@@ -90,25 +96,25 @@ class PaneFrame:
         return self.edge_distance() if callable(self.edge_distance) else self.edge_distance
 
     @property
-    def shape(self):
+    def shape(self) -> tuple[int, int]:
         """``(H, W)`` of the image."""
-        return self.inside.shape
+        return (int(self.inside.shape[0]), int(self.inside.shape[1]))
 
-    def to_mm(self, x, y):
+    def to_mm(self, x: ArrayLike, y: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Frame millimetres ``(u, v)`` of image points ``(x, y)`` (px)."""
         return _apply(self.px_to_mm, x, y)
 
-    def to_px(self, u, v):
+    def to_px(self, u: ArrayLike, v: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Image points ``(x, y)`` (px) of frame millimetres ``(u, v)``."""
         return _apply(np.linalg.inv(self.px_to_mm), u, v)
 
-    def pixel_area_mm2(self, x, y):
+    def pixel_area_mm2(self, x: ArrayLike, y: ArrayLike) -> np.ndarray:
         """Area (mm^2) of the pixels at ``(x, y)``: ``|det H| / |h3 . (x, y, 1)|^3``."""
         H = self.px_to_mm
         w = H[2, 0] * np.asarray(x, dtype=np.float64) + H[2, 1] * np.asarray(y, dtype=np.float64) + H[2, 2]
         return np.abs(np.linalg.det(H) / w**3)
 
-    def area_mm2(self, mask):
+    def area_mm2(self, mask: np.ndarray) -> float:
         """Area (mm^2) of the pixels of ``mask`` (bool, shape (H, W))."""
         H = self.px_to_mm
         if H[2, 0] == 0 and H[2, 1] == 0:  # affine: one area for every pixel
@@ -116,7 +122,7 @@ class PaneFrame:
         yy, xx = np.nonzero(mask)
         return float(self.pixel_area_mm2(xx, yy).sum()) if yy.size else 0.0
 
-    def to_dict(self):
+    def to_dict(self) -> dict[str, Any]:
         """JSON form for ``summary.json`` (``"pane"``); ``outline_px``: one ``"x,y x,y ..."`` string per polygon."""
         return {
             "source": self.source, "units": self.units,
@@ -126,7 +132,7 @@ class PaneFrame:
         }
 
 
-def _compact_polygon(points, tolerance_px: float = 1.5) -> str:
+def _compact_polygon(points: ArrayLike, tolerance_px: float = 1.5) -> str:
     """A polygon's vertices for ``summary.json``: ``"x,y x,y ..."`` (SVG ``points``), whole px.
 
     Douglas-Peucker (``cv2.approxPolyDP``) keeps the vertices within ``tolerance_px`` of the
@@ -135,13 +141,13 @@ def _compact_polygon(points, tolerance_px: float = 1.5) -> str:
     """
     import cv2
 
-    pts = np.asarray(points, dtype=np.float32).reshape(-1, 1, 2)
+    pts: np.ndarray = np.asarray(points, dtype=np.float32).reshape(-1, 1, 2)
     if len(pts) > 3:
         pts = cv2.approxPolyDP(pts, tolerance_px, closed=True)
     return " ".join(f"{x:.0f},{y:.0f}" for x, y in pts.reshape(-1, 2))
 
 
-def pane_frame_from_corners(corners_px, size_mm, shape):
+def pane_frame_from_corners(corners_px: ArrayLike, size_mm: Sequence[float], shape: tuple[int, int]) -> PaneFrame:
     """The frame of a pane given by its four corners in the photograph.
 
     Parameters
@@ -184,7 +190,7 @@ def pane_frame_from_corners(corners_px, size_mm, shape):
     return PaneFrame(H, inside, dist, "spec", "pane_mm", (src,), (w_mm, h_mm))
 
 
-def _outline_polygons(region):
+def _outline_polygons(region: np.ndarray) -> tuple[np.ndarray, ...]:
     import cv2
 
     contours, _ = cv2.findContours(region.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
@@ -192,7 +198,7 @@ def _outline_polygons(region):
                  for c in sorted(contours, key=cv2.contourArea, reverse=True) if len(c) >= 3)
 
 
-def fill_holes(mask):
+def fill_holes(mask: np.ndarray) -> np.ndarray:
     """``mask`` with its holes filled: the pixels not reached from outside the image through the background.
 
     Same as :func:`scipy.ndimage.binary_fill_holes` (the background connected through
@@ -213,7 +219,7 @@ def fill_holes(mask):
     return background[1:-1, 1:-1] != 2
 
 
-def distance_to_outside(mask):
+def distance_to_outside(mask: np.ndarray) -> np.ndarray:
     """Euclidean distance (px, float32) from each pixel of ``mask`` to the nearest pixel outside it (0 outside).
 
     Exact Euclidean distance transform (OpenCV's ``DIST_MASK_PRECISE``, the algorithm of
@@ -229,7 +235,7 @@ def distance_to_outside(mask):
     return cv2.distanceTransform(np.ascontiguousarray(mask).view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
 
 
-def grow_region(mask, radius_px):
+def grow_region(mask: np.ndarray, radius_px: float) -> np.ndarray:
     """``mask`` grown by ``radius_px``: the pixels whose centre lies within ``radius_px`` of a pixel of ``mask``.
 
     The same pixels as ``distance_to_outside(~mask) <= radius_px``, by one dilation with
@@ -253,7 +259,7 @@ def grow_region(mask, radius_px):
     return cv2.dilate(np.ascontiguousarray(mask).view(np.uint8), disk).view(bool)
 
 
-def pane_frame_from_region(valid, mm_per_px, *, grow_px=0.0):
+def pane_frame_from_region(valid: np.ndarray, mm_per_px: float, *, grow_px: float = 0.0) -> PaneFrame:
     """The pane's outline found in the image: the region where the grid is visible.
 
     Parameters
@@ -301,7 +307,7 @@ def pane_frame_from_region(valid, mm_per_px, *, grow_px=0.0):
                      _outline_polygons(region), size, warning)
 
 
-def _edge_distance_mm(region, mm_per_px):
+def _edge_distance_mm(region: np.ndarray, mm_per_px: float) -> np.ndarray:
     """Distance (mm, float32) from each pixel centre of ``region`` to its edge, half a pixel beyond the last centre inside; NaN outside."""
     dist = distance_to_outside(region)
     dist -= 0.5
@@ -323,7 +329,7 @@ _PANE_ASPECT_RATIO = 1.0 / 0.75
 _CORNER_SLACK_PX = 1.0
 
 
-def check_pane(pane, zones, result, *, spec_label="the specification"):
+def check_pane(pane: Pane | None, zones: Sequence[Zone], result: Result, *, spec_label: str = "the specification") -> None:
     """Refuse a pane or zone that the photo cannot show: outside it, or at odds with its measured scale.
 
     Parameters
@@ -362,12 +368,12 @@ def check_pane(pane, zones, result, *, spec_label="the specification"):
                 f"the pane of {spec_label} has a corner at ({x:.6g}, {y:.6g}) px, outside the {W} x {H} px photo: "
                 f"its '{key}' were written for another photo; give the corners of the pane in this photo, or as "
                 "fractions of the image ('corners_frac') to serve every resolution")
-        s = float(getattr(result, "mm_per_px", float("nan")))
+        s = float(result.mm_per_px)
         d = np.hypot(*(c[[1, 2, 3, 2]] - c[[0, 3, 0, 1]]).T)  # top, bottom, left, right edges, px
         span = ((d[0] + d[1]) / 2 * s, (d[2] + d[3]) / 2 * s)
         size = tuple(float(v) for v in pane.size_mm)
         ratio = (span[0] / size[0], span[1] / size[1])
-        optics = "reflection" if getattr(result, "optics", None) is not None else "transmission"
+        optics = "reflection" if result.optics is not None else "transmission"
         r_lo, r_hi = PANE_SCALE_RANGE[optics]
         aspect = max(ratio) / max(min(ratio), 1e-300)
         if math.isfinite(s) and (not all(r_lo <= r <= r_hi for r in ratio) or aspect > _PANE_ASPECT_RATIO):
@@ -395,7 +401,7 @@ def check_pane(pane, zones, result, *, spec_label="the specification"):
                 f"{w_h[0]:g} x {w_h[1]:g} mm pane; give an inset_mm under {min(w_h) / 2:g}")
 
 
-def pane_frame(result, pane=None):
+def pane_frame(result: Result, pane: Pane | None = None) -> PaneFrame:
     """The :class:`PaneFrame` of an analysis: from the specification's ``pane``, else found in the image.
 
     Parameters
@@ -408,11 +414,11 @@ def pane_frame(result, pane=None):
     valid = np.asarray(result.valid, dtype=bool)
     if pane is not None:
         return pane_frame_from_corners(pane.corners_in(valid.shape), pane.size_mm, valid.shape)
-    grow = float(getattr(result, "margin_px", (0.0, 0.0))[0])
+    grow = float(result.margin_px[0])
     return pane_frame_from_region(valid, float(result.mm_per_px), grow_px=grow)
 
 
-def zone_masks(frame, zones):
+def zone_masks(frame: PaneFrame, zones: Sequence[Zone]) -> dict[str, np.ndarray]:
     """Pixels of each zone.
 
     Parameters
@@ -450,13 +456,13 @@ def zone_masks(frame, zones):
     return out
 
 
-def measured_region(result):
+def measured_region(result: Result) -> np.ndarray:
     """The pixels statistics and verdicts use: the result's trusted pixels (quality label 0), else its valid region."""
-    return np.asarray(getattr(result, "trusted", None) if getattr(result, "trusted", None) is not None
-                      else result.valid, dtype=bool)
+    return np.asarray(result.trusted, dtype=bool)
 
 
-def region_statistics(result, region, *, over_limits_mD=None, channels=tuple(CHANNEL_FIELDS)):
+def region_statistics(result: Result, region: np.ndarray, *, over_limits_mD: Mapping[str, Sequence[float]] | None = None,
+                      channels: Sequence[str] = tuple(CHANNEL_FIELDS)) -> dict[str, dict[str, Any]]:
     """``{channel: statistics}`` of ``channels`` of ``result`` (those it holds) over the pixels of ``region`` (bool, (H, W)).
 
     ``channels``: names of :data:`glassdist.acceptance.stats.STATISTIC_FIELDS` (default the power
@@ -466,8 +472,10 @@ def region_statistics(result, region, *, over_limits_mD=None, channels=tuple(CHA
     return regions_statistics(result, {"region": region}, over_limits_mD=over_limits_mD, channels=channels)["region"]
 
 
-def zone_statistics(result, frame, zones, *, over_limits_mD=None, masks=None, channels=tuple(CHANNEL_FIELDS),
-                    statistics=None):
+def zone_statistics(result: Result, frame: PaneFrame, zones: Sequence[Zone], *,
+                    over_limits_mD: Mapping[str, Sequence[float]] | None = None,
+                    masks: Mapping[str, np.ndarray] | None = None, channels: Sequence[str] = tuple(CHANNEL_FIELDS),
+                    statistics: Mapping[str, dict[str, dict[str, Any]]] | None = None) -> dict[str, dict[str, Any]]:
     """Statistics and coverage of every zone.
 
     Parameters

@@ -82,12 +82,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import InputError
 from ..validation import DISTANCE_M, check_number
 from .metrics import channels_from_strain
+
+if TYPE_CHECKING:
+    from .result import Optics
 
 __all__ = [
     "ReflectionGeometry",
@@ -185,18 +189,17 @@ class ReflectionGeometry:
         a0 = math.radians(self.plane_deg)
         return r0 * math.cos(a0) + np.asarray(dx_mm, float), r0 * math.sin(a0) + np.asarray(dy_mm, float)
 
-    def to_dict(self) -> dict:
-        """The record ``summary.json`` keeps under ``optics``."""
-        return {
-            "optics": "reflection",
-            "board_distance_m": self.distance_m,
-            "camera_distance_m": self.distance_m if self.camera_distance_m is None else self.camera_distance_m,
-            "camera_in_board_plane": self.camera_distance_m is None,
-            "incidence_deg": self.incidence_deg,
-            "plane_of_incidence_deg": self.plane_deg,
-            "magnification": self.magnification,
-            "effective_distance_m": self.effective_distance_m,
-        }
+    def optics(self, notes: tuple[str, ...] = ()) -> Optics:
+        """The result's record of this geometry (``summary.json`` ``optics``), with ``notes`` on what the channels mean."""
+        from .result import Optics
+
+        return Optics(board_distance_m=self.distance_m,
+                      camera_distance_m=self.distance_m if self.camera_distance_m is None else self.camera_distance_m,
+                      camera_in_board_plane=self.camera_distance_m is None, incidence_deg=self.incidence_deg,
+                      plane_of_incidence_deg=self.plane_deg, magnification=self.magnification,
+                      effective_distance_m=self.effective_distance_m, notes=notes)
+
+
 
 
 def _tensor_in_frame(tu, tv, ptt, pss, pts):
@@ -381,13 +384,12 @@ def reflect_result(result, geometry: ReflectionGeometry):
     for name in ("phi_eff_sigma_mD", "phi_shear_sigma_mD"):  # the t and s channels scale by cos(theta)
         if name in fields:
             fields[name] = (fields[name] * c).astype(fields[name].dtype)
-    optics = geometry.to_dict()
-    optics["notes"] = [
+    notes: tuple[str, ...] = (
         "phi in reflective power on the pane (Coddington: P = 2 [[Z_tt/cos, Z_ts], [Z_ts, Z_ss cos]]); "
-        "concave pane -> phi_eff < 0; mm_per_px and sigma_mm in pane mm; displacement_mm in board mm",
-    ]
+        "concave pane -> phi_eff < 0; mm_per_px and sigma_mm in pane mm; displacement_mm in board mm",)
     if result.method == "direct":
-        optics["notes"].append(UNIFORM_POWER_NOTE)
+        notes += (UNIFORM_POWER_NOTE,)
+    optics = geometry.optics(notes)
     eff_sigma = None if result.effective_sigma_mm is None else result.effective_sigma_mm / m
     from ..flatness.slope import with_surface_fields
 

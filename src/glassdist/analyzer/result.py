@@ -8,9 +8,10 @@ fields: writers, figures and exports iterate it rather than naming fields themse
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from functools import cached_property
-from typing import Any, overload
+from typing import Any, Protocol, TypeVar, overload, runtime_checkable
 
 import numpy as np
 
@@ -23,7 +24,7 @@ from .params import AnalyzerParams
 from .region import ANALYSED, LABELS, pixel_quality, trusted_on
 from .resample import upsample_axis, upsample_axis_rows, upsample_field, upsample_field_rows, upsample_labels
 
-__all__ = ["AnalysisResult", "FieldSpec", "FIELDS", "CHANNELS"]
+__all__ = ["AnalysisResult", "Optics", "Result", "holds", "row_blocks", "FieldSpec", "FIELDS", "CHANNELS"]
 
 
 @dataclass(frozen=True)
@@ -82,6 +83,226 @@ FIELDS: tuple[FieldSpec, ...] = (
 CHANNELS: tuple[str, ...] = ("phi_eff_mD", "phi_shear_mD", "phi_total_mD")
 
 _SPECS = {f.name: f for f in FIELDS}
+
+
+@dataclass(frozen=True)
+class Optics:
+    """The reflection geometry a result's channels are expressed in (:func:`glassdist.analyzer.reflection.reflect_result`).
+
+    Attributes
+    ----------
+    board_distance_m : float
+        Board-to-pane distance D, m.
+    camera_distance_m : float
+        Camera-to-pane distance C, m (D with the camera in the board plane).
+    camera_in_board_plane : bool
+        No camera distance was given: C = D.
+    incidence_deg : float
+        Angle of incidence theta of the line of sight on the pane at the view's centre, deg.
+    plane_of_incidence_deg : float
+        Direction of the plane of incidence in the image, deg from +x towards +y.
+    magnification : float
+        ``m = 1 + D / C``: board mm per pane mm.
+    effective_distance_m : float
+        ``D / m``, m: the transmission distance the Analyzer ran at.
+    notes : tuple of str
+        What the channels mean in reflection.
+    optics : {'reflection'}
+        The kind of optics (``summary.json`` ``optics.optics``).
+    """
+
+    board_distance_m: float
+    camera_distance_m: float
+    camera_in_board_plane: bool
+    incidence_deg: float
+    plane_of_incidence_deg: float
+    magnification: float
+    effective_distance_m: float
+    notes: tuple[str, ...] = ()
+    optics: str = "reflection"
+
+    def to_dict(self) -> dict[str, Any]:
+        """The record ``summary.json`` keeps under ``optics``."""
+        return {"optics": self.optics, "board_distance_m": self.board_distance_m,
+                "camera_distance_m": self.camera_distance_m, "camera_in_board_plane": self.camera_in_board_plane,
+                "incidence_deg": self.incidence_deg, "plane_of_incidence_deg": self.plane_of_incidence_deg,
+                "magnification": self.magnification, "effective_distance_m": self.effective_distance_m,
+                "notes": list(self.notes)}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> Optics:
+        """The record :meth:`to_dict` wrote (``summary.json`` ``optics``)."""
+        return cls(float(d["board_distance_m"]), float(d["camera_distance_m"]), bool(d["camera_in_board_plane"]),
+                   float(d["incidence_deg"]), float(d["plane_of_incidence_deg"]), float(d["magnification"]),
+                   float(d["effective_distance_m"]), tuple(d.get("notes", ())), str(d.get("optics", "reflection")))
+
+
+_R = TypeVar("_R", bound="Result")
+
+
+@runtime_checkable
+class Result(Protocol):
+    """The contract of every glassdist result: what acceptance, measures, figures and writers may read.
+
+    :class:`AnalysisResult` (an analysis's own) and :class:`glassdist.storage.StoredResult`
+    (a run read back from its folder by :func:`glassdist.load_result`) implement it; code
+    downstream of the analysis takes a ``Result`` and asks it, never its class or its
+    private state. Lengths in mm, distances in m, powers in mD (the module's conventions).
+
+    Attributes
+    ----------
+    method : {'comparative', 'direct'}
+    pattern : {'lines', 'checkerboard', 'dots'}
+        The backdrop pattern the analysis used.
+    valid, trusted : ndarray (H, W) bool
+        The reported region and, within it, the pixels statistics use (quality label 0).
+    detrend_region : ndarray (H, W) bool or None
+        The pixels the A2 detrend was fitted on (None: not recorded).
+    mm_per_px, pitch_mm, distance_m, sigma_mm, carrier_period_mm : float
+    detrend_degree : int
+    px_per_period : float
+        The shortest carrier period in the photo, px (the capture limit is on it).
+    margin_px : (float, float)
+        Contamination margins at excluded areas and at the image edges, px.
+    optics : Optics or None
+        None in transmission; the reflection geometry otherwise.
+    analysis_grid : SamplingGrid
+        The grid the fields are held on (the pixel grid itself for a pixel-layout file).
+    grid_valid, grid_trusted, grid_detrend_region : ndarray (h, w) bool
+        The analysed samples of :attr:`analysis_grid`, the trusted ones, and those the A2
+        detrend was fitted on.
+    """
+
+    @property
+    def method(self) -> str:
+        """'comparative' or 'direct'."""
+        ...
+
+    @property
+    def pattern(self) -> str:
+        """The backdrop pattern the analysis used."""
+        ...
+
+    @property
+    def valid(self) -> np.ndarray:
+        """The reported region, (H, W) bool."""
+        ...
+
+    @property
+    def trusted(self) -> np.ndarray:
+        """The pixels statistics use (quality label 0), (H, W) bool."""
+        ...
+
+    @property
+    def detrend_region(self) -> np.ndarray | None:
+        """The pixels the A2 detrend was fitted on, (H, W) bool (None: not recorded)."""
+        ...
+
+    @property
+    def mm_per_px(self) -> float:
+        """Backdrop mm per px (reflection: pane mm)."""
+        ...
+
+    @property
+    def pitch_mm(self) -> float:
+        """Grid pitch, mm."""
+        ...
+
+    @property
+    def distance_m(self) -> float:
+        """Glass-to-grid distance L (reflection: board-to-pane D), m."""
+        ...
+
+    @property
+    def sigma_mm(self) -> float:
+        """The reporting smoothing scale, mm."""
+        ...
+
+    @property
+    def carrier_period_mm(self) -> float:
+        """Carrier period on the backdrop, mm."""
+        ...
+
+    @property
+    def detrend_degree(self) -> int:
+        """Total degree of the A2 detrend."""
+        ...
+
+    @property
+    def px_per_period(self) -> float:
+        """Shortest carrier period in the photo, px."""
+        ...
+
+    @property
+    def margin_px(self) -> tuple[float, float]:
+        """Contamination margins (excluded areas, image edge), px."""
+        ...
+
+    @property
+    def optics(self) -> Optics | None:
+        """None in transmission; the reflection geometry otherwise."""
+        ...
+
+    @property
+    def analysis_grid(self) -> F.SamplingGrid:
+        """The grid the fields are held on."""
+        ...
+
+    @property
+    def grid_valid(self) -> np.ndarray:
+        """Analysed samples of :attr:`analysis_grid`, (h, w) bool."""
+        ...
+
+    @property
+    def grid_trusted(self) -> np.ndarray:
+        """Trusted samples of :attr:`analysis_grid`, (h, w) bool."""
+        ...
+
+    @property
+    def grid_detrend_region(self) -> np.ndarray:
+        """Samples of :attr:`analysis_grid` the A2 detrend was fitted on, (h, w) bool."""
+        ...
+
+    def field_specs(self) -> tuple[FieldSpec, ...]:
+        """The registered fields the result holds, in :data:`FIELDS` order."""
+        ...
+
+    def grid_field(self, name: str) -> np.ndarray:
+        """Field ``name`` on :attr:`analysis_grid`."""
+        ...
+
+    def grid_fields(self) -> dict[str, np.ndarray]:
+        """Every field on :attr:`analysis_grid`, by name (a new mapping)."""
+        ...
+
+    def with_grid_fields(self: _R, fields: dict[str, np.ndarray], **changes: Any) -> _R:
+        """A copy holding ``fields`` on :attr:`analysis_grid` (and ``changes`` applied)."""
+        ...
+
+    def pixel_field(self, name: str) -> np.ndarray:
+        """Field ``name`` on the input's pixel grid (NaN where invalid)."""
+        ...
+
+    def pixel_rows(self, names: Sequence[str], max_pixels: int = 1 << 21
+                   ) -> Iterator[tuple[slice, dict[str, np.ndarray]]]:
+        """Fields ``names`` on the pixel grid, ``(rows, {name: block})`` one block of image rows at a time."""
+        ...
+
+
+def holds(result: Result, name: str) -> bool:
+    """Whether ``result`` holds the registered field ``name``."""
+    return any(f.name == name for f in result.field_specs())
+
+
+def row_blocks(fields: dict[str, np.ndarray], max_pixels: int = 1 << 21
+               ) -> Iterator[tuple[slice, dict[str, np.ndarray]]]:
+    """``(rows, {name: field[rows]})`` of (H, W[, 2]) fields already on the pixel grid, about ``max_pixels`` each."""
+    shapes = {f.shape[:2] for f in fields.values()}
+    H, W = shapes.pop() if shapes else (0, 1)
+    block_rows = max(1, int(max_pixels) // max(W, 1))
+    for r in range(0, H, block_rows):
+        rows = slice(r, min(H, r + block_rows))
+        yield rows, {n: f[rows] for n, f in fields.items()}
 
 
 def _row_slices(full: np.ndarray, block_rows: int):
@@ -182,8 +403,8 @@ class AnalysisResult:
     noise_std : (float, float or None)
         White noise of the photo and of the reference (Comparative), intensity units,
         estimated from their spectra.
-    optics : dict or None
-        None in transmission; in reflection the geometry record of
+    optics : Optics or None
+        None in transmission; in reflection the geometry of
         :func:`glassdist.analyzer.reflection.reflect_result` (the channels are then the
         reflective power on the pane, ``mm_per_px`` and ``sigma_mm`` in pane mm).
     bulk : BulkChannel or None
@@ -228,7 +449,7 @@ class AnalysisResult:
     guard_px: float = 0.0
     noise_std: tuple[float, float | None] = (float("nan"), None)
     effective_sigma_mm: float | None = None
-    optics: dict | None = None
+    optics: Optics | None = None
     bulk: BulkChannel | None = None
     demodulations: int = 1
     photo_passes: int = 0
@@ -283,7 +504,8 @@ class AnalysisResult:
             return upsample_axis(f, self.grid_field("phi_shear_mD"), d["idx"], d["grid"], ~self.valid)
         return upsample_field(f, d["idx"], d["grid"], ~self.valid)
 
-    def pixel_rows(self, names, max_pixels: int = 1 << 21):
+    def pixel_rows(self, names: Sequence[str], max_pixels: int = 1 << 21
+                   ) -> Iterator[tuple[slice, dict[str, np.ndarray]]]:
         """Fields ``names`` on the pixel grid, one block of image rows at a time.
 
         Yields ``(rows, {name: block})`` with ``rows`` a ``slice`` of image rows and each
@@ -338,6 +560,23 @@ class AnalysisResult:
 
         H, W = self.valid.shape
         return self.valid & cv2.resize(fit.view(np.uint8), (W, H), interpolation=cv2.INTER_NEAREST).view(bool)
+
+    @property
+    def grid_detrend_region(self) -> np.ndarray:
+        """(h, w) bool: the samples of :attr:`analysis_grid` the A2 detrend was fitted on (``grid_valid`` where not recorded)."""
+        fit = self._deferred.get("fit_valid") if self._deferred else None
+        gv = np.asarray(self.grid_valid, dtype=bool)
+        return gv if fit is None else gv & np.asarray(fit, dtype=bool)
+
+    @property
+    def pattern(self) -> str:
+        """The backdrop pattern the analysis used (``params.pattern``)."""
+        return str(self.params.pattern)
+
+    @property
+    def px_per_period(self) -> float:
+        """Shortest carrier period of the photo, px (the capture limit ``min_px_per_period`` is on it)."""
+        return float(min(self.carriers.k1.period_px, self.carriers.k2.period_px))
 
     @property
     def block_px(self) -> float:
@@ -445,7 +684,7 @@ class AnalysisResult:
                            "coordinates (glassdist.analyzer.reflection); concave pane -> phi_eff < 0",
                 "axis_deg": "axis of the larger principal power, degrees from +x towards +y (down)",
             },
-            **({"optics": self.optics} if self.optics is not None else {}),
+            **({"optics": self.optics.to_dict()} if self.optics is not None else {}),
         }
 
 

@@ -124,8 +124,8 @@ def pane_step_mm(result) -> tuple[float, float]:
     sy, sx = result.analysis_grid.step
     step = (sy * result.mm_per_px, sx * result.mm_per_px)
     optics = result.optics
-    f = math.sqrt(math.cos(math.radians(optics["incidence_deg"])))
-    psi = math.radians(optics["plane_of_incidence_deg"])
+    f = math.sqrt(math.cos(math.radians(optics.incidence_deg)))
+    psi = math.radians(optics.plane_of_incidence_deg)
     if abs(math.sin(psi)) < 1e-9:
         return step[0] * f, step[1] / f
     if abs(math.cos(psi)) < 1e-9:
@@ -170,7 +170,7 @@ def surface_fields(result, geometry) -> SurfaceFields:
         finite displacement.
     """
     optics = result.optics
-    if optics is None or optics.get("optics") != "reflection":
+    if optics is None or optics.optics != "reflection":
         raise ValueError("surface_fields needs a reflection result (optics = reflection)")
     fields = result.grid_fields()
     d = np.asarray(fields["displacement_mm"], float)
@@ -201,8 +201,8 @@ def surface_fields(result, geometry) -> SurfaceFields:
 def with_surface_fields(result, geometry):
     """``result`` (a reflection result of capture geometry ``geometry``) with ``surface_slope_mrad``, ``surface_height_um`` (and ``surface_slope_sigma_mrad``
     when the displacement has an uncertainty) among its fields; a transmission result unchanged."""
-    optics = getattr(result, "optics", None)
-    if optics is None or optics.get("optics") != "reflection":
+    optics = result.optics
+    if optics is None or optics.optics != "reflection":
         return result
     s = surface_fields(result, geometry)
     extra = {"surface_slope_mrad": s.slope_mrad, "surface_height_um": s.height_um}

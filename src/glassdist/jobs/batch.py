@@ -56,7 +56,6 @@ from html import escape
 from pathlib import Path
 
 from ..errors import InputError
-from ..history.options import record_as_args
 from ..validation import DISTANCE_M, PITCH_MM, SIGMA_MM, check_number, read_csv_rows, safe_text
 from ..fs import atomic_write_text, write_csv
 from ..storage import EXIT_SPEC_FAIL
@@ -101,34 +100,24 @@ class Pane:
     operator: str | None = None
     lot: str | None = None
 
-    def analyze_args(self, out_dir, *, report=False, export=False):
-        """Arguments of ``glassdist analyze`` for this pane, writing into ``out_dir``.
+    def request(self, out_dir, *, report=False, export=False):
+        """The :class:`~glassdist.jobs.request.AnalyzeRequest` of this pane, writing into ``out_dir``.
 
         ``out_dir`` is the pane's temporary folder ``OUT/panes/.tmp-...``: the run is
         recorded in the history as a pane of the batch ``OUT``, in ``OUT/panes/<id>``.
-        The pane's ``id`` is its ``--pane-id``; pitch and distance may be left to the
-        pane's specification when its protocol pins them. Every option is given as
-        ``--name=value`` and the image comes last after ``--``, so that no manifest cell
-        (an image or a site named ``-h``...) can be read as an option.
+        The pane's ``id`` is its pane ID; pitch and distance may be left to the pane's
+        specification when its protocol pins them.
         """
-        args = ["analyze"]
-        for flag, value in (("--pitch-mm", self.pitch_mm), ("--distance-m", self.distance_m)):
-            if value is not None:
-                args.append(f"{flag}={value!r}")
-        for flag, value in (("--reference", self.reference), ("--pattern", self.pattern), ("--params", self.params),
-                            ("--mask", self.mask), ("--spec", self.spec), ("--sigma-mm", self.sigma_mm),
-                            ("--detrend-degree", self.detrend_degree), ("--pane-id", self.id), ("--site", self.site),
-                            ("--operator", self.operator), ("--lot", self.lot)):
-            if value is not None:
-                args.append(f"{flag}={value}")
-        if report:
-            args.append("--report")
-        if export:
-            args.append("--export")
-        # recorded in the history as a pane of this batch, in the folder it is renamed to once complete
+        from .request import AnalyzeRequest, RecordAs
+
         panes = Path(out_dir).parent
-        args += record_as_args(source="batch", job=panes.parent, out_dir=panes / self.id)
-        return args + [f"--out={out_dir}", "--", str(self.image)]
+        return AnalyzeRequest(
+            images=(self.image,), out=Path(out_dir), reference=self.reference, pattern=self.pattern,
+            params=self.params, mask=self.mask, spec=self.spec, pitch_mm=self.pitch_mm, distance_m=self.distance_m,
+            sigma_mm=self.sigma_mm, detrend_degree=self.detrend_degree, pane_id=self.id, site=self.site,
+            operator=self.operator, lot=self.lot, report=report, export=export,
+            # recorded in the history as a pane of this batch, in the folder it is renamed to once complete
+            record_as=RecordAs(source="batch", job=str(panes.parent), out_dir=str(panes / self.id)))
 
     def fingerprint(self, *, report=False, export=False):
         """SHA-256 of the settings, the input files' bytes, the output options and the version."""

@@ -1,7 +1,8 @@
 """Child ``glassdist`` processes and the job folders they write into: shared by batch, sweep and the web app.
 
 * :func:`run_glassdist` runs ``glassdist ARGS`` in a child process of its own (this
-  interpreter, this glassdist) and returns a :class:`PaneOutcome`. On Linux the child
+  interpreter, this glassdist) and returns a :class:`PaneOutcome`; :func:`run_request`
+  sends a typed request (:mod:`glassdist.jobs.request`) the same way. On Linux the child
   is forked from a server that has imported the stack once (:mod:`glassdist._childserver`:
   2.2-2.5 s of every fresh start saved); elsewhere, or with ``GLASSDIST_CHILD=process``,
   it is ``python -m glassdist ARGS``;
@@ -23,8 +24,8 @@ from pathlib import Path
 from ..errors import InputError
 from ..storage import EXIT_SPEC_FAIL
 
-__all__ = ["PaneOutcome", "lock_job_folder", "place_folder", "prepare_job_folder", "read_json", "run_glassdist",
-           "subprocess_runner"]
+__all__ = ["PaneOutcome", "lock_job_folder", "place_folder", "prepare_job_folder", "read_json", "run_request",
+           "run_glassdist", "subprocess_runner"]
 
 @dataclass(frozen=True)
 class PaneOutcome:
@@ -33,6 +34,16 @@ class PaneOutcome:
     exit_code: int
     log: str = ""
     error: str = ""
+
+
+def run_request(request, *, cwd=None, timeout_s=None):
+    """Run a request of :mod:`glassdist.jobs.request` (``analyze``, ``validate``) in a child process of its own.
+
+    The request goes to the child serialised (JSON), and the child runs it as its command runs
+    its options (:func:`glassdist.cli.run_request`); ``cwd``, ``timeout_s`` and the outcome as
+    for :func:`run_glassdist`, the log's first line the equivalent command.
+    """
+    return _run_child(request.options(), cwd, timeout_s, request=request.model_dump_json())
 
 
 def run_glassdist(args, *, cwd=None, timeout_s=None):
@@ -53,13 +64,19 @@ def run_glassdist(args, *, cwd=None, timeout_s=None):
         Exit code, the command and its combined output, and the error line (last
         line of stderr) when the exit code is neither 0 nor 3 (spec FAIL).
     """
-    args = [str(a) for a in args]
+    return _run_child([str(a) for a in args], cwd, timeout_s)
+
+
+def _run_child(args, cwd, timeout_s, request=None):
+    """``glassdist ARGS``, or the serialised ``request`` (a JSON text) read from its stdin, in a child process."""
     env = _child_env()
     cmd = [sys.executable, "-m", "glassdist", *args]
     try:
-        ran = _SERVER.run(args, env, cwd, timeout_s)
+        ran = _SERVER.run(args, env, cwd, timeout_s, request)
         if ran is None:  # no server here: a fresh interpreter
-            proc = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=cwd, timeout=timeout_s)
+            fresh = cmd if request is None else [sys.executable, "-m", "glassdist._childserver", "--request"]
+            proc = subprocess.run(fresh, capture_output=True, text=True, env=env, cwd=cwd, timeout=timeout_s,
+                                  input=request)
             ran = proc.returncode, proc.stdout, proc.stderr
     except subprocess.TimeoutExpired:
         return PaneOutcome(1, f"$ {' '.join(cmd)}\n(stopped after {timeout_s:g} s)",
@@ -150,7 +167,7 @@ class _ChildServer:
         if self._owner == os.getpid():
             self._stop()
 
-    def run(self, args, env, cwd, timeout_s):
+    def run(self, args, env, cwd, timeout_s, run_request=None):
         if not _FORK_SAFE or os.environ.get("GLASSDIST_CHILD") == "process" or self._failed:
             return None
         if not self._lock.acquire(blocking=False):
@@ -164,7 +181,7 @@ class _ChildServer:
                     self._failed = True
                     return None
             try:
-                return self._request(args, env, cwd, timeout_s)
+                return self._request(args, env, cwd, timeout_s, run_request)
             except subprocess.TimeoutExpired:  # the child was stopped after a complete exchange: the server serves on
                 raise
             except BaseException:  # Ctrl-C may cut the exchange half-way: start afresh next time
@@ -173,13 +190,15 @@ class _ChildServer:
         finally:
             self._lock.release()
 
-    def _request(self, args, env, cwd, timeout_s):
+    def _request(self, args, env, cwd, timeout_s, run_request=None):
         import tempfile
         import time
 
         with tempfile.TemporaryDirectory(prefix="glassdist-child-") as tmp:
             paths = {k: str(Path(tmp) / k) for k in ("out", "err", "status")}
             request = {"args": args, "env": env, "cwd": None if cwd is None else str(Path(cwd).resolve()), **paths}
+            if run_request is not None:
+                request["request"] = run_request
             pid = self._ask(request).get("pid")
             if not isinstance(pid, int):
                 self._stop()
@@ -278,7 +297,7 @@ def subprocess_runner(pane, out_dir, *, report=False, export=False, cwd=None):
     PaneOutcome
         Exit code, combined output, and the error line (last line of stderr) on failure.
     """
-    return run_glassdist(pane.analyze_args(out_dir, report=report, export=export), cwd=cwd)
+    return run_request(pane.request(out_dir, report=report, export=export), cwd=cwd)
 
 
 def read_json(path):

@@ -42,7 +42,7 @@ def run_lines(record, summary, out_dir, removed=()) -> list[str]:
     lines = acceptance_lines(record.acceptance, out_dir / "report.html" if record.request.report else None)
     s = summary["statistics"]
     optics = "" if result.optics is None else (
-        f"reflection (D {result.optics['board_distance_m']:g} m, incidence {result.optics['incidence_deg']:g} deg), ")
+        f"reflection (D {result.optics.board_distance_m:g} m, incidence {result.optics.incidence_deg:g} deg), ")
 
     def mD(v) -> str:  # null when no pixel is trusted
         return "n/a" if v is None else f"{v:.3g} mD"

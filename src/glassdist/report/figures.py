@@ -566,7 +566,7 @@ def save_channel_heatmaps(result, out_dir, *, vmax=None):
     guard = np.asarray(result.valid, dtype=bool) & ~valid
     if vmax is None:
         vmax = shared_limit(result.phi_eff_mD, result.phi_shear_mD, valid=valid)
-    method = getattr(result, "method", "")
+    method = result.method
     written = []
     for name in ("phi_eff", "phi_shear"):
         attr, label, cmap, signed = CHANNEL_STYLES[name]
@@ -575,7 +575,7 @@ def save_channel_heatmaps(result, out_dir, *, vmax=None):
             title=f"{label}\n{method} method, mD" if method else f"{label}, mD",
         )
         written.append(save_figure(fig, out_dir / f"{name}.png"))
-    if getattr(result, "axis_deg", None) is not None:
+    if any(f.name == "axis_deg" for f in result.field_specs()):
         fig, _ = plot_axis(result.axis_deg, result.phi_shear_mD, valid, guard=guard)
         written.append(save_figure(fig, out_dir / "axis.png"))
     logger.debug("heatmaps written: %s", ", ".join(p.name for p in written))

@@ -198,7 +198,7 @@ def _fit_facts(result):
 
 def _geometry_rows(result, params, shares, fit_facts):
     """Rows of the capture-geometry table (the homography and its fit for the Direct method)."""
-    optics = getattr(result, "optics", None)
+    optics = result.optics
     where = "the grid plane" if optics is None else "the pane"
     geometry = [
         ("grid pitch", f"{_num(result.pitch_mm)} mm"),
@@ -215,8 +215,8 @@ def _geometry_rows(result, params, shares, fit_facts):
                       f'<span id="trusted-percent">{_num(shares["trusted_percent"])}</span> % of {of}')]
     if optics is not None:
         geometry.insert(2, ("optics", escape(
-            f"reflection: φ in reflective power on the pane (Coddington); camera at {_num(optics['camera_distance_m'])} m, "
-            f"incidence {_num(optics['incidence_deg'])}°, board mm per pane mm {_num(optics['magnification'])}")))
+            f"reflection: φ in reflective power on the pane (Coddington); camera at {_num(optics.camera_distance_m)} m, "
+            f"incidence {_num(optics.incidence_deg)}°, board mm per pane mm {_num(optics.magnification)}")))
     if result.homography is not None:
         rows = "<br>".join(" ".join(f"{x: .6g}" for x in r) for r in np.asarray(result.homography, dtype=float))
         geometry.append(("homography (grid → image)", f'<span class="mono">{rows}</span>'))
@@ -337,11 +337,7 @@ def resolved_parameters(result):
     ``result.params.resolved()`` with ``sigma_mm`` replaced by the smoothing scale actually
     used (the parameter's default, ``None``, stands for 2 carrier periods).
     """
-    params = getattr(result, "params", None)
-    resolved = dict(params.resolved()) if params is not None else {}
-    if getattr(result, "sigma_mm", None) is not None:
-        resolved["sigma_mm"] = result.sigma_mm
-    return resolved
+    return {**result.params.resolved(), "sigma_mm": result.sigma_mm}
 
 
 def metadata_rows(metadata):

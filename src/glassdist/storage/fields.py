@@ -45,14 +45,20 @@ import csv
 import io
 import json
 import zipfile
-from dataclasses import dataclass
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..acceptance.stats import STATISTICS
 from ..errors import InputError
 from ..fs import atomic_write, atomic_write_bytes, atomic_write_text
+
+if TYPE_CHECKING:
+    from ..analyzer.fourier import SamplingGrid
+    from ..analyzer.result import FieldSpec, Optics
 
 __all__ = [
     "SUMMARY_NAME", "FIELD_LAYOUTS", "GRID_KEYS", "REGION_DESCRIPTIONS", "region_summary", "StoredResult", "grid_members", "load_result", "pixel_members", "statistics_table",
@@ -225,7 +231,7 @@ def grid_members(result):
     yield "grid_cols_px", cols[0].astype(np.float64), False
     yield "grid_valid", gv, True
     yield "valid_bits", np.packbits(np.asarray(result.valid, dtype=bool), axis=None), True
-    yield "detrend_region", _grid_detrend_region(result), True
+    yield "detrend_region", result.grid_detrend_region, True
     yield "detrend_region_bits", np.packbits(np.asarray(result.detrend_region, dtype=bool), axis=None), True
     yield "mm_per_px", np.float64(result.mm_per_px), False
     for spec in result.field_specs():
@@ -235,14 +241,6 @@ def grid_members(result):
             yield spec.name, f, False
         else:  # label maps: on the pixel grid (their own rules there), compressed to a few hundred kB
             yield spec.name, result.pixel_field(spec.name), True
-
-
-def _grid_detrend_region(result) -> np.ndarray:
-    """(h, w) bool: the analysis-grid samples the A2 detrend was fitted on (``grid_valid`` where not recorded)."""
-    d = result._deferred or {}
-    fit = d.get("fit_valid")
-    gv = np.asarray(result.grid_valid, dtype=bool)
-    return gv if fit is None else gv & np.asarray(fit, dtype=bool)
 
 
 def pixel_members(result, on_plane=None):
@@ -259,7 +257,10 @@ def pixel_members(result, on_plane=None):
 
 @dataclass(frozen=True)
 class StoredResult:
-    """A run's fields read back from its folder (:func:`load_result`).
+    """A run's fields read back from its folder (:func:`load_result`): a :class:`~glassdist.analyzer.result.Result`.
+
+    The settings (``method``, ``mm_per_px``, ``sigma_mm``, ...) are those ``summary.json``
+    records; acceptance, measures and figures take it as they take the analysis's own result.
 
     Attributes
     ----------
@@ -280,16 +281,143 @@ class StoredResult:
     detrend_region : ndarray (H, W) bool or None
         The pixels the A2 detrend was fitted on (within ``valid``); None for a file written
         before it was recorded.
+    grid_detrend : ndarray (h, w) bool or None
+        The samples of the analysis grid the A2 detrend was fitted on, where recorded.
     """
 
     layout: str
-    fields: dict
+    fields: dict[str, np.ndarray]
     valid: np.ndarray
     grid_valid: np.ndarray
     grid_rows_px: np.ndarray
     grid_cols_px: np.ndarray
-    summary: dict
+    summary: dict[str, Any]
     detrend_region: np.ndarray | None = None
+    grid_detrend: np.ndarray | None = None
+
+    @classmethod
+    def on_pixel_grid(cls, fields: dict[str, np.ndarray], valid: np.ndarray, **summary: Any) -> StoredResult:
+        """A result of fields already on the pixel grid (maps from elsewhere, closed forms in tests).
+
+        ``summary``: the settings ``summary.json`` would record (``method``, ``mm_per_px``, ``sigma_mm``, ...).
+        """
+        valid = np.asarray(valid, dtype=bool)
+        H, W = valid.shape
+        return cls("pixel", dict(fields), valid, valid, np.arange(H, dtype=np.float64), np.arange(W, dtype=np.float64),
+                   dict(summary))
+
+    # -- the settings summary.json records
+    @property
+    def method(self) -> str:
+        """'comparative' or 'direct'."""
+        return str(self.summary["method"])
+
+    @property
+    def pattern(self) -> str:
+        """The backdrop pattern the analysis used."""
+        return str(self.summary["pattern"])
+
+    @property
+    def mm_per_px(self) -> float:
+        """Backdrop (reflection: pane) mm per px."""
+        return float(self.summary["mm_per_px"])
+
+    @property
+    def pitch_mm(self) -> float:
+        """Grid pitch, mm."""
+        return float(self.summary["pitch_mm"])
+
+    @property
+    def distance_m(self) -> float:
+        """Glass-to-grid distance L (reflection: D), m."""
+        return float(self.summary["distance_m"])
+
+    @property
+    def sigma_mm(self) -> float:
+        """The reporting smoothing scale, mm."""
+        return float(self.summary["sigma_mm"])
+
+    @property
+    def carrier_period_mm(self) -> float:
+        """Carrier period on the backdrop, mm."""
+        return float(self.summary["carrier_period_mm"])
+
+    @property
+    def detrend_degree(self) -> int:
+        """The A2 detrend's total degree."""
+        return int(self.summary["detrend_degree"])
+
+    @property
+    def px_per_period(self) -> float:
+        """Shortest carrier period of the photo, px."""
+        c = self.summary["carriers"]
+        return float(min(c["k1"]["period_px"], c["k2"]["period_px"]))
+
+    @property
+    def margin_px(self) -> tuple[float, float]:
+        """Contamination margins at excluded areas and at the image edges, px."""
+        m = self.summary.get("margin_px") or {}
+        return float(m.get("excluded_areas", 0.0)), float(m.get("image_edge", 0.0))
+
+    @property
+    def optics(self) -> Optics | None:
+        """None in transmission; the reflection geometry otherwise."""
+        from ..analyzer.result import Optics
+
+        d = self.summary.get("optics")
+        return None if d is None else d if isinstance(d, Optics) else Optics.from_dict(d)
+
+    # -- the fields
+    @property
+    def trusted(self) -> np.ndarray:
+        """Pixels of quality label 0 (``valid`` where no quality map is stored)."""
+        from ..analyzer.region import ANALYSED
+
+        return self.valid if "quality" not in self.fields else self.pixel_field("quality") == ANALYSED
+
+    @property
+    def analysis_grid(self) -> SamplingGrid:
+        """The grid the fields are stored on (the pixel grid for the pixel layout)."""
+        from ..analyzer.fourier import SamplingGrid
+
+        return SamplingGrid(tuple(self.valid.shape), tuple(self.grid_valid.shape))
+
+    @property
+    def grid_trusted(self) -> np.ndarray:
+        """(h, w) bool: the samples of :attr:`analysis_grid` whose centre pixel is trusted."""
+        if self.layout == "pixel":
+            return self.trusted
+        yy, xx = self.analysis_grid.coords()
+        H, W = self.valid.shape
+        return self.trusted[np.clip(np.rint(yy).astype(np.intp), 0, H - 1), np.clip(np.rint(xx).astype(np.intp), 0, W - 1)]
+
+    @property
+    def grid_detrend_region(self) -> np.ndarray:
+        """(h, w) bool: the samples the A2 detrend was fitted on (``grid_valid`` where not recorded)."""
+        gv = np.asarray(self.grid_valid, dtype=bool)
+        if self.layout == "pixel" and self.detrend_region is not None:
+            return gv & self.detrend_region
+        return gv if self.grid_detrend is None else gv & self.grid_detrend
+
+    def field_specs(self) -> tuple[FieldSpec, ...]:
+        """The registered fields the file holds, in :data:`~glassdist.analyzer.FIELDS` order."""
+        from ..analyzer.result import FIELDS
+
+        return tuple(f for f in FIELDS if f.name in self.fields)
+
+    def grid_field(self, name: str) -> np.ndarray:
+        """Field ``name`` as stored, on :attr:`analysis_grid` (a label map of the analysis layout is on the pixel grid)."""
+        if name not in self.fields or self.fields[name].shape[:2] != self.grid_valid.shape:
+            raise AttributeError(name)
+        return self.fields[name]
+
+    def grid_fields(self) -> dict[str, np.ndarray]:
+        """Every field as stored, by name (a new mapping)."""
+        return dict(self.fields)
+
+    def with_grid_fields(self, fields: dict[str, np.ndarray], **changes: Any) -> StoredResult:
+        """A copy holding ``fields``; ``changes`` are settings of ``summary``."""
+        return replace(self, fields=dict(fields), summary={**self.summary, **changes})
 
     def pixel_field(self, name: str) -> np.ndarray:
         """Field ``name`` on the input's pixel grid, brought there exactly as the analysis does."""
@@ -298,10 +426,9 @@ class StoredResult:
         f = self.fields[name]
         if self.layout == "pixel" or f.shape[:2] == self.valid.shape:  # label maps are stored on the pixel grid
             return f
-        from ..analyzer.fourier import SamplingGrid
         from ..analyzer.resample import grid_fill_indices, upsample_axis, upsample_field, upsample_labels
 
-        grid = SamplingGrid(tuple(self.valid.shape), tuple(self.grid_valid.shape))
+        grid = self.analysis_grid
         if f.dtype.kind != "f":
             return upsample_labels(f, grid)
         idx = grid_fill_indices(self.grid_valid)
@@ -309,7 +436,14 @@ class StoredResult:
             return upsample_axis(f, self.fields.get("phi_shear_mD"), idx, grid, ~self.valid)
         return upsample_field(f, idx, grid, ~self.valid)
 
-    def to_pixel_grid(self) -> dict:
+    def pixel_rows(self, names: Sequence[str], max_pixels: int = 1 << 21
+                   ) -> Iterator[tuple[slice, dict[str, np.ndarray]]]:
+        """Fields ``names`` on the pixel grid, ``(rows, {name: block})`` by blocks of about ``max_pixels`` pixels."""
+        from ..analyzer.result import row_blocks
+
+        yield from row_blocks({n: self.pixel_field(n) for n in names}, max_pixels)
+
+    def to_pixel_grid(self) -> dict[str, np.ndarray]:
         """Every field on the pixel grid, ``valid`` and ``detrend_region``: ``--fields pixel``'s result.npz keys."""
         regions = {"valid": self.valid}
         if self.detrend_region is not None:
@@ -358,8 +492,9 @@ def load_result(out_dir) -> StoredResult:
             valid = np.unpackbits(z["valid_bits"], count=H * W).reshape(H, W).astype(bool)
             fit = (np.unpackbits(z["detrend_region_bits"], count=H * W).reshape(H, W).astype(bool)
                    if "detrend_region_bits" in z.files else None)
+            grid_fit = z["detrend_region"] if "detrend_region" in z.files else None
             return StoredResult("analysis", fields, valid, z["grid_valid"], z["grid_rows_px"], z["grid_cols_px"],
-                                summary, fit)
+                                summary, fit, grid_fit)
         valid = z["valid"]
         fit = z["detrend_region"] if "detrend_region" in z.files else None
     H, W = valid.shape

@@ -182,14 +182,14 @@ def result_protocol(result, spec: LoadedSpec | None = None):
 
     from ..acceptance.spec import resolve_protocol
 
-    sources = getattr(result, "sources", None) or {}
+    sources = result.sources
     if "given" not in sources or result.optics is not None:
         return None
     given = set(sources["given"])
     pinned = spec.spec.protocol if spec is not None else None
     chosen = {"sigma_mm": result.sigma_mm if given & {"sigma_mm", "sigma_periods"} else None,
               "detrend_degree": result.detrend_degree if "detrend_degree" in given else None}
-    decided = "pattern" not in given and getattr(pinned, "pattern", None) is None
+    decided = "pattern" not in given and (pinned is None or pinned.pattern is None)
     try:
         protocol = resolve_protocol(pinned, reference_given=result.method == "comparative", pitch_mm=result.pitch_mm,
                                     distance_m=result.distance_m, pattern=result.params.pattern, **chosen)

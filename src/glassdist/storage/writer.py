@@ -108,7 +108,7 @@ def write_outputs(result, out_dir, *, fields="analysis", report=False, export=Fa
         protocol = result_protocol(result, loaded)
     request = RunRequest(fields=fields, report=report, export=export, spec=loaded, protocol=protocol, mask=mask,
                          metadata=dict(metadata or {}), history=history, camera_distance_m=camera_distance_m)
-    inputs = read_inputs(image_path, reference_path, mask_path, image=image, sources=getattr(result, "sources", None))
+    inputs = read_inputs(image_path, reference_path, mask_path, image=image, sources=result.sources)
     planned = plan_outputs(result.field_specs(), fields=fields, report=report, export=export, limits=request.limits)
     spec_file = Path(loaded.path) if loaded is not None and loaded.path else None
     with open_output_folder(out_dir, planned=planned, inputs=(*inputs.paths, spec_file)) as folder:

@@ -162,14 +162,14 @@ def expand_variants(scene_path, vary: dict) -> list[Variant]:
 
 
 def _execute_variant(job):
-    """Run ``glassdist validate`` on one variant into a new temporary folder (here or on a worker)."""
-    from ..jobs.runner import run_glassdist
+    """Run ``glassdist validate`` on one variant (its typed request) into a new temporary folder (here or on a worker)."""
+    from ..jobs.runner import run_request
 
-    args, variants_dir, vid, cwd = job
+    request, variants_dir, vid, cwd = job
     tmp = Path(variants_dir) / f".tmp-{vid}-{os.getpid()}-{secrets.token_hex(3)}"
     (tmp if cwd is None else Path(cwd) / tmp).mkdir()
     t0 = time.monotonic()
-    outcome = run_glassdist([*args, "--out", str(tmp)], cwd=cwd)
+    outcome = run_request(request.model_copy(update={"out": tmp}), cwd=cwd)
     return tmp, outcome, time.monotonic() - t0
 
 
@@ -251,14 +251,16 @@ def run_sweep(scene_path, vary: dict, out, *, method="direct", engine="exact", s
         if records:
             echo(f"resuming: {len(records)} variant(s) already done, {len(todo)} to run")
         write_sweep_index(variants, out)
-        extra = ["--method", method, "--engine", engine, "--no-progress"] + ([] if spp is None else ["--spp", str(spp)])
         cwd = None
         if executor is not None and executor.distributed and todo:
             cwd = None if out.is_absolute() else os.getcwd()
             executor.check_paths(files=[out / "scenes" / f"{v.id}.json" for v in todo], folders=[out / "variants"],
                                  cwd=cwd)
             echo(f"running {len(todo)} variant(s) on the {executor.description}")
-        jobs = [(["validate", str(out / "scenes" / f"{v.id}.json"), *extra], out / "variants", v.id, cwd) for v in todo]
+        from ..jobs.request import ValidateRequest
+
+        jobs = [(ValidateRequest(scene=out / "scenes" / f"{v.id}.json", out=out / "variants" / v.id, method=method,
+                                 engine=engine, spp=spp), out / "variants", v.id, cwd) for v in todo]
         _run_variants(variants, todo, jobs, out, records, executor, progress, echo,
                       fingerprint=dict(method=method, engine=engine, spp=spp))
         for stale in (out / "variants").glob(".tmp-*"):  # of attempts lost with their worker

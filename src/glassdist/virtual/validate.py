@@ -177,7 +177,7 @@ def compare_with_scene(result, scene: Scene, *, model: Prediction, truth: Predic
         (``result.detrend_region``, the whole blocks its A2 fit sees; ``valid`` adds a ring
         of partial blocks the fit never saw).
     """
-    board = 1.0 if result.optics is None else result.optics["magnification"]  # reflection: the board's mm per px
+    board = 1.0 if result.optics is None else result.optics.magnification  # reflection: the board's mm per px
     settings = dict(
         sigma_mm=result.sigma_mm, detrend_degree=result.detrend_degree, mm_per_px=result.mm_per_px * board,
         valid=result.detrend_region if truth_region is None else truth_region,

@@ -16,7 +16,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import InputError
-from ..history.options import record_as_args
+from ..jobs.request import AnalyzeRequest
+from ..validation import safe_text
 
 __all__ = ["FIELDS", "FLAGS", "LABELS", "ROLES", "Job", "JobStore", "form_language"]
 
@@ -25,8 +26,9 @@ logger = logging.getLogger(__name__)
 #: Uploads a job takes, and the ``glassdist analyze`` option each becomes (the photo is the positional argument).
 ROLES = {"image": None, "reference": "--reference", "mask": "--mask", "spec": "--spec"}
 
-#: Form fields passed to ``glassdist analyze`` as ``--option=value`` (checked there, as on the command line);
-#: a field left empty is not sent (analyze's default, or the specification's pinned value, applies).
+#: Form fields of the job's :class:`~glassdist.jobs.request.AnalyzeRequest` (each the field of that name) and the
+#: ``glassdist analyze`` option it is; a field left empty is not sent (analyze's default, or the specification's
+#: pinned value, applies); its range is checked by the analysis, as on the command line.
 FIELDS = {"pitch_mm": "--pitch-mm", "distance_m": "--distance-m", "pattern": "--pattern",
           "detrend_degree": "--detrend-degree", "sigma_mm": "--sigma-mm",
           "pane_id": "--pane-id", "lot": "--lot", "site": "--site", "operator": "--operator", "optics": "--optics",
@@ -151,6 +153,39 @@ def _folder_bytes(folder: Path) -> int:
     return total
 
 
+#: what the request's parse says of a form value that is not of its field's type (pydantic's error types)
+_NOT_OF_TYPE = {"float_parsing": "must be a number", "finite_number": "must be a finite number",
+                "int_parsing": "must be a whole number", "int_from_float": "must be a whole number"}
+
+
+def job_request(job: Job, form: dict, *, db: str | None = None) -> AnalyzeRequest:
+    """The :class:`~glassdist.jobs.request.AnalyzeRequest` of a job: its uploads, the form's fields and checkboxes.
+
+    Each field's text is read as its type once, here (a value is never an option: it is a
+    field of the request); one that is not of it is refused in the form's words.
+
+    Raises
+    ------
+    InputError
+        A field's text is not a value of its type (a number, a whole number, one of the choices).
+    """
+    from pydantic import ValidationError
+
+    values = {key: text for key in FIELDS if (text := (form.get(key) or "").strip())}
+    try:
+        return AnalyzeRequest.model_validate({
+            **values, **{role: job.names[role] for role, option in ROLES.items() if option and role in job.names},
+            "images": (job.names["image"],), "out": "out", "db": db,
+            **{key: bool(form.get(key)) for key in FLAGS}, "record_as": {"source": "web", "job": job.id}})
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        key = str(err["loc"][0]) if err["loc"] else ""
+        if key not in values:
+            raise
+        what = _NOT_OF_TYPE.get(err["type"], "must be one of the choices offered")
+        raise InputError(f"{_field(FIELDS[key])}: {what}, got '{safe_text(values[key], 40)}'") from None
+
+
 @dataclass
 class Job:
     """One analysis requested from the web page.
@@ -165,8 +200,8 @@ class Job:
         Role (``image``, ``reference``, ``mask``, ``spec``) -> stored file name.
     display : dict
         Role -> the client's file name, for display and error lines only.
-    args : list of str
-        The ``glassdist analyze`` arguments (paths relative to ``folder``).
+    request : AnalyzeRequest or None
+        What the job asks of ``glassdist analyze`` (paths relative to ``folder``).
     state : str
         ``queued``, ``running``, ``done`` (analysed; exit status 0 or 3) or ``failed``.
     exit_code : int or None
@@ -179,7 +214,7 @@ class Job:
     folder: Path
     names: dict = field(default_factory=dict)
     display: dict = field(default_factory=dict)
-    args: list = field(default_factory=list)
+    request: AnalyzeRequest | None = None
     created: float = field(default_factory=time.time)
     started: float | None = None
     finished: float | None = None
@@ -283,19 +318,7 @@ class JobStore:
             if missing:
                 raise InputError(form_language("the following arguments are required: "
                                                + ", ".join(FIELDS[key] for key in missing)))
-        args = ["analyze"]
-        for key, option in FIELDS.items():
-            value = (form.get(key) or "").strip()
-            if value:
-                args.append(f"{option}={value}")  # one token: a value can never become an option
-        for role, option in ROLES.items():
-            if option and role in job.names:
-                args += [option, job.names[role]]
-        if self.db is not None:
-            args.append(f"--db={self.db}")
-        args += [flag for key, flag in FLAGS.items() if form.get(key)]
-        args += [*record_as_args(source="web", job=job.id), "--out", "out", "--", job.names["image"]]
-        job.args = args
+        job.request = job_request(job, form, db=self.db)
         with self._lock:
             self._jobs[job.id] = job
             self._evict()
@@ -303,12 +326,12 @@ class JobStore:
         return job
 
     def _run(self, job: Job) -> None:
-        from ..jobs.runner import run_glassdist
+        from ..jobs.runner import run_request
         from ..storage import EXIT_SPEC_FAIL
 
         job.state, job.started = "running", time.time()
         try:
-            outcome = run_glassdist(job.args, cwd=job.folder, timeout_s=self.timeout_s)
+            outcome = run_request(job.request, cwd=job.folder, timeout_s=self.timeout_s)
             job.exit_code, job.log = outcome.exit_code, outcome.log
             job.error = form_language(outcome.error, job.names, job.display)
             job.state = "done" if outcome.exit_code in (0, EXIT_SPEC_FAIL) else "failed"
