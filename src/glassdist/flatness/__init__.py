@@ -13,6 +13,7 @@ from .measures import (
     RollerWaveHeight,
     astm_c1651_mD,
     edge_lift,
+    edge_lifts,
     flatness_measures,
     roller_wave_height,
 )
@@ -26,7 +27,7 @@ from .slope import (
 )
 
 __all__ = [
-    "EdgeLift", "FlatnessMeasures", "RollerWaveHeight", "SurfaceFields", "astm_c1651_mD", "edge_lift",
+    "EdgeLift", "FlatnessMeasures", "RollerWaveHeight", "SurfaceFields", "astm_c1651_mD", "edge_lift", "edge_lifts",
     "flatness_measures", "integrate_slope", "landing_slope", "pane_step_mm", "polynomial_detrend",
     "roller_wave_height", "surface_fields", "with_surface_fields",
 ]
