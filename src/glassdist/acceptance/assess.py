@@ -9,12 +9,13 @@ worst regions on the heatmaps.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from .regions import REGION_CHANNELS, all_worst_regions, regions_csv
-from .spec import as_spec, check_capture, spec_channels, spec_limits, spec_verdict
+from .flatness_limits import flatness_checks
+from .spec import Check, as_spec, check_capture, spec_channels, spec_limits, spec_verdict
 from .stats import CHANNEL_FIELDS, regions_statistics, share_percent, shared_limit
 from .zones import check_pane, measured_region, pane_frame, zone_masks, zone_statistics
 
@@ -117,7 +118,7 @@ def colour_limits(result, spec=None, channels=("phi_eff", "phi_shear"), *, limit
     return {c: float(min(limits[c])) if limits.get(c) else shared for c in channels}
 
 
-def assess(result, spec=None, *, protocol=None, mask=None, metadata=None, camera=False):
+def assess(result, spec=None, *, protocol=None, mask=None, metadata=None, camera=False, flatness=None):
     """Capture check, statistics, pane frame, zones, worst regions and verdict of one analysis.
 
     Parameters
@@ -137,6 +138,10 @@ def assess(result, spec=None, *, protocol=None, mask=None, metadata=None, camera
         The camera facts of the photograph's EXIF (:func:`glassdist.io.camera_metadata`;
         None: the photo has none), recorded with the metadata; left out when no photo
         is known.
+    flatness : dict, optional
+        The run's ``summary.json["flatness"]`` (:func:`glassdist.sections.result_sections`), judged by
+        the spec's flatness limits (:mod:`~glassdist.acceptance.flatness_limits`); default computed
+        from the result where the spec has any.
 
     Returns
     -------
@@ -173,6 +178,9 @@ def assess(result, spec=None, *, protocol=None, mask=None, metadata=None, camera
     if spec is not None:
         verdict = spec_verdict(spec, stats, result, spec_path=loaded.path, spec_sha256=loaded.sha256, zones=zones,
                                 trusted_percent=trusted, of_mask=mask is not None)
+        if spec.flatness:  # the flatness limits (acceptance.flatness_limits), after the channels' criteria
+            extra = tuple(Check(*args) for args in flatness_checks(spec.flatness, flatness, result))
+            verdict = replace(verdict, checks=verdict.checks + extra)
     regions = all_worst_regions(result, frame, spec, channels=REGION_CHANNELS, statistics=stats, limits=limits)
     meta = {k: v for k, v in (metadata or {}).items() if v is not None}
     if camera is not False:

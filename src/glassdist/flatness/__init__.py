@@ -6,7 +6,7 @@ and height (fields ``surface_slope_mrad``, ``surface_height_um`` of ``result.npz
 :mod:`~glassdist.flatness.measures` the measures in mm and µm (``summary.json["flatness"]``).
 """
 
-from .integrate import integrate_slope
+from .integrate import integrate_slope, integrate_slopes
 from .measures import (
     EdgeLift,
     FlatnessMeasures,
@@ -19,6 +19,7 @@ from .measures import (
 )
 from .slope import (
     SurfaceFields,
+    height_sigma,
     landing_slope,
     pane_step_mm,
     polynomial_detrend,
@@ -28,6 +29,6 @@ from .slope import (
 
 __all__ = [
     "EdgeLift", "FlatnessMeasures", "RollerWaveHeight", "SurfaceFields", "astm_c1651_mD", "edge_lift", "edge_lifts",
-    "flatness_measures", "integrate_slope", "landing_slope", "pane_step_mm", "polynomial_detrend",
-    "roller_wave_height", "surface_fields", "with_surface_fields",
+    "flatness_measures", "height_sigma", "integrate_slope", "integrate_slopes", "landing_slope", "pane_step_mm",
+    "polynomial_detrend", "roller_wave_height", "surface_fields", "with_surface_fields",
 ]
