@@ -301,16 +301,20 @@ def wave_photos(tmp_path_factory):
 
 @pytest.mark.parametrize("layout", ["analysis", "pixel"])
 def test_cli_writes_slope_and_height_and_the_flatness_summary(wave_photos, layout):
-    """result.npz holds surface_slope_mrad (H, W, 2), surface_height_um (H, W) (and the slope's uncertainty) in both
-    layouts; summary.json's flatness names the roller wave."""
+    """result.npz holds surface_slope_mrad (H, W, 2), surface_height_um (H, W) (and their uncertainties) in both
+    layouts; summary.json's flatness names the roller wave; the report carries the height and slope maps."""
     f = wave_photos
     out = f / layout
     args = ["analyze", str(f / "pane.png"), "--reference", str(f / "flat.png"), "--optics", "reflection",
             "--pitch-mm", "36", "--distance-m", "1.997", "--detrend-degree", "1", "--quiet", "--fields", layout,
-            "--out", str(out)]
+            "--out", str(out)] + (["--report"] if layout == "analysis" else [])
     assert main(args) == 0
     s = json.loads((out / "summary.json").read_text())
-    assert {"surface_slope_mrad", "surface_height_um"} <= set(s["fields"]["keys"])
+    assert {"surface_slope_mrad", "surface_height_um", "surface_height_sigma_um"} <= set(s["fields"]["keys"])
+    if layout == "analysis":  # the report carries the height and slope maps
+        html = (out / "report.html").read_text()
+        assert (out / "surface_height.png").is_file() and (out / "surface_slope.png").is_file()
+        assert "Front-face height Z" in html and "Front-face slope magnitude" in html
     rw = s["flatness"]["roller_wave"]
     assert rw["wavelength_mm"] == pytest.approx(LAMBDA_MM, rel=0.02)
     assert rw["peak_to_valley_mm"] == pytest.approx(PV_MM, rel=0.05)

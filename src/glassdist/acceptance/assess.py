@@ -13,8 +13,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .regions import REGION_CHANNELS, all_worst_regions, regions_csv
 from .flatness_limits import flatness_checks
+from .regions import REGION_CHANNELS, all_worst_regions, regions_csv
 from .spec import Check, as_spec, check_capture, spec_channels, spec_limits, spec_verdict
 from .stats import CHANNEL_FIELDS, regions_statistics, share_percent, shared_limit
 from .zones import check_pane, measured_region, pane_frame, zone_masks, zone_statistics
