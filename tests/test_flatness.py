@@ -490,7 +490,8 @@ EXAMPLE_FLATNESS_SPEC = __import__("pathlib").Path(__file__).parents[1] / "examp
 def test_example_flatness_spec_judges_roller_wave_and_edge_lift(tmp_path, capsys, h_mm, code):
     """examples/reflection/flatness_spec.json (roller wave <= 0.3 mm, edge lift <= 0.3 mm) on the edge-lift scene under
     the 0.1 mm roller wave: h = 0.2 mm passes (exit 0), h = 0.4 mm fails on the edge lift (exit 3); the verdict lines
-    say what was judged (the wave's wavelength, the edge each lift is at, the largest)."""
+    say what was judged (the wave's wavelength, the edge each lift is at, the largest); the history's columns
+    roller_wave_pv_mm and edge_lift_mm carry the run's."""
     scene = _edge_scene(h_mm, True)
     write_png16(tmp_path / "pane.png", render_scene(scene))
     write_png16(tmp_path / "flat.png", render_scene(scene, reference=True))
@@ -505,7 +506,13 @@ def test_example_flatness_spec_judges_roller_wave_and_edge_lift(tmp_path, capsys
     assert all(f"{e} 0." in edge for e in ("top", "bottom", "left", "right"))
     s = json.loads((out / "summary.json").read_text())
     judged = {c["criterion"]: c for c in s["verdict"]["checks"]}
-    assert judged["edge lift <= 0.3 mm"]["value"] == pytest.approx(max(abs(v) for v in s["flatness"]["edge_lift_mm"].values()))
+    largest = max(abs(v) for v in s["flatness"]["edge_lift_mm"].values())
+    assert judged["edge lift <= 0.3 mm"]["value"] == pytest.approx(largest)
+    capsys.readouterr()
+    assert main(["history", "--format", "json"]) == 0  # the history's columns for the run
+    rec = json.loads(capsys.readouterr().out)[-1]
+    assert rec["edge_lift_mm"] == pytest.approx(largest)
+    assert rec["roller_wave_pv_mm"] == pytest.approx(s["flatness"]["roller_wave"]["peak_to_valley_mm"])
 
 
 def test_flatness_limits_fail_where_the_run_gives_no_flatness(tmp_path):
