@@ -6,7 +6,7 @@ import pytest
 
 from glassdist.errors import InputError
 from glassdist.scene import (
-    GaussianBump, Pillow, Plane, RollerWave, SphericalCap, landing_jacobian, load_scene, pattern_intensity,
+    EdgeLift, GaussianBump, Pillow, Plane, RollerWave, SphericalCap, landing_jacobian, load_scene, pattern_intensity,
 )
 from glassdist.theory import carrier_period_mm, nominal_mm_per_px
 
@@ -21,6 +21,7 @@ TERMS = [
     SphericalCap(kind="spherical_cap", radius_mm=-20000, aperture_mm=300, center_mm=(10, 5)),
     GaussianBump(kind="gaussian", amplitude_mm=0.05, sigma_mm=40, center_mm=(-5, 8)),
     Plane(kind="plane", slope=(1e-3, -2e-3), offset_mm=0.1),
+    EdgeLift(kind="edge_lift", height_mm=0.3, width_mm=60, size_mm=(300, 260), center_mm=(10, -5)),
 ]
 
 
@@ -43,6 +44,27 @@ def test_term_derivatives_match_finite_differences(term):
         assert np.allclose(a, b, atol=1e-5 * hs)
     hg = term.height_gradient(u, v)
     assert np.allclose(hg[0], term.height(u, v)) and np.allclose(hg[1], gu) and np.allclose(hg[2], gv)
+
+
+def test_edge_lift_height_is_the_quadratic_of_the_distance_in_from_each_edge():
+    """h (1 - d / w)^2 within w of each named edge (d from that edge, top = smaller v), 0 further in, h beyond the
+    edge; the two edges' lifts add at a corner; slope -2 h / w at the edge, pointing out of the pane."""
+    t = EdgeLift(kind="edge_lift", height_mm=0.4, width_mm=60, size_mm=(800, 600), center_mm=(100, 50))
+    left, top = 100 - 400, 50 - 300
+    d = np.array([0.0, 15.0, 30.0, 59.0, 60.0, 200.0])
+    want = 0.4 * np.clip(1 - d / 60, 0, None) ** 2
+    v0 = np.full_like(d, 50.0)
+    np.testing.assert_allclose(t.height(left + d, v0), want, atol=1e-15)  # left edge
+    np.testing.assert_allclose(t.height(100 + 400 - d, v0), want, atol=1e-15)  # right
+    np.testing.assert_allclose(t.height(100 + 0 * d, top + d), want, atol=1e-15)  # top: v = centre - b / 2
+    np.testing.assert_allclose(t.height(100 + 0 * d, 50 + 300 - d), want, atol=1e-15)  # bottom
+    assert t.height(left + 10.0, top + 20.0) == pytest.approx(0.4 * ((5 / 6) ** 2 + (2 / 3) ** 2), rel=1e-12)
+    assert t.height(left - 5.0, 50.0) == pytest.approx(0.4)  # beyond the edge: the edge's height
+    gu, gv = t.gradient(np.array([left, 100 + 400.0]), np.array([50.0, 50.0]))
+    np.testing.assert_allclose(gu, [-2 * 0.4 / 60, 2 * 0.4 / 60], rtol=1e-12)
+    only = EdgeLift(kind="edge_lift", height_mm=0.4, width_mm=60, size_mm=(800, 600), center_mm=(100, 50),
+                    edges=("top",))
+    assert only.height(left, 50.0) == 0.0 and only.height(100.0, top) == pytest.approx(0.4)
 
 
 @pytest.mark.parametrize("span_mm", [200.0, 600.0], ids=["inside", "across the edge"])

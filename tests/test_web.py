@@ -418,7 +418,8 @@ def test_contract_spec_with_the_form_as_it_loads_in_headless_chromium(server, pa
 
 def test_reflection_in_headless_chromium(server, tmp_path):
     """The form's optics field: a concave mirror (R = 20 m, board at 1.997 m, camera in the board plane) rendered
-    in reflection reads -4000/R = -200 mD, and the job page names the reflection geometry."""
+    in reflection reads -4000/R = -200 mD, and the job page names the reflection geometry and shows the front
+    face's height and slope maps."""
     from glassdist.io import write_png16
     from glassdist.render import render_scene
     from glassdist.scene import scene_from_dict
@@ -442,6 +443,8 @@ def test_reflection_in_headless_chromium(server, tmp_path):
         summary = page.request.get(page.url + "/files/summary.json").json()
         assert summary["optics"]["optics"] == "reflection"
         assert summary["statistics"]["phi_eff_mD"]["mean"] == pytest.approx(-200.0, rel=0.02)
+        for name in ("surface_height.png", "surface_slope.png"):  # the flatness figures beside the power figures
+            assert page.locator(f'img[src$="{name}"]').count() == 1
 
 
 def test_kept_jobs_have_a_disk_budget(tmp_path):

@@ -397,6 +397,8 @@ def _run_analyze(args) -> int:
             # a single photo is handed over, so that the analysis frees it once Block F is done
             # transmission: the Direct bulk channel (its magnification needs the camera file's focal length)
             pin = args.camera_distance_m if optics is None and lens is not None and reference is None else None
+            if optics is not None and lens is not None and reference is None:  # reflection: the pane's bow
+                pin = optics.pinned_camera_distance_m
             result = (analyze(images.pop(), lens=lens, camera_distance_m=pin, camera=inputs.camera or None, **kw)
                       if len(images) == 1
                       else analyze_captures(images, **kw))

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
+from .flatness_limits import flatness_checks
 from .geometry import MD_STATISTICS
 from .regions import REGION_CHANNELS, all_worst_regions, regions_csv
 from .spec import _STAT_TEXT, _SYMBOL, Check, as_spec, check_capture, spec_channels, spec_limits, spec_verdict
@@ -129,7 +130,7 @@ def colour_limits(result: Result, spec: Spec | None = None, channels: Sequence[s
 def assess(result: Result, spec: LoadedSpec | Spec | Mapping[str, Any] | str | Path | None = None, *,
            protocol: ResolvedProtocol | None = None, mask: np.ndarray | None = None,
            metadata: Mapping[str, Any] | None = None, camera: dict[str, Any] | None | Literal[False] = False,
-           camera_distance_m: float | None = None) -> Acceptance:
+           camera_distance_m: float | None = None, flatness: dict[str, Any] | None = None) -> Acceptance:
     """Capture check, statistics, pane frame, zones, worst regions and verdict of one analysis.
 
     Parameters
@@ -152,6 +153,10 @@ def assess(result: Result, spec: LoadedSpec | Spec | Mapping[str, Any] | str | P
     camera_distance_m : float, optional
         The camera-to-pane distance (``--camera-distance-m``): a specification's
         ``reference_geometry`` converts the capture with it.
+    flatness : dict, optional
+        The run's ``summary.json["flatness"]`` (:func:`glassdist.sections.result_sections`), judged by
+        the spec's flatness limits (:mod:`~glassdist.acceptance.flatness_limits`); default computed
+        from the result where the spec has any.
 
     Returns
     -------
@@ -193,6 +198,9 @@ def assess(result: Result, spec: LoadedSpec | Spec | Mapping[str, Any] | str | P
                                zones=judged_zones, trusted_percent=trusted, of_mask=mask is not None)
         if geo is not None:
             verdict = replace(verdict, checks=(geo, *verdict.checks))
+        if judged.flatness:  # the flatness limits (acceptance.flatness_limits), after the channels' criteria
+            extra = tuple(Check(*args) for args in flatness_checks(judged.flatness, flatness, result))
+            verdict = replace(verdict, checks=verdict.checks + extra)
     worst = all_worst_regions(result, frame, judged, channels=REGION_CHANNELS, statistics=stats, limits=limits)
     meta = {k: v for k, v in (metadata or {}).items() if v is not None}
     if camera is not False:

@@ -66,6 +66,7 @@ from pydantic import BaseModel, Field, field_validator, model_validator
 
 from ..errors import InputError
 from ..validation import MODEL_CONFIG, SIGMA_MM, check_input_file, load_mapping, safe_text, validate_model
+from .flatness_limits import WithFlatnessLimits
 from .geometry import ReferenceGeometry, check_convertible
 from .stats import format_limit, share_percent
 
@@ -308,14 +309,14 @@ class Figures(BaseModel):
         return v
 
 
-class Spec(BaseModel):
-    """An acceptance specification (see the module docstring for the JSON form)."""
+class Spec(WithFlatnessLimits):
+    """An acceptance specification (see the module docstring for the JSON form; ``flatness``: its base's)."""
 
     model_config = MODEL_CONFIG
 
     name: str = Field(..., min_length=1)
     description: str = ""
-    criteria: tuple[Criterion, ...] = Field(..., min_length=1)
+    criteria: tuple[Criterion, ...] = ()  # with 'flatness', at least one entry (WithFlatnessLimits)
     min_valid_percent: float | None = Field(None, ge=0, le=100)
     protocol: Protocol = Protocol()
     pane: Pane | None = None

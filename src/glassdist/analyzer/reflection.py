@@ -102,6 +102,7 @@ __all__ = [
     "strain_from_channels",
     "reflect_result",
     "analyze_reflection",
+    "noise_correlation_mm",
     "UNIFORM_POWER_NOTE",
 ]
 
@@ -157,6 +158,19 @@ class ReflectionGeometry:
     def effective_distance_m(self) -> float:
         """``D / m``: the transmission distance whose channels equal ``P`` at normal incidence, m."""
         return self.distance_m / self.magnification
+
+    @property
+    def pinned_camera_distance_m(self) -> float | None:
+        """The camera-to-pane distance to pin the Direct bulk channel with, m, or None (C not given).
+
+        The bulk channel pins the magnification at the camera-to-board distance ``camera_distance_m +
+        distance_m`` (:func:`glassdist.analyzer.bulk.measured_bulk`); a reflection run analyses at
+        ``D / m`` while the board lies ``C + D`` from the camera along the reflected line of sight
+        (the mirror unfolds the path): ``C + D - D / m``.
+        """
+        if self.camera_distance_m is None:
+            return None
+        return self.camera_distance_m + self.distance_m - self.effective_distance_m
 
     def incidence(self, dx_mm, dy_mm):
         """Angle of incidence and plane of incidence (deg) at pane points offset from the view's centre.
@@ -396,12 +410,26 @@ def reflect_result(result, geometry: ReflectionGeometry):
     return with_surface_fields(result.with_grid_fields(  # with the front face's slope and height
         fields, distance_m=geometry.distance_m, mm_per_px=result.mm_per_px / m, sigma_mm=result.sigma_mm / m,
         effective_sigma_mm=eff_sigma, optics=optics,
-    ), geometry)
+    ), geometry, correlation_mm=noise_correlation_mm(result) / m)
+
+
+def noise_correlation_mm(result) -> float:
+    """Standard deviation of the Gaussian that correlates the displacement's noise, in the result's mm.
+
+    ``displacement_mm`` carries Block F's low-pass (the bandpass, then the complex smoothing:
+    :func:`glassdist.analyzer.demodulate.demodulation_blur_px2`), not the metric smoothing; white image
+    noise through it is white noise through a Gaussian of that covariance. Returned: its isotropic
+    standard deviation ``sqrt(tr C / 2)``, averaged over the two carriers, px x ``result.mm_per_px``.
+    """
+    from .demodulate import covariances, demodulation_blur_px2
+
+    C = demodulation_blur_px2(result.carriers, covariances(result.carriers, result.params), result.params)
+    return float(np.sqrt(np.mean(np.trace(C, axis1=1, axis2=2)) / 2.0)) * float(result.mm_per_px)
 
 
 def analyze_reflection(image, *, pitch_mm: float, geometry: ReflectionGeometry, reference=None, params=None,
                        mask=None, pattern: str | None = None, detrend_degree: int | None = None,
-                       sigma_mm: float | None = None):
+                       sigma_mm: float | None = None, lens=None):
     """Measure the reflective power of a pane from a photo of a grid board reflected in it.
 
     Parameters
@@ -415,6 +443,11 @@ def analyze_reflection(image, *, pitch_mm: float, geometry: ReflectionGeometry, 
     sigma_mm : float, optional
         Reporting smoothing scale on the pane, mm (default: 2 carrier periods of the
         board's image, i.e. 2 p_c / m on the pane).
+    lens : LensCalibration, optional
+        The camera's lens (:func:`glassdist.analyzer.lens.calibration_from_camera_file`): with the
+        Direct Method and ``geometry.camera_distance_m`` it pins the magnification, so that the
+        bulk channel reads the pane's uniform curvature (:attr:`ReflectionGeometry.pinned_camera_distance_m`;
+        the bow of :func:`glassdist.flatness.flatness_measures`).
 
     Returns
     -------
@@ -448,6 +481,8 @@ def analyze_reflection(image, *, pitch_mm: float, geometry: ReflectionGeometry, 
     if sigma_mm is None and params.sigma_mm is not None:  # a parameter file's sigma_mm is on the pane too
         sigma_mm = params.sigma_mm
     board_sigma = None if sigma_mm is None else float(sigma_mm) * m
+    pin = geometry.pinned_camera_distance_m if lens is not None and reference is None else None
     res = analyze(image, pitch_mm=pitch_mm, distance_m=geometry.effective_distance_m, reference=reference,
-                  params=params, mask=mask, pattern=pattern, detrend_degree=detrend_degree, sigma_mm=board_sigma)
+                  params=params, mask=mask, pattern=pattern, detrend_degree=detrend_degree, sigma_mm=board_sigma,
+                  lens=lens, camera_distance_m=pin)
     return reflect_result(res, geometry)

@@ -77,6 +77,9 @@ FIELDS: tuple[FieldSpec, ...] = (
     FieldSpec("surface_height_um", "um",
               "reflection: front-face height Z (away from the camera), least-squares integral of the slope, "
               "detrended at degree N"),
+    FieldSpec("surface_height_sigma_um", "um",
+              "reflection: standard uncertainty of surface_height_um from the image noise (the slope's, through the "
+              "integrator and the detrends)"),
 )
 
 #: The power channels (mD) that statistics, specifications and heatmaps are about.

@@ -14,7 +14,7 @@ and no value is assumed outside the region. The normal equations ``A^T A Z = A^T
 graph Laplacian, singular by one constant per 4-connected part of the region, and
 consistent (each difference row sums to zero, so ``A^T b`` has no component along those
 constants). Up to :data:`DIRECT_MAX_SAMPLES` samples each part is pinned at one sample and the
-system solved by a sparse direct factorisation (``scipy.sparse.linalg.spsolve``, a symmetric
+system solved by a sparse direct factorisation (``scipy.sparse.linalg.splu``, a symmetric
 ordering); above, by conjugate gradients (``scipy.sparse.linalg.cg``, relative residual 1e-10)
 preconditioned by the Neumann Laplacian of the full rectangle, inverted by a type-II DCT
 (``scipy.fft.dctn``): the masked operator differs from it only at the borders and holes, so
@@ -45,9 +45,9 @@ from __future__ import annotations
 
 import numpy as np
 from scipy import fft, ndimage, sparse
-from scipy.sparse.linalg import LinearOperator, cg, spsolve
+from scipy.sparse.linalg import LinearOperator, cg, splu
 
-__all__ = ["DIRECT_MAX_SAMPLES", "integrate_slope"]
+__all__ = ["DIRECT_MAX_SAMPLES", "integrate_slope", "integrate_slopes"]
 
 #: Region size (samples) up to which the direct factorisation is used, between the sizes where each is the
 #: faster (benchmarks/flatness_results.json: direct 0.45 s, CG 1.14 s at 25k samples; 1.84 s and 1.35 s at 100k).
@@ -102,15 +102,25 @@ def integrate_slope(gx: np.ndarray, gy: np.ndarray, mask: np.ndarray, step_mm) -
         Shapes differ, the step is not positive, or a slope inside the region is not finite.
     """
     gx, gy = np.asarray(gx, float), np.asarray(gy, float)
+    if gx.ndim != 2 or gy.ndim != 2:
+        raise ValueError(f"gx, gy and mask must be 2-D of one shape, got {gx.shape}, {gy.shape}, {np.shape(mask)}")
+    return integrate_slopes(gx[None], gy[None], mask, step_mm)[0]
+
+
+def integrate_slopes(gx: np.ndarray, gy: np.ndarray, mask: np.ndarray, step_mm) -> np.ndarray:
+    """:func:`integrate_slope` of ``k`` slope fields on one region: ``gx, gy`` of shape (k, h, w), the
+    system built (and, up to :data:`DIRECT_MAX_SAMPLES`, factorised) once; returns (k, h, w)."""
+    gx, gy = np.asarray(gx, float), np.asarray(gy, float)
     mask = np.asarray(mask, bool)
-    if gx.shape != mask.shape or gy.shape != mask.shape or mask.ndim != 2:
-        raise ValueError(f"gx, gy and mask must be 2-D of one shape, got {gx.shape}, {gy.shape}, {mask.shape}")
+    if gx.ndim != 3 or gx.shape[1:] != mask.shape or gy.shape != gx.shape or mask.ndim != 2:
+        raise ValueError(f"gx, gy and mask must be 2-D of one shape, got {gx.shape[1:]}, {gy.shape[1:]}, {mask.shape}")
     sy, sx = (float(s) for s in step_mm)
     if not (sy > 0 and sx > 0):
         raise ValueError(f"step_mm must be positive, got {step_mm!r}")
-    if not (np.isfinite(gx[mask]).all() and np.isfinite(gy[mask]).all()):
+    if not (np.isfinite(gx[:, mask]).all() and np.isfinite(gy[:, mask]).all()):
         raise ValueError("the slopes must be finite inside the mask")
-    out = np.full(mask.shape, np.nan)
+    k = gx.shape[0]
+    out = np.full(gx.shape, np.nan)
     n = int(np.count_nonzero(mask))
     if n == 0:
         return out
@@ -123,22 +133,32 @@ def integrate_slope(gx: np.ndarray, gy: np.ndarray, mask: np.ndarray, step_mm) -
         b = (slice(None), slice(1, None)) if axis == 1 else (slice(1, None), slice(None))
         pair = mask[a] & mask[b]
         i0, i1 = index[a][pair], index[b][pair]
-        k = i0.size
-        eq = np.arange(m, m + k)
+        npair = i0.size
+        eq = np.arange(m, m + npair)
         rows += [eq, eq]
         cols += [i1, i0]
-        vals += [np.full(k, 1.0 / s), np.full(k, -1.0 / s)]
-        rhs.append(0.5 * (g[a][pair] + g[b][pair]))
-        m += k
+        vals += [np.full(npair, 1.0 / s), np.full(npair, -1.0 / s)]
+        rhs.append(0.5 * (g[:, a[0], a[1]][:, pair] + g[:, b[0], b[1]][:, pair]))
+        m += npair
     A = sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(m, n))
-    normal, b = (A.T @ A).tocsr(), A.T @ np.concatenate(rhs)
+    normal = (A.T @ A).tocsr()
+    B = np.asarray(A.T @ np.concatenate(rhs, axis=1).T)  # (n, k)
     labels, nparts = ndimage.label(mask)
-    z = _solve_cg(normal, b, mask, sy, sx) if n > DIRECT_MAX_SAMPLES else None
-    if z is None:  # one sample of each 4-connected part pinned to 0: the system becomes definite
+    Z = np.empty((n, k))
+    todo = list(range(k))
+    if n > DIRECT_MAX_SAMPLES:
+        solved = [_solve_cg(normal, B[:, j], mask, sy, sx) for j in range(k)]
+        for j, z in enumerate(solved):
+            if z is not None:
+                Z[:, j] = z
+        todo = [j for j, z in enumerate(solved) if z is None]
+    if todo:  # one sample of each 4-connected part pinned to 0: the system becomes definite
         anchors = index[mask][np.unique(labels[mask], return_index=True)[1]]
         pin = sparse.csr_matrix((np.ones(nparts), (anchors, anchors)), shape=(n, n))
-        z = spsolve((normal + pin).tocsc(), b, permc_spec="MMD_AT_PLUS_A")  # symmetric: a symmetric ordering
+        lu = splu((normal + pin).tocsc(), permc_spec="MMD_AT_PLUS_A")  # symmetric: a symmetric ordering
+        Z[:, todo] = lu.solve(np.ascontiguousarray(B[:, todo]))
     lab = labels[mask]
-    means = ndimage.mean(z, lab, np.arange(1, nparts + 1))
-    out[mask] = z - np.asarray(means)[lab - 1]
+    for j in range(k):
+        means = ndimage.mean(Z[:, j], lab, np.arange(1, nparts + 1))
+        out[j][mask] = Z[:, j] - np.asarray(means)[lab - 1]
     return out

@@ -48,7 +48,8 @@ EN 12150-1:2015, *Glass in building - Thermally toughened soda lime silicate saf
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -60,9 +61,25 @@ __all__ = [
     "astm_c1651_mD",
     "bow_of",
     "edge_lift",
+    "edge_lifts",
     "flatness_measures",
     "roller_wave_height",
 ]
+
+
+#: the pane edges a view can hold (``top``: the image's first rows)
+EDGE_NAMES = ("top", "bottom", "left", "right")
+EDGE_LIFT_NOTE = ("height at the edge above the straight line fitted to the profile between 100 and 300 mm in "
+                  "(EN 12150-1 practice), mm, > 0 away from the camera; the edge (edge_px, image px, pixel j "
+                  "centred on j) is where the reported region meets the frame or the dark surroundings; the "
+                  "profile is the height averaged along the edge over span_px, carried from its first sample "
+                  "(first_mm) to the edge by the quadratic of its first 40 mm")
+
+
+#: quality labels of what lies beyond a pane edge seen (:data:`glassdist.analyzer.region.LABELS`): occluded / low
+#: modulation (the frame, the dark surroundings) and beyond range (the strongly bent glass next to them); pinned
+#: to the analyzer's by tests/test_flatness.py
+BEYOND_EDGE_LABELS = (2, 3)
 
 
 def astm_c1651_mD(peak_to_valley_mm: float, wavelength_mm: float) -> float:
@@ -143,8 +160,10 @@ def roller_wave_height(height_um: np.ndarray, mask: np.ndarray, step_mm, *, degr
     Returns
     -------
     RollerWaveHeight or None
-        None when fewer than 16 samples or no spectral peak in the band (four samples to the
-        region's extent).
+        None when fewer than 16 samples, no spectral peak in the band (four samples to the
+        region's extent), or the refined wave vector leaves that band (no periodic component the
+        region holds: the least squares ran to a wavelength longer than the region, where it is a
+        polynomial's, or shorter than four samples).
     """
     mask = np.asarray(mask, bool) & np.isfinite(height_um)
     if mask.sum() < 16:
@@ -173,6 +192,9 @@ def roller_wave_height(height_um: np.ndarray, mask: np.ndarray, step_mm, *, degr
     rest = zv - P @ np.linalg.lstsq(P, zv, rcond=None)[0]
     rss, tss = float(np.sum((zv - A @ coef) ** 2)), float(np.sum(rest**2))
     kn = float(np.hypot(*k))
+    extent = max(np.ptp(x) + step_mm[1], np.ptp(y) + step_mm[0])
+    if not (1.0 / extent <= kn <= 1.0 / (4.0 * max(step_mm))):
+        return None
     direction = math.degrees(math.atan2(k[1], k[0]))
     direction = direction + 180.0 if direction <= -90.0 else direction - 180.0 if direction > 90.0 else direction
     pv_mm = 2e-3 * float(np.hypot(coef[-2], coef[-1]))
@@ -180,7 +202,7 @@ def roller_wave_height(height_um: np.ndarray, mask: np.ndarray, step_mm, *, degr
                             max(0.0, 1.0 - rss / tss) if tss > 0 else 0.0)
 
 
-def bow_of(height_um: np.ndarray, mask: np.ndarray, step_mm, *, method: str, degree: int) -> dict:
+def bow_of(height_um: np.ndarray, mask: np.ndarray, step_mm, *, method: str, degree: int, bulk=None) -> dict:
     """The bow the result leaves identifiable (module notes, "Bow"): radius of the mean curvature, or why none.
 
     Returns
@@ -189,10 +211,22 @@ def bow_of(height_um: np.ndarray, mask: np.ndarray, step_mm, *, method: str, deg
         ``identifiable``, ``radius_m`` (of ``Z = -r^2 / 2R``: positive for a face concave towards
         the camera; None when not identifiable or flat), ``note``.
     """
+    pinned = getattr(bulk, "pinned", None) if bulk is not None else None
+    if method == "direct" and pinned and bulk.phi_eff_mD is not None and bulk.phi_eff_mD != 0:
+        sig = bulk.phi_eff_sigma_mD
+        R = -4000.0 / bulk.phi_eff_mD
+        return {"identifiable": True, "radius_m": float(R),
+                "radius_sigma_m": None if sig is None else float(abs(R) * sig / abs(bulk.phi_eff_mD)),
+                "note": "Direct Method, magnification pinned (camera file and camera-to-pane distance): the bulk "
+                        "channel's sphere, R = -4000 / phi_eff (mD, reflective power 4 / R at normal incidence; "
+                        "R > 0 concave towards the camera); radius_sigma_m from its noise only, the distance's and "
+                        "focal length's own tolerances as the bulk channel's pinned sensitivities say"}
     if method == "direct":
         return {"identifiable": False, "radius_m": None,
                 "note": "Direct Method: a uniform curvature is a change of scale of the board's image, absorbed by "
-                        "the homography; read the bow with the Comparative Method (a flat reference surface)"}
+                        "the homography; read the bow with the Comparative Method (a flat reference surface), or pin "
+                        "the camera (a camera file and the camera-to-pane distance: --camera-file, "
+                        "--camera-distance-m)"}
     if degree >= 2:
         return {"identifiable": False, "radius_m": None,
                 "note": f"the height is detrended at degree {degree} (>= 2), which removes a uniform curvature; "
@@ -225,6 +259,12 @@ class FlatnessMeasures:
     detrend_degree : int
     step_mm : (float, float)
         Pane mm per sample of the height map.
+    height_sigma_um : float or None
+        RMS over the trusted samples of ``surface_height_sigma_um`` (the height's standard uncertainty
+        from the image noise), µm; None when the result has none.
+    edge_lifts : dict
+        :func:`edge_lifts`: per edge (``top``, ``bottom``, ``left``, ``right``) None where the edge is
+        not in view, else its lift (mm), where the edge lies and the profile used.
     """
 
     roller_wave: RollerWaveHeight | None
@@ -232,11 +272,21 @@ class FlatnessMeasures:
     bow: dict
     detrend_degree: int
     step_mm: tuple[float, float]
+    edge_lifts: dict = field(default_factory=dict)
+    height_sigma_um: float | None = None
+
+    @property
+    def edge_lift_mm(self) -> dict:
+        """``{edge: lift_mm or None}`` for the four edges."""
+        return {e: None if self.edge_lifts.get(e) is None else self.edge_lifts[e]["lift_mm"] for e in EDGE_NAMES}
 
     def to_dict(self) -> dict:
         return {
             "roller_wave": None if self.roller_wave is None else self.roller_wave.to_dict(),
             "height_peak_to_valley_um": self.height_peak_to_valley_um,
+            "height_sigma_um": self.height_sigma_um,
+            "edge_lift_mm": self.edge_lift_mm,
+            "edge_lift": {**{e: self.edge_lifts.get(e) for e in EDGE_NAMES}, "definition": EDGE_LIFT_NOTE},
             "bow": self.bow,
             "detrend_degree": self.detrend_degree,
             "step_mm": list(self.step_mm),
@@ -246,8 +296,11 @@ class FlatnessMeasures:
         }
 
 
-def flatness_measures(result) -> FlatnessMeasures | None:
-    """The flatness measures of a reflection result holding ``surface_height_um``, else None."""
+def flatness_measures(result, *, beyond_edge_labels=BEYOND_EDGE_LABELS) -> FlatnessMeasures | None:
+    """The flatness measures of a reflection result holding ``surface_height_um``, else None.
+
+    ``beyond_edge_labels``: the quality labels that may lie beyond a pane edge seen (:func:`edge_lifts`).
+    """
     from .slope import pane_step_mm
 
     if "surface_height_um" not in {f.name for f in result.field_specs()}:
@@ -257,8 +310,16 @@ def flatness_measures(result) -> FlatnessMeasures | None:
     step = pane_step_mm(result)
     N = int(result.detrend_degree)
     pv = float(np.ptp(z[mask])) if mask.any() else float("nan")
+    region = np.asarray(result.grid_valid, bool) & np.isfinite(z)  # the edges: the reported region, to its border
+    lifts = edge_lifts(z, region, result.analysis_grid.coords(), step, np.asarray(result.valid, bool),
+                       np.asarray(result.quality), grid_step_px=result.analysis_grid.step,
+                       beyond_edge_labels=beyond_edge_labels)
+    sig = None
+    if "surface_height_sigma_um" in {f.name for f in result.field_specs()} and mask.any():
+        sig = float(np.sqrt(np.nanmean(np.asarray(result.grid_field("surface_height_sigma_um"), float)[mask] ** 2)))
     return FlatnessMeasures(roller_wave_height(z, mask, step, degree=N), pv,
-                            bow_of(z, mask, step, method=result.method, degree=N), N, step)
+                            bow_of(z, mask, step, method=result.method, degree=N, bulk=result.bulk), N, step, lifts,
+                            sig)
 
 
 @dataclass(frozen=True)
@@ -326,3 +387,106 @@ def edge_lift(d_mm, height_um, *, flat_mm=(100.0, 300.0), extrapolate_mm: float 
         return EdgeLift(nan, nan, first, (float(a), float(b)))
     z0 = float(np.polyval(np.polyfit(d[near], z[near], 2), 0.0))
     return EdgeLift((z0 - a) / 1000.0, z0, first, (float(a), float(b)))
+
+
+def _edge_of(valid_px: np.ndarray, quality_px: np.ndarray, name: str, tolerance_px: float = 2.0,
+             beyond=BEYOND_EDGE_LABELS):
+    """Where the reported region meets a pane edge seen in the photo, px, and the span along it, or None.
+
+    The edge is the outer side of the region's first pixel on each line across the edge, over the middle
+    half of the region's extent along the edge (away from the corners and the other edges' lifts), the
+    mean over them (the border steps by the demodulation's sampling; the mean of the steps follows the
+    edge to a fraction of one). None unless the pixels just beyond are occluded / low modulation or beyond
+    range (``beyond``, :data:`BEYOND_EDGE_LABELS`) on nine lines in ten: the frame, the dark
+    surroundings, or the strongly bent glass next to them (an image edge or a user mask is not a pane
+    edge); and None where the border is not straight (interquartile range above ``tolerance_px``).
+    """
+    v, q = (valid_px, quality_px) if name in ("left", "right") else (valid_px.T, quality_px.T)
+    if name in ("right", "bottom"):
+        v, q = v[:, ::-1], q[:, ::-1]
+    lines = np.flatnonzero(v.any(axis=1))
+    if lines.size < 8:
+        return None
+    a, b = lines[0] + 0.25 * (lines[-1] - lines[0]), lines[0] + 0.75 * (lines[-1] - lines[0])
+    mid = lines[(lines >= a) & (lines <= b)]
+    first = np.argmax(v[mid], axis=1)
+    outside = q[mid, np.maximum(first - 1, 0)]
+    if np.mean((first > 0) & np.isin(outside, beyond)) < 0.9:
+        return None
+    q1, q3 = np.percentile(first, [25, 75])
+    if q3 - q1 > tolerance_px:
+        return None
+    inner = float(np.mean(first)) - 0.5  # the outer side of the first pixel, counted from this edge
+    edge = inner if name in ("left", "top") else v.shape[1] - 1 - inner
+    return float(edge), (float(a), float(b))
+
+
+def edge_lifts(height_um: np.ndarray, mask: np.ndarray, coords_px, step_mm, valid_px: np.ndarray,
+               quality_px: np.ndarray, *,
+               grid_step_px, flat_mm=(100.0, 300.0), beyond_edge_labels=BEYOND_EDGE_LABELS) -> dict[str, Any]:
+    """Edge lift at each pane edge in view (EN 12150-1 practice; :func:`edge_lift` on each edge's profile).
+
+    The profile of an edge is the height averaged along the edge over the middle half of the region's
+    extent (away from the corners, where two edges' lifts add), as a function of the distance ``d`` in
+    from the edge; the edge is where the reported region meets the frame or the dark surroundings
+    (:func:`_edge_of`): the lift is that of the glass the region reaches. Where the lift bends the grid's
+    image beyond the demodulation's range next to the frame, the region, and so the edge, stops short of
+    the glass's edge (``edge_px`` says where).
+
+    Parameters
+    ----------
+    height_um : ndarray (h, w)
+        Height on the analysis grid, µm.
+    mask : ndarray (h, w) bool
+        Samples of the profile (the reported region).
+    coords_px : (ndarray, ndarray)
+        Pixel coordinates ``(y, x)`` of the grid samples (pixel ``j`` centred on ``j``).
+    step_mm : (float, float)
+        Pane mm per grid sample along rows and columns.
+    valid_px, quality_px : ndarray (H, W)
+        The result's reported region and quality labels on the photo's pixels (what lies beyond the
+        region's border).
+    grid_step_px : (float, float)
+        Pixels per grid sample.
+    flat_mm : (float, float)
+        The straight edge's span (:func:`edge_lift`).
+    beyond_edge_labels : tuple of int
+        The quality labels that may lie beyond a pane edge (:data:`BEYOND_EDGE_LABELS`).
+
+    Returns
+    -------
+    dict
+        ``{edge: None or {"lift_mm", "edge_px", "span_px", "first_mm", "line_um", "profile": {"d_mm",
+        "height_um"}}}`` for ``top``, ``bottom``, ``left``, ``right`` (``top``: the image's first rows).
+    """
+    yy, xx = coords_px
+    out: dict[str, Any] = {}
+    for name in EDGE_NAMES:
+        found = _edge_of(np.asarray(valid_px, bool), np.asarray(quality_px), name,
+                         tolerance_px=1.0 + float(max(grid_step_px)), beyond=beyond_edge_labels)
+        if found is None:
+            out[name] = None
+            continue
+        edge, (a, b) = found
+        across_cols = name in ("left", "right")
+        along, pos = (yy[:, 0], xx[0, :]) if across_cols else (xx[0, :], yy[:, 0])
+        mm_per_px = step_mm[1] / grid_step_px[1] if across_cols else step_mm[0] / grid_step_px[0]
+        sel = (along >= a) & (along <= b)
+        z = np.where(mask, height_um, np.nan)
+        band = z[sel, :] if across_cols else z[:, sel].T
+        counts = np.isfinite(band).sum(axis=0)
+        full = counts > 0.5 * band.shape[0]  # a sample of the profile: most of the band measured there
+        prof = np.where(full, np.nansum(band, axis=0) / np.maximum(counts, 1), np.nan)
+        d = (pos - edge if name in ("left", "top") else edge - pos) * mm_per_px
+        keep = np.isfinite(prof) & (d >= 0)
+        order = np.argsort(d[keep])
+        d, prof = d[keep][order], prof[keep][order]
+        el = edge_lift(d, prof, flat_mm=flat_mm)
+        if not np.isfinite(el.lift_mm):
+            out[name] = None
+            continue
+        out[name] = {"lift_mm": el.lift_mm, "edge_px": edge, "span_px": [a, b], "first_mm": el.first_mm,
+                     "line_um": list(el.line),
+                     "profile": {"d_mm": [round(float(x), 3) for x in d],
+                                 "height_um": [round(float(x), 4) for x in prof]}}
+    return out

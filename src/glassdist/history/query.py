@@ -31,8 +31,8 @@ _STAT_RE = re.compile(r"^([a-z_]+)\.([A-Za-z0-9_]+)$")
 #: ``trusted_percent``: the trusted share a specification judges; ``protocol``, ``measures``: as ``summary.json``)
 COLUMNS = ("run", "record_id", "recorded_utc", "source", "job", "pane_id", "lot", "site", "operator", "camera",
            "verdict", "spec_name", "spec_sha256", "exit_code", "zone", "statistic", "value", "phi_eff_p95_abs_mD",
-           "phi_shear_p95_abs_mD", "valid_percent", "trusted_percent", "method", "pattern", "pitch_mm", "distance_m",
-           "sigma_mm", "detrend_degree", "protocol", "measures", "image", "image_sha256", "reference",
+           "phi_shear_p95_abs_mD", "roller_wave_pv_mm", "edge_lift_mm", "valid_percent", "trusted_percent", "method",
+           "pattern", "pitch_mm", "distance_m", "sigma_mm", "detrend_degree", "protocol", "measures", "image", "image_sha256", "reference",
            "reference_sha256", "warnings", "out_dir", "glassdist_version")
 
 #: the statistics that cannot be negative, and their range (a control limit beyond it is drawn at its edge)
@@ -41,8 +41,11 @@ _RANGES = {"mean_abs": (0.0, math.inf), "std": (0.0, math.inf), "p95_abs": (0.0,
 
 
 def statistic_unit(statistic: str) -> str:
-    """The unit of ``CHANNEL.STATISTIC`` as recorded: mD, % (coverage, area over a threshold) or samples."""
+    """The unit of ``CHANNEL.STATISTIC`` as recorded: mD, % (coverage, area over a threshold), samples, or mm
+    (channel ``flatness``: a reflection run's roller-wave depth and largest edge lift)."""
     channel, stat = parse_statistic(statistic)
+    if channel == "flatness":
+        return "mm"
     if channel == "region" or stat.startswith("area_over") or stat.endswith("_percent"):
         return "%"
     return "samples" if stat == "n_valid" else "mD"
@@ -53,7 +56,7 @@ def statistic_range(statistic: str) -> tuple[float, float]:
     channel, stat = parse_statistic(statistic)
     if stat.startswith("area_over") or stat.endswith("_percent"):
         return (0.0, 100.0)
-    if channel in ("phi_shear", "phi_total") or channel.endswith("_sigma"):  # non-negative channels: every statistic
+    if channel in ("phi_shear", "phi_total", "flatness") or channel.endswith("_sigma"):  # non-negative: every statistic
         return (0.0, math.inf)
     return _RANGES.get(stat, (-math.inf, math.inf))
 
@@ -203,7 +206,8 @@ def query_runs(store, flt: HistoryFilter = HistoryFilter()) -> list[dict]:
 
     ids = _run_ids(flt).subquery()
     zone, channel, stat = flt.key
-    keys = {(zone, channel, stat), (REGION, "phi_eff", "p95_abs"), (REGION, "phi_shear", "p95_abs")}
+    keys = {(zone, channel, stat), (REGION, "phi_eff", "p95_abs"), (REGION, "phi_shear", "p95_abs"),
+            (REGION, "flatness", "roller_wave_peak_to_valley_mm"), (REGION, "flatness", "edge_lift_max_mm")}
     # time and warnings as stored (text on SQLite): turned into ISO text and a list below, without a parse per row
     cols = [Run.id, Run.record_id, type_coerce(Run.recorded_utc, String).label("recorded_utc"), Run.source, Run.job,
             Run.pane_id, Run.lot, Run.site, Run.operator, Run.camera, Run.verdict, Run.spec_name, Run.spec_sha256,
@@ -229,6 +233,8 @@ def query_runs(store, flt: HistoryFilter = HistoryFilter()) -> list[dict]:
         rec.update(zone=zone, statistic=label, value=values.get((rid, zone, channel, stat)),
                    phi_eff_p95_abs_mD=values.get((rid, REGION, "phi_eff", "p95_abs")),
                    phi_shear_p95_abs_mD=values.get((rid, REGION, "phi_shear", "p95_abs")),
+                   roller_wave_pv_mm=values.get((rid, REGION, "flatness", "roller_wave_peak_to_valley_mm")),
+                   edge_lift_mm=values.get((rid, REGION, "flatness", "edge_lift_max_mm")),
                    warnings=_list(rec["warnings"]))
         out.append({c: rec[c] for c in COLUMNS})
     return out

@@ -309,6 +309,14 @@ def _stat_rows(zone: str, statistics: dict) -> list[dict]:
     return rows
 
 
+def _flatness_row(summary: dict) -> dict:
+    """A reflection run's roller-wave depth and largest edge lift (mm), recorded as channel ``flatness``."""
+    flat = summary.get("flatness") or {}
+    lifts = [abs(v) for v in (flat.get("edge_lift_mm") or {}).values() if isinstance(v, (int, float))]
+    return {"roller_wave_peak_to_valley_mm": (flat.get("roller_wave") or {}).get("peak_to_valley_mm"),
+            "edge_lift_max_mm": max(lifts) if lifts else None}
+
+
 def _camera(meta: dict) -> str | None:
     cam = meta.get("camera")
     if not isinstance(cam, dict):
@@ -390,7 +398,7 @@ def run_rows(summary: dict, *, exit_code: int, out_dir, recording: Recording = R
         checks.append({"criterion": str(c.get("criterion", "")), "zone": zone.group(1) if zone else None,
                        "value": _finite(c.get("value")), "limit": _finite(c.get("limit")), "unit": c.get("unit"),
                        "passed": bool(c.get("passed")), "note": c.get("note") or None})
-    stats = _stat_rows(REGION, a4.get("statistics"))
+    stats = _stat_rows(REGION, a4.get("statistics")) + _stat_rows(REGION, {"flatness": _flatness_row(summary)})
     for name, z in (summary.get("zones") or {}).items():
         stats += _stat_rows(str(name), z.get("statistics"))
         cov = _finite(z.get("trusted_percent"))

@@ -130,6 +130,32 @@ def _heatmap(name, samples, v, chosen, axes, acceptance):
                             "not trusted), light grey not analysed."), F.figure_png(fig)
 
 
+def _surface_figures(result, axes):
+    """Reflection: the front face's height (µm) and slope magnitude (mrad) over the reported region, guard band
+    included (the edge lift lies there: :mod:`glassdist.flatness`); none for a result without them."""
+    if "surface_height_um" not in {f.name for f in result.field_specs()}:
+        return []
+    _, to_axes, units, px_axis = axes
+    samples = map_samples(result, ["surface_height_um", "surface_slope_mrad"])
+    shown = samples.trusted | samples.guard
+    slope = np.hypot(*np.moveaxis(np.asarray(samples.fields["surface_slope_mrad"], float), -1, 0))
+    out = []
+    for stem, field, signed, unit, title, what in (
+            ("surface_height", samples.fields["surface_height_um"], True, "µm", "Surface height Z",
+             "Front-face height Z (away from the camera), detrended at degree N"),
+            ("surface_slope", slope, False, "mrad", "Surface slope |grad Z|",
+             "Front-face slope magnitude |grad Z|, its trend of degree N - 1 removed")):
+        v = shared_limit(field, valid=shown)
+        fig, ax = F.plot_channel(field, shown, signed=signed, vmax=v, title=f"{title}, {unit}",
+                                 extent=_extent(samples, to_axes), axis_units=units, px_axis=px_axis, colorbar=False)
+        fig.colorbar(ax.images[0], ax=ax, label=unit, extend="both" if signed else "max")
+        span = f"[-{v:.3g}, {v:.3g}]" if signed else f"[0, {v:.3g}]"
+        out.append((stem, f"{what}, {unit} (glassdist.flatness; the measures are summary.json's flatness); colour "
+                          f"limits {span} {unit}; over the reported region, guard band included (where the edge "
+                          "lift lies).", F.figure_png(fig)))
+    return out
+
+
 def _quality_figures(result, samples, axes, max_px=900):
     """The quality map (labels, reduced by striding to at most ``max_px`` a side) and the phi_eff uncertainty map.
 
@@ -238,6 +264,7 @@ def run_figures(result, image=None, limits=None, *, heatmaps=True, acceptance=No
                             "over the trusted pixels; white where phi_shear is too small for the axis to be "
                             "meaningful.", F.figure_png(fig)))
     out += _quality_figures(result, samples, axes)
+    out += _surface_figures(result, axes)
     out += _threshold_masks(samples, limits, stats, axes)
     fig = Figure(figsize=(10, 3.8))
     fig.subplots_adjust(left=0.09, right=0.98, bottom=0.14, top=0.9, wspace=0.3)

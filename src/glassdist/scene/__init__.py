@@ -81,7 +81,17 @@ from .model import (
     rotation_yaw_pitch,
     scene_from_dict,
 )
-from .surfaces import FaceShape, GaussianBump, Harmonic, Pillow, Plane, PolynomialBump, RollerWave, SphericalCap
+from .surfaces import (
+    EdgeLift,
+    FaceShape,
+    GaussianBump,
+    Harmonic,
+    Pillow,
+    Plane,
+    PolynomialBump,
+    RollerWave,
+    SphericalCap,
+)
 
 __all__ = [
     "Scene",
@@ -106,6 +116,7 @@ __all__ = [
     "GaussianBump",
     "PolynomialBump",
     "Plane",
+    "EdgeLift",
     "FaceShape",
     "pixel_directions",
     "pixel_grid",

@@ -36,6 +36,7 @@ __all__ = [
     "GaussianBump",
     "PolynomialBump",
     "Plane",
+    "EdgeLift",
     "Term",
     "FaceShape",
 ]
@@ -349,8 +350,80 @@ class Plane(_TermBase):
         return z, z.copy(), z.copy()
 
 
+_EDGES = ("left", "right", "top", "bottom")
+
+
+class EdgeLift(_TermBase):
+    """Edge lift of a toughened pane: a quadratic rise within ``width_mm`` of each named edge.
+
+    .. math::
+
+       h(u, v) = \\sum_e A \\left(1 - \\frac{d_e}{w}\\right)^2 \\quad (d_e < w), \\qquad
+       d_{left} = \\Delta u + a/2, \\; d_{right} = a/2 - \\Delta u, \\;
+       d_{top} = \\Delta v + b/2, \\; d_{bottom} = b/2 - \\Delta v,
+
+    ``A = height_mm`` at the edge (``> 0``: towards the backdrop, away from the camera), ``w =
+    width_mm``, ``(a, b) = size_mm`` the rectangle whose edges lift (usually the pane) centred on
+    ``center_mm``, ``(\\Delta u, \\Delta v)`` from it; ``top`` is the edge at the smaller ``v``
+    (the image's top row, ``y`` down). ``d_e`` is clipped to ``[0, w]``: the height is ``A``
+    beyond an edge, zero further than ``w`` in, with a continuous slope (zero at ``d = w``) and a
+    curvature ``2 A / w^2`` within ``w``. Corners add the two edges' lifts. EN 12150-1:2015 § 6
+    measures this lift with a straight edge resting on the flat part of the pane.
+    """
+
+    kind: Literal["edge_lift"]
+    height_mm: Length_mm
+    width_mm: PositiveLength_mm
+    size_mm: tuple[Length_mm, Length_mm]
+    center_mm: tuple[Length_mm, Length_mm] = (0.0, 0.0)
+    edges: tuple[Literal["left", "right", "top", "bottom"], ...] = _EDGES
+
+    @model_validator(mode="after")
+    def _positive(self):
+        if min(self.size_mm) <= 0:
+            raise ValueError("size_mm must be positive")
+        if len(set(self.edges)) != len(self.edges):
+            raise ValueError("edges must not repeat")
+        return self
+
+    def _edges(self, u, v):
+        """Per edge: ``(q, du/dd, dv/dd, inside)``, ``q = 1 - d / w`` clipped to [0, 1], ``inside``: ``0 <= d < w``."""
+        a, b = self.size_mm
+        du, dv = u - self.center_mm[0], v - self.center_mm[1]
+        for e in self.edges:
+            d, su, sv = {"left": (du + a / 2, 1.0, 0.0), "right": (a / 2 - du, -1.0, 0.0),
+                         "top": (dv + b / 2, 0.0, 1.0), "bottom": (b / 2 - dv, 0.0, -1.0)}[e]
+            q = 1.0 - np.asarray(d, float) / self.width_mm
+            yield np.clip(q, 0.0, 1.0), su, sv, (q > 0) & (q <= 1)
+
+    def height_gradient(self, u, v):
+        A, w = self.height_mm, self.width_mm
+        shape = np.broadcast(u, v).shape
+        h, gu, gv = np.zeros(shape), np.zeros(shape), np.zeros(shape)
+        for q, su, sv, inside in self._edges(u, v):
+            h = h + A * q * q
+            dh_dd = np.where(inside, -2.0 * A / w * q, 0.0)  # flat beyond the edge and further than w in
+            gu, gv = gu + su * dh_dd, gv + sv * dh_dd
+        return h, gu, gv
+
+    def height(self, u, v):
+        return self.height_gradient(u, v)[0]
+
+    def gradient(self, u, v):
+        return self.height_gradient(u, v)[1:]
+
+    def hessian(self, u, v):
+        A, w = self.height_mm, self.width_mm
+        shape = np.broadcast(u, v).shape
+        huu, huv, hvv = np.zeros(shape), np.zeros(shape), np.zeros(shape)
+        for _, su, sv, inside in self._edges(u, v):
+            c = np.where(inside, 2.0 * A / (w * w), 0.0)
+            huu, hvv = huu + su * su * c, hvv + sv * sv * c
+        return huu, huv, hvv
+
+
 Term = Annotated[
-    Union[RollerWave, Pillow, SphericalCap, GaussianBump, PolynomialBump, Plane], Field(discriminator="kind")
+    Union[RollerWave, Pillow, SphericalCap, GaussianBump, PolynomialBump, Plane, EdgeLift], Field(discriminator="kind")
 ]
 
 

@@ -210,6 +210,8 @@ class RunRecord:
     acceptance : Acceptance
     measures : dict
         :meth:`glassdist.measures.StandardMeasures.to_dict`.
+    sections : dict
+        ``flatness`` and ``intrinsic`` where they apply (:func:`glassdist.sections.result_sections`).
     """
 
     request: RunRequest
@@ -217,6 +219,7 @@ class RunRecord:
     result: object
     acceptance: Acceptance
     measures: dict
+    sections: dict = field(default_factory=dict)
 
     @property
     def exit_code(self) -> int:
@@ -260,16 +263,7 @@ class RunRecord:
             # with the shares the verdict judged (measured_percent, trusted_percent: one number each)
             **acc.summary(), "measures": self.measures,
         })
-        from ..flatness.measures import flatness_measures
-
-        flat = flatness_measures(result)  # reflection: the front face in mm and µm
-        if flat is not None:
-            summary["flatness"] = flat.to_dict()
-        if self.request.camera_distance_m is not None and result.optics is None:
-            from ..viewpoint.intrinsic import intrinsic_section, reading_of_result
-
-            summary["intrinsic"] = intrinsic_section(reading_of_result(result, self.request.camera_distance_m),
-                                                     result.trusted)
+        summary.update(self.sections)  # computed on the analysis side (build_record)
         return summary
 
 
@@ -283,7 +277,9 @@ def build_record(request: RunRequest, inputs: RunInputs, result) -> RunRecord:
     """
     from ..acceptance.assess import assess  # scipy.ndimage: not needed to check the inputs
     from ..measures import standard_measures
+    from ..sections import result_sections
 
+    sections = result_sections(result, camera_distance_m=request.camera_distance_m)
     acc = assess(result, request.spec, protocol=request.protocol, mask=request.mask, metadata=request.metadata,
-                 camera=inputs.camera, camera_distance_m=request.camera_distance_m)
-    return RunRecord(request, inputs, result, acc, standard_measures(result).to_dict())
+                 camera=inputs.camera, camera_distance_m=request.camera_distance_m, flatness=sections.get("flatness"))
+    return RunRecord(request, inputs, result, acc, standard_measures(result).to_dict(), sections)

@@ -28,6 +28,8 @@ _TEMPLATES.env.globals["labels"] = LABELS  # the form's words, on every page tha
 #: Figures shown on the result page, in this order, when the analysis wrote them.
 _FIGURES = (("phi_eff.png", "phi_eff (mD)"), ("phi_shear.png", "phi_shear (mD)"), ("axis.png", "astigmatism axis"),
             ("uncertainty.png", "standard uncertainty of phi_eff (mD)"),
+            ("surface_height.png", "reflection: front-face height (µm)"),
+            ("surface_slope.png", "reflection: front-face slope (mrad)"),
             ("input_region.png", "photo, analysed region outlined"))
 #: Figures after the threshold masks, in boxes twice as wide: their legends and panels need the room.
 _WIDE_FIGURES = (("quality.png", "quality: why each pixel is analysed or not"), ("histograms.png", "histograms"))
