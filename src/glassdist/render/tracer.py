@@ -463,9 +463,9 @@ def render_intensity(
         if scene.reflection:
             centres = pixel_directions(scene.camera, (col[..., None] + ox + 0.5 / sx).ravel(),
                                        (row[..., None] + oy + 0.5 / sy).ravel())
-            I = _reflected_intensity(scene, dx, dy, dz, reference, (hx[..., None], hy[..., None]), cs.shape,
+            lum = _reflected_intensity(scene, dx, dy, dz, reference, (hx[..., None], hy[..., None]), cs.shape,
                                      centres)
-            out[r0:r1] = I.mean(axis=-1)
+            out[r0:r1] = lum.mean(axis=-1)
             if progress is not None:
                 progress(r1 * W * samples_per_pixel, H * W * samples_per_pixel)
             continue
@@ -477,10 +477,10 @@ def render_intensity(
         else:
             Xx, Xy, status = _trace_components(scene, dx, dy, dz)
         Xx, Xy, status = (a.reshape(cs.shape) for a in (Xx, Xy, status))
-        I = pattern_intensity(scene.backdrop, Xx, Xy, (hx[..., None], hy[..., None]))
-        I = np.where(status == GLASS, I * pane.transmittance, I)
-        I = np.where(status == BLOCKED, frame_I, I)
-        out[r0:r1] = I.mean(axis=-1)
+        lum = pattern_intensity(scene.backdrop, Xx, Xy, (hx[..., None], hy[..., None]))
+        lum = np.where(status == GLASS, lum * pane.transmittance, lum)
+        lum = np.where(status == BLOCKED, frame_I, lum)
+        out[r0:r1] = lum.mean(axis=-1)
         if progress is not None:
             progress(r1 * W * samples_per_pixel, H * W * samples_per_pixel)
     return out
@@ -515,13 +515,13 @@ def _reflected_intensity(scene: Scene, dx, dy, dz, reference: bool, half_width, 
     shift_x, shift_y = (Lc[:, 0] - L0[:, 0]).reshape(shape), (Lc[:, 1] - L0[:, 1]).reshape(shape)
     X, Y, status, ghost = _reflection_components(scene, dx, dy, dz)
     X, Y, status = (a.reshape(shape) for a in (X, Y, status))
-    I = pattern_intensity(scene.backdrop, np.nan_to_num(X) + shift_x, np.nan_to_num(Y) + shift_y, half_width)
+    lum = pattern_intensity(scene.backdrop, np.nan_to_num(X) + shift_x, np.nan_to_num(Y) + shift_y, half_width)
     if ghost is not None:
         X2, Y2, w1, w2 = (a.reshape(shape) for a in ghost)
         I2 = pattern_intensity(scene.backdrop, np.nan_to_num(X2) + shift_x, np.nan_to_num(Y2) + shift_y, half_width)
         w2 = np.nan_to_num(w2)
-        I = (w1 * I + w2 * I2) / np.where(w1 + w2 > 0, w1 + w2, 1.0)
-    return np.where(status == GLASS, I, frame_I)
+        lum = (w1 * lum + w2 * I2) / np.where(w1 + w2 > 0, w1 + w2, 1.0)
+    return np.where(status == GLASS, lum, frame_I)
 
 
 class ExactTracer:

@@ -8,10 +8,16 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, Field, model_validator
 
-from ..validation import (
-    DISTANCE_M, MODEL_CONFIG, Angle_deg, Length_mm, PositiveLength_mm, load_mapping, validate_model,
-)
 from ..brown import BrownDistortion
+from ..validation import (
+    DISTANCE_M,
+    MODEL_CONFIG,
+    Angle_deg,
+    Length_mm,
+    PositiveLength_mm,
+    load_mapping,
+    validate_model,
+)
 from .surfaces import FaceShape, Term
 
 __all__ = [
@@ -166,6 +172,7 @@ class LensDistortion(BaseModel):
 
     @property
     def brown(self) -> BrownDistortion:
+        """The lens's Brown-Conrady coefficients as a :class:`~glassdist.brown.BrownDistortion`."""
         return BrownDistortion(self.k1, self.k2, self.p1, self.p2)
 
 
@@ -211,6 +218,7 @@ class Camera(BaseModel):
 
     @property
     def pixel_pitch_mm(self) -> float:
+        """The sensor's pixel pitch, mm (sensor width over pixel columns)."""
         return self.sensor_width_mm / self.pixels[0]
 
     @property
@@ -228,7 +236,10 @@ class Noise(BaseModel):
 
 
 class Lighting(BaseModel):
-    """Uneven lighting: gain ``1 + gradient * t`` with ``t`` in [-1, 1] across the image along ``direction_deg`` (from +x towards +y)."""
+    """Uneven lighting: gain ``1 + gradient * t``.
+
+    ``t`` runs over [-1, 1] across the image along ``direction_deg`` (from +x towards +y).
+    """
 
     model_config = _FROZEN
     gradient: float = Field(0.0, ge=0, lt=1)

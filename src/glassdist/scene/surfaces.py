@@ -47,15 +47,24 @@ Slope = Annotated[float, Field(ge=-1, le=1)]
 
 
 class _TermBase(BaseModel):
+    """One term of a face's shape: height in mm over the face coordinates ``(u, v)`` in mm.
+
+    Every term implements the four methods below, on arrays of any (broadcast) shape; the
+    tracer's Newton step calls them at every iteration.
+    """
+
     model_config = _FROZEN
 
     def height(self, u, v):  # pragma: no cover - abstract
+        """The term's height ``h(u, v)``, mm."""
         raise NotImplementedError
 
     def gradient(self, u, v):  # pragma: no cover - abstract
+        """``(h_u, h_v)``: the height's slope along ``u`` and ``v`` (dimensionless)."""
         raise NotImplementedError
 
     def hessian(self, u, v):  # pragma: no cover - abstract
+        """``(h_uu, h_uv, h_vv)``: the height's second derivatives, 1/mm."""
         raise NotImplementedError
 
     def height_gradient(self, u, v):
