@@ -24,8 +24,8 @@ import numpy as np
 from .errors import InputError
 from .validation import check_input_file, limits, safe_text
 
-__all__ = ["Photo", "read_photo", "read_sources", "read_image", "preview", "image_shape", "read_mask", "write_png16", "prepare_output_dir", "open_with_pillow",
-           "camera_metadata", "to_jsonable"]
+__all__ = ["Photo", "read_photo", "read_sources", "read_image", "preview", "image_shape", "read_mask", "write_png16",
+           "prepare_output_dir", "open_with_pillow", "camera_metadata", "to_jsonable"]
 
 _READABLE = {".png", ".tif", ".tiff", ".bmp", ".jpg", ".jpeg"}
 

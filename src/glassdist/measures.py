@@ -863,7 +863,8 @@ def standard_measures(result, *, gauge_mm: float = 4.0, directions_deg=(0.0, 90.
     optics = result.optics
     rw_step = gl_step = step
     if optics is not None:
-        gl_step = (step[0] * optics.magnification, step[1] * optics.magnification)  # board mm per sample  # reflection: D / cos(theta) turns the board displacement into reflective power
+        # board mm per sample; in reflection D / cos(theta) turns the board displacement into reflective power
+        gl_step = (step[0] * optics.magnification, step[1] * optics.magnification)
         cos_t = float(np.cos(np.radians(optics.incidence_deg)))
         L = optics.board_distance_m / cos_t
         # a camera aimed at the view's centre sees the pane foreshortened by cos(theta) along the plane of

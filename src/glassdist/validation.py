@@ -242,7 +242,8 @@ def _yaml_node_count(root, lim: Limits) -> None:
             kids = _yaml_children(node, yaml)
             size[key] = 1 + sum(size[id(k)] for k in kids)
             if size[key] > lim.nodes:
-                raise ValueError(f"it expands to more than {lim.nodes} values (YAML aliases repeat their anchor; the limit is GLASSDIST_MAX_NODES)")
+                raise ValueError(f"it expands to more than {lim.nodes} values "
+                                 "(YAML aliases repeat their anchor; the limit is GLASSDIST_MAX_NODES)")
             continue
         if key in size:
             continue
@@ -573,6 +574,7 @@ class Range:
     unit: str = ""
 
     def text(self) -> str:
+        """The range in words, e.g. ``> 0 mm and <= 100 mm``."""
         u = f" {self.unit}" if self.unit else ""
         return f"{'>' if self.lo_open else '>='} {self.lo:g}{u} and <= {self.hi:g}{u}"
 

@@ -364,7 +364,10 @@ class Check:
     covers: str = ""
 
     def line(self) -> str:
-        """One line for the console, e.g. ``PASS  p95 |phi_eff| <= 60 mD  (value 41.2 mD; over the trusted 71.97 % of zone 'vision')``."""
+        """One line for the console.
+
+        For example ``PASS  p95 |phi_eff| <= 60 mD  (value 41.2 mD; over the trusted 71.97 % of zone 'vision')``.
+        """
         if isinstance(self.value, float):
             value = "not computable" if math.isnan(self.value) else f"{self.value:.4g} {self.unit}".rstrip()
         else:
@@ -470,7 +473,8 @@ def load_spec(path: str | Path) -> LoadedSpec:
     digest = hashlib.sha256()
     data = load_mapping(p, "specification file", option="--spec", fmt="json", expect="'name' and 'criteria'",
                         digest=digest)
-    spec = validate_model(Spec, data, "specification", f"'{safe_text(p)}'", "see docs/user-guide/factory-acceptance.md for the format")
+    spec = validate_model(Spec, data, "specification", f"'{safe_text(p)}'",
+                          "see docs/user-guide/factory-acceptance.md for the format")
     return LoadedSpec(spec, digest.hexdigest(), str(path))
 
 
@@ -622,7 +626,8 @@ def resolve_protocol(protocol: Protocol | None = None, *, reference_given: bool,
     >>> resolve_protocol(p, reference_given=True, distance_m=3.0)
     Traceback (most recent call last):
     ...
-    glassdist.errors.InputError: --distance-m 3 contradicts the protocol of the specification (distance_m = 1 m); leave --distance-m out to use the specification's value, or use a specification written for this setting
+    glassdist.errors.InputError: --distance-m 3 contradicts the protocol of the specification (distance_m = 1 m);
+    leave --distance-m out to use the specification's value, or use a specification written for this setting
     """
     protocol = protocol or Protocol()
     pinned = protocol.model_dump(exclude_none=True)

@@ -42,8 +42,9 @@ if TYPE_CHECKING:
     from ..analyzer.result import Result
     from .spec import Pane, Zone
 
-__all__ = ["PaneFrame", "check_pane", "PANE_SCALE_RANGE", "distance_to_outside", "fill_holes", "grow_region", "pane_frame", "pane_frame_from_corners", "pane_frame_from_region", "zone_masks",
-           "zone_statistics", "measured_region", "region_statistics"]
+__all__ = ["PaneFrame", "check_pane", "PANE_SCALE_RANGE", "distance_to_outside", "fill_holes", "grow_region", "pane_frame",
+           "pane_frame_from_corners", "pane_frame_from_region", "zone_masks", "zone_statistics", "measured_region",
+           "region_statistics"]
 
 
 def _apply(H: np.ndarray, x: ArrayLike, y: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
@@ -308,7 +309,10 @@ def pane_frame_from_region(valid: np.ndarray, mm_per_px: float, *, grow_px: floa
 
 
 def _edge_distance_mm(region: np.ndarray, mm_per_px: float) -> np.ndarray:
-    """Distance (mm, float32) from each pixel centre of ``region`` to its edge, half a pixel beyond the last centre inside; NaN outside."""
+    """Distance (mm, float32) from each pixel centre of ``region`` to its edge; NaN outside.
+
+    The edge lies half a pixel beyond the last centre inside.
+    """
     dist = distance_to_outside(region)
     dist -= 0.5
     dist *= mm_per_px

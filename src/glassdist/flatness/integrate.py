@@ -22,7 +22,8 @@ the iterations stay few (``benchmarks/bench_flatness.py``: 3.6 s against 11.1 s 
 solve on a 600 x 800 grid with a hole and an island, the two within 7e-10 of the height's
 spread), the direct solve should they not converge. Each part's mean is then removed.
 
-The trapezoidal pairing is second-order: a sinusoid of wavenumber ``k`` sampled every ``s`` comes back scaled by ``(k s / 2) / tan(k s / 2) ~ 1 - (k s)^2 / 12``
+The trapezoidal pairing is second-order: a sinusoid of wavenumber ``k`` sampled every ``s`` comes back
+scaled by ``(k s / 2) / tan(k s / 2) ~ 1 - (k s)^2 / 12``
 (-0.4 % at 30 samples per wavelength, -3.3 % at 10).
 
 Why not Frankot-Chellappa (the FFT projection on integrable gradients): it assumes the slope

@@ -112,6 +112,7 @@ class RollerWaveHeight:
     explained_fraction: float
 
     def to_dict(self) -> dict:
+        """The roller wave as ``summary.json["flatness"]["roller_wave"]`` writes it."""
         return asdict(self)
 
 
@@ -281,6 +282,7 @@ class FlatnessMeasures:
         return {e: None if self.edge_lifts.get(e) is None else self.edge_lifts[e]["lift_mm"] for e in EDGE_NAMES}
 
     def to_dict(self) -> dict:
+        """The measures as ``summary.json["flatness"]`` writes them."""
         return {
             "roller_wave": None if self.roller_wave is None else self.roller_wave.to_dict(),
             "height_peak_to_valley_um": self.height_peak_to_valley_um,

@@ -101,7 +101,8 @@ def height_sigma(slope_sigma: np.ndarray, region: np.ndarray, step_mm, degree: i
     integral, the degree-N detrend), but the slope's noise is correlated over the reporting smoothing,
     so its covariance does not follow from the per-sample uncertainty alone. Here the noise is
     modelled as white noise through a Gaussian of standard deviation ``correlation_mm``
-    (the demodulation's low-pass, :func:`glassdist.analyzer.reflection.noise_correlation_mm`), scaled at each sample to ``slope_sigma``, independent between the components;
+    (the demodulation's low-pass, :func:`glassdist.analyzer.reflection.noise_correlation_mm`), scaled at
+    each sample to ``slope_sigma``, independent between the components;
     ``draws`` such slope fields are taken through the same chain (one factorisation of the integrator,
     :func:`glassdist.flatness.integrate.integrate_slopes`) and the standard deviation of their heights
     is the uncertainty. Seeded: the same result gives the same map.

@@ -28,12 +28,14 @@ def register(subparsers):
     p = subparsers.add_parser("batch", help="analyse many panes (manifest CSV or folder), resumable",
                               description=_HELP)
     p.add_argument("source", metavar="MANIFEST.csv|FOLDER", help="manifest CSV or folder of images")
-    p.add_argument("--out", type=folder_option, required=True, metavar="DIR", help="batch output folder (new, empty, or to resume)")
+    p.add_argument("--out", type=folder_option, required=True, metavar="DIR",
+                   help="batch output folder (new, empty, or to resume)")
     p.add_argument("--spec", metavar="SPEC.json", help="acceptance specification for panes without a 'spec' column")
     p.add_argument("--report", action="store_true", help="write an HTML report per pane")
     p.add_argument("--export", action="store_true", help="write NPZ and 32-bit TIFF fields per pane")
     p.add_argument("--pitch-mm", type=number_option(PITCH_MM), help="grid pitch, mm (default for panes without one)")
-    p.add_argument("--distance-m", type=number_option(DISTANCE_M), help="glass-to-grid distance L, m (default for panes without one)")
+    p.add_argument("--distance-m", type=number_option(DISTANCE_M),
+                   help="glass-to-grid distance L, m (default for panes without one)")
     p.add_argument("--reference", metavar="REF", help="glass-less reference photo (Comparative method) by default")
     p.add_argument("--pattern", choices=["auto", "lines", "checkerboard", "dots"],
                    help="grid pattern by default (default: auto, decided from each photo's spectrum)")

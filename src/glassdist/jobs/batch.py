@@ -56,9 +56,9 @@ from html import escape
 from pathlib import Path
 
 from ..errors import InputError
-from ..validation import DISTANCE_M, PITCH_MM, SIGMA_MM, check_number, read_csv_rows, safe_text
 from ..fs import atomic_write_text, write_csv
 from ..storage import EXIT_SPEC_FAIL
+from ..validation import DISTANCE_M, PITCH_MM, SIGMA_MM, check_number, read_csv_rows, safe_text
 from .runner import PaneOutcome, lock_job_folder, place_folder, prepare_job_folder, read_json, subprocess_runner
 
 __all__ = [
@@ -272,10 +272,10 @@ def check_panes(panes, defaults=None):
     InputError
         The first problem, prefixed with the pane's id.
     """
+    from ..acceptance.spec import load_spec
     from ..analyzer.params import load_params
     from ..io import image_shape
     from ..validation import check_input_file, check_sigma_extent
-    from ..acceptance.spec import load_spec
 
     options = {k: v for k, v in (defaults or {}).items() if k in ("reference", "mask") and v is not None}
     for name, path in options.items():

@@ -301,6 +301,7 @@ def subprocess_runner(pane, out_dir, *, report=False, export=False, cwd=None):
 
 
 def read_json(path):
+    """The JSON document at ``path``; None when it is missing or not valid JSON."""
     try:
         return json.loads(Path(path).read_text(encoding="utf-8"))
     except (OSError, json.JSONDecodeError):

@@ -61,7 +61,8 @@ if TYPE_CHECKING:
     from ..analyzer.result import FieldSpec, Optics
 
 __all__ = [
-    "SUMMARY_NAME", "FIELD_LAYOUTS", "GRID_KEYS", "REGION_DESCRIPTIONS", "region_summary", "StoredResult", "grid_members", "load_result", "pixel_members", "statistics_table",
+    "SUMMARY_NAME", "FIELD_LAYOUTS", "GRID_KEYS", "REGION_DESCRIPTIONS", "region_summary", "StoredResult", "grid_members",
+    "load_result", "pixel_members", "statistics_table",
     "tiff_names", "write_fields_npz", "write_fields_tiff", "write_npz", "write_statistics_csv",
 ]
 

@@ -86,7 +86,8 @@ def parse_vary(texts) -> dict:
         try:
             vary[key] = [yaml.safe_load(v.strip()) for v in values.split(",")]
         except (yaml.YAMLError, ValueError):  # ValueError: an integer of more than 4300 digits
-            raise InputError(f"--vary '{safe_text(text, 80)}': a value cannot be read; use numbers, words or true/false") from None
+            raise InputError(f"--vary '{safe_text(text, 80)}': a value cannot be read; "
+                             "use numbers, words or true/false") from None
         if any(v is None or isinstance(v, (dict, list)) for v in vary[key]):
             raise InputError(f"--vary '{text}': every value must be a number, a word or true/false")
     if not vary:

@@ -31,7 +31,8 @@ def register(subparsers):
         "this machine only unless --host says otherwise (there is no login). Needs glassdist[web].")
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1: this machine only)")
     p.add_argument("--port", type=_port, default=8000, help="port (default 8000)")
-    p.add_argument("--max-upload-mb", type=number_option(Range(1e-3, 1e5, unit="MB")), default=64.0, help="largest accepted upload per file, MB (default 64)")
+    p.add_argument("--max-upload-mb", type=number_option(Range(1e-3, 1e5, unit="MB")), default=64.0,
+                   help="largest accepted upload per file, MB (default 64)")
     p.add_argument("--max-jobs", type=int, default=20, help="jobs kept (older ones and their files are removed; default 20)")
     p.add_argument("--max-disk-mb", type=number_option(Range(1.0, 1e9, unit="MB")), default=2048.0,
                    help="disk budget of the kept jobs, MB: the oldest are removed while their files take more (default 2048)")
@@ -46,9 +47,10 @@ def run(args) -> int:
     from ..errors import InputError
 
     try:
-        from . import serve
         import fastapi  # noqa: F401
         import uvicorn  # noqa: F401
+
+        from . import serve
     except ImportError:
         raise InputError("glassdist serve needs the web extra: pip install 'glassdist[web]'") from None
     if not args.max_upload_mb > 0 or args.max_jobs < 1:
