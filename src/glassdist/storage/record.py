@@ -67,6 +67,8 @@ class RunRequest:
     camera_distance_m : float or None
         Camera to pane, m (transmission): the run also reports the pane's intrinsic reading
         (:mod:`glassdist.viewpoint`), ``intrinsic`` in ``summary.json`` and its maps in ``result.npz``.
+    capture_pose : glassdist.viewpoint.pose.CapturePose or None
+        The capture's angle to the pane normal and focal length, with their sources (None: normal incidence).
     """
 
     fields: str = "analysis"
@@ -78,6 +80,7 @@ class RunRequest:
     metadata: dict = field(default_factory=dict)
     history: object = None
     camera_distance_m: float | None = None
+    capture_pose: object = None
 
     def __post_init__(self):
         if self.fields not in FIELD_LAYOUTS:
@@ -268,8 +271,10 @@ class RunRecord:
         if self.request.camera_distance_m is not None and result.optics is None:
             from ..viewpoint.intrinsic import intrinsic_section, reading_of_result
 
-            summary["intrinsic"] = intrinsic_section(reading_of_result(result, self.request.camera_distance_m),
-                                                     result.trusted)
+            pose = self.request.capture_pose
+            reading = reading_of_result(result, self.request.camera_distance_m,
+                                        geometry=None if pose is None else pose.geometry)
+            summary["intrinsic"] = intrinsic_section(reading, result.trusted, None if pose is None else pose.sources())
         return summary
 
 
