@@ -89,7 +89,8 @@ def register(subparsers):
 
     q = subparsers.add_parser(
         "compare", help="two captures of one pane on the intrinsic axis: their difference and its uncertainty",
-        description="Both results analysed with --camera-distance-m (oblique: with the angle stated or estimated), aimed at the pane centre. "
+        description="Both results analysed with --camera-distance-m (oblique: with the angle stated or estimated), "
+        "aimed at the pane centre. "
         "Prints the intrinsic mean absolute phi_eff and mean phi_shear of each over the pane area both trust, their "
         "difference with its expanded uncertainty (k = 2), and whether it is consistent with zero.")
     q.add_argument("result_a", type=Path, help="output folder of the first capture")
