@@ -58,8 +58,14 @@ def with_capture_pose(request, result, args, camera, lens):
     pose = capture_pose(result, request.camera_distance_m, angle_deg=args.camera_angle_deg,
                         azimuth_deg=args.camera_azimuth_deg or 0.0,
                         focal_length_px=getattr(lens, "focal_px", None), camera=camera)
-    if pose.warnings:
-        result = replace(result, warnings=(*result.warnings, *pose.warnings))
+    warnings = list(pose.warnings)
+    spec = getattr(request.spec, "spec", None)
+    if pose.geometry.viewing_angle_deg > 0 and getattr(spec, "reference_geometry", None) is not None:
+        warnings.append(f"the specification's reference_geometry factor is that of a capture at normal incidence; this "
+                        f"capture is {pose.geometry.viewing_angle_deg:.3g} deg off the normal, which the factor leaves "
+                        "out: 'glassdist view' predicts the reading at the specification's geometry in full")
+    if warnings:
+        result = replace(result, warnings=(*result.warnings, *warnings))
     return replace(request, capture_pose=pose), result
 
 

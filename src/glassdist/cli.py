@@ -117,9 +117,9 @@ def _register_analyze(sub) -> None:
                    "pane; phi in reflective power on the pane, docs/user-guide/reflection.md)")
     p.add_argument("--camera-distance-m", type=number_option(DISTANCE_M),
                    help="reflection: camera-to-pane distance C, m (default: the camera in the board plane, C = D); "
-                   "transmission (either method): the camera-to-pane distance Dc along the pane normal, the camera facing "
-                   "the pane and aimed at its centre: the run also reports the pane's intrinsic reading (summary.json "
-                   "'intrinsic'); with --camera-file (Direct Method) it also pins the magnification for the bulk channel")
+                   "transmission (either method): the camera-to-pane distance Dc along the line of sight, the camera "
+                   "aimed at the pane centre (facing it, or at --camera-angle-deg): the run also reports the pane's "
+                   "intrinsic reading (summary.json 'intrinsic'); with --camera-file (Direct Method) it also pins the magnification for the bulk channel")
     add_capture_options(p)
     p.add_argument("--incidence-deg", type=float,
                    help="reflection: angle between the line of sight and the pane normal at the view's centre, deg (default 0)")
