@@ -713,3 +713,36 @@ def test_analyze_refuses_inconsistent_capture_pose_options(tmp_path, capsys, ext
     err = capsys.readouterr().err.strip()
     assert code == 2 and needle in err and len(err.splitlines()) == 1, err
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("psi", [0.0, 45.0, 90.0, 200.0])
+@pytest.mark.parametrize("swapped", [False, True])
+def test_pose_from_an_exact_plane_homography(psi, swapped):
+    """Closed form: the homography of the pane plane through a pinhole 35 deg off the normal (the camera of
+    ``pane_coordinates``) gives back the angle, the azimuth and the focal length (grid axes in either order); a
+    capture facing the pane has no projective terms."""
+    import cv2
+
+    from glassdist.viewpoint import CaptureGeometry
+    from glassdist.viewpoint.intrinsic import pane_coordinates
+    from glassdist.viewpoint.pose import angle_from_homography, focal_from_homography, homography_is_normal
+
+    shape = (240, 320)
+    r, c = np.meshgrid(np.linspace(0, 239, 7), np.linspace(0, 319, 7), indexing="ij")
+
+    def homography(theta):
+        g = CaptureGeometry(3.0, 1.0, viewing_angle_deg=theta, viewing_azimuth_deg=psi, focal_length_px=900.0)
+        x, y = pane_coordinates(r, c, shape, mm_per_px=1.0, geometry=g)
+        src = np.stack([-y.ravel(), x.ravel()], -1) if swapped else np.stack([x.ravel(), y.ravel()], -1)
+        return cv2.findHomography(src, np.stack([c.ravel(), r.ravel()], -1), 0)[0]
+
+    H = homography(35.0)
+    theta, azimuth = angle_from_homography(H, shape, 900.0)
+    assert theta == pytest.approx(35.0, abs=1e-4)
+    assert (azimuth - psi + 180.0) % 360.0 - 180.0 == pytest.approx(0.0, abs=1e-4)
+    assert focal_from_homography(H, shape) == pytest.approx(900.0, rel=1e-5)
+    assert not homography_is_normal(H, shape)
+    if psi == 0.0 and not swapped:
+        scale = CaptureGeometry(3.0, 1.0).factor
+        facing = np.array([[1 / scale, 0, 159.5], [0, 1 / scale, 119.5], [0, 0, 1.0]])
+        assert homography_is_normal(facing, shape) and focal_from_homography(facing, shape) is None

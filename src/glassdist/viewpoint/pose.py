@@ -9,13 +9,14 @@ The angle is stated (``--camera-angle-deg``, ``--camera-azimuth-deg``) or, by th
 Method, read from the homography ``H`` from the backdrop's logical grid to the pixels
 (Zhang 2000, §3.1): with ``K = [[f, 0, c_x], [0, f, c_y], [0, 0, 1]]`` (principal point at the
 image centre, square pixels), ``K^-1 H = lambda [r_1 r_2 t]``, the backdrop's normal in the
-camera frame is ``n = r_1 x r_2`` and ``cos theta = |n_z|``; ``psi = atan2(-n_y, -n_x)``
-(backdrop and pane parallel). Without the projective terms (``theta`` near 0) the angle is
+camera frame is ``n = r_1 x r_2`` and ``cos theta = |n_z|``, the optical axis in the pane
+frame ``(r_1 . z, r_2 . z, n . z)`` gives ``psi`` (backdrop and pane parallel, the grid along
+the pane's edges). Without the projective terms (``theta`` near 0) the angle is
 0. A Comparative capture states no pose of its own (its reference is glass-less, the
 analysis is relative to it): the angle is stated, or normal incidence is assumed.
 
-The focal length, in this order: the camera file's; the photo's EXIF 35 mm-equivalent focal
-length (``f = f_35 W / 36``); the homography's own (the orthogonality and equal length of
+The focal length, in this order: the lens calibration's (``--camera-file``, ``--lens-photo``);
+the photo's EXIF 35 mm-equivalent focal length (``f = f_35 W / 36``); the homography's own (the orthogonality and equal length of
 ``r_1``, ``r_2``, well posed off the normal: trusted from
 :data:`MIN_SELF_CALIBRATED_ANGLE_DEG`); the capture's scale (``mm_per_px`` the
 geometric-mean backdrop mm per px at the centre: ``f = 1000 (Dc + L / cos theta) /
@@ -39,6 +40,9 @@ __all__ = ["CapturePose", "angle_from_homography", "capture_pose", "focal_from_h
            "homography_is_normal"]
 
 
+#: The oblique reading's range (:class:`~glassdist.viewpoint.intrinsic.CaptureGeometry`), deg.
+MAX_ANGLE_DEG = 70.0
+
 #: Below this angle a focal length calibrated from the homography itself is not trusted (ill-posed at the normal).
 MIN_SELF_CALIBRATED_ANGLE_DEG = 10.0
 
@@ -53,7 +57,8 @@ class CapturePose:
     angle_source : str
         ``"stated"``, ``"homography"`` or ``"assumed normal"``.
     focal_length_source : str or None
-        ``"camera file"``, ``"EXIF"``, ``"homography"``, ``"capture scale"`` (None at normal incidence).
+        ``"lens calibration"`` (``--camera-file``, ``--lens-photo``), ``"EXIF"``, ``"homography"``,
+        ``"capture scale"`` (None at normal incidence).
     warnings : tuple of str
     """
 
@@ -88,15 +93,22 @@ def focal_from_homography(H, image_shape) -> float | None:
 
 
 def angle_from_homography(H, image_shape, focal_length_px: float) -> tuple[float, float]:
-    """``(theta, psi)`` (deg) of the camera to the backdrop's normal from its homography (module notes)."""
+    """``(theta, psi)`` (deg) of the camera's line of sight to the backdrop's normal from its homography.
+
+    The grid's axes ``r_1``, ``r_2`` (unit, in the camera frame, turned to run along the image's
+    columns and rows) give the normal ``n = r_1 x r_2`` and the optical axis in the pane frame,
+    ``a = (r_1 . z, r_2 . z, n . z)``: ``cos theta = a_z``, ``psi = atan2(a_y, a_x)``.
+    """
     G = _centred(H, image_shape)
     B = np.diag([1.0 / focal_length_px, 1.0 / focal_length_px, 1.0]) @ G
-    n = np.cross(B[:, 0], B[:, 1])
+    r1, r2 = B[:, 0] / np.linalg.norm(B[:, 0]), B[:, 1] / np.linalg.norm(B[:, 1])
+    if abs(r1[0]) < abs(r2[0]):  # the grid's first axis along the image rows
+        r1, r2 = r2, r1
+    r1, r2 = (r1 if r1[0] > 0 else -r1), (r2 if r2[1] > 0 else -r2)
+    n = np.cross(r1, r2)
     n = n / np.linalg.norm(n)
-    if n[2] < 0:
-        n = -n
-    theta = math.degrees(math.acos(min(1.0, float(n[2]))))
-    psi = math.degrees(math.atan2(-n[1], -n[0])) if theta > 1e-6 else 0.0
+    theta = math.degrees(math.acos(min(1.0, abs(float(n[2])))))
+    psi = math.degrees(math.atan2(r2[2], r1[2])) if theta > 1e-6 else 0.0
     return theta, psi % 360.0
 
 
@@ -127,13 +139,13 @@ def capture_pose(result, camera_distance_m: float, *, angle_deg: float | None = 
     angle_deg, azimuth_deg : float, optional
         The stated ``theta`` and ``psi``; ``angle_deg`` None: estimated where the data allow.
     focal_length_px : float, optional
-        The camera file's focal length, px.
+        The lens calibration's focal length, px.
     camera : dict, optional
         The photo's EXIF facts (:func:`glassdist.io.read_photo`).
     """
     shape = result.valid.shape
     warnings = []
-    focal, fsource = focal_length_px, "camera file"
+    focal, fsource = focal_length_px, "lens calibration"
     if focal is None:
         focal, fsource = _exif_focal_px(camera, shape[1]), "EXIF"
     H = getattr(result, "homography", None)
@@ -159,6 +171,11 @@ def capture_pose(result, camera_distance_m: float, *, angle_deg: float | None = 
                                 "of the pane normal, too close to calibrate its focal length from the view itself; "
                                 "read as normal incidence: give --camera-file (or --camera-angle-deg) to read the "
                                 "angle")
+                angle_deg, azimuth_deg, source = 0.0, 0.0, "assumed normal"
+            elif angle_deg >= MAX_ANGLE_DEG:
+                warnings.append(f"the Direct homography puts the camera {angle_deg:.3g} deg off the pane normal, beyond "
+                                f"the {MAX_ANGLE_DEG:g} deg the oblique reading covers; read as normal incidence: give "
+                                "--camera-angle-deg if that is the capture's pose")
                 angle_deg, azimuth_deg, source = 0.0, 0.0, "assumed normal"
     if angle_deg == 0.0:
         return CapturePose(CaptureGeometry(float(camera_distance_m), float(result.distance_m), refractive_index),
