@@ -611,7 +611,7 @@ def _oblique_capture_scene(theta_deg, *, Dc_m=3.0, L_m=1.0, pixels=(320, 240)):
 @pytest.fixture(scope="module")
 def oblique_pair(tmp_path_factory):
     """The wave at Dc 3 m / L 1 m, normal and 30 deg from the side (Comparative, detrend 1), and the 30 deg render by
-    the Direct Method without the angle: ``{0: folder, 30: folder, 'direct': folder, 'focal_px': f}``."""
+    the Direct Method without the angle: ``{0: folder, 30: folder, ('direct', 0 or 30): folder, 'focal_px': f}``."""
     from glassdist.io import write_png16
 
     tmp = tmp_path_factory.mktemp("oblique")
@@ -627,9 +627,8 @@ def oblique_pair(tmp_path_factory):
         out[th] = tmp / f"o{th:g}"
         assert main(["analyze", str(img), "--reference", str(ref), *common, *angle, "--fields", "pixel",
                      "--out", str(out[th])]) == 0
-        if th:
-            out["direct"] = tmp / "direct30"
-            assert main(["analyze", str(img), *common, "--out", str(out["direct"])]) == 0
+        out["direct", th] = tmp / f"direct{th:g}"
+        assert main(["analyze", str(img), *common, "--out", str(out["direct", th])]) == 0
     return out
 
 
@@ -664,8 +663,12 @@ def test_oblique_capture_through_analyze_reads_the_normal_capture_intrinsic_pane
 def test_direct_homography_estimates_the_capture_angle(oblique_pair):
     """By the Direct Method without --camera-angle-deg or a camera file, the 30 deg capture's angle is read from the
     homography's projective terms (the focal length calibrated from the same homography) within 2 deg, the azimuth
-    within 5 deg. Measured: 29.20 deg, azimuth 2.84 deg, f 956.2 px for 960 px."""
-    i = _summary(oblique_pair["direct"])["intrinsic"]
+    within 5 deg; the normal capture's homography reads normal incidence, without a warning. Measured: 29.20 deg,
+    azimuth 2.84 deg, f 956.2 px for 960 px."""
+    s0 = _summary(oblique_pair["direct", 0.0])
+    assert (s0["intrinsic"]["angle_source"], s0["intrinsic"]["viewing_angle_deg"]) == ("homography", 0.0)
+    assert not any("normal" in w for w in s0["warnings"]), s0["warnings"]
+    i = _summary(oblique_pair["direct", 30.0])["intrinsic"]
     print(i["viewing_angle_deg"], i["viewing_azimuth_deg"], i["focal_length_px"])
     assert (i["angle_source"], i["focal_length_source"]) == ("homography", "homography")
     assert i["viewing_angle_deg"] == pytest.approx(30.0, abs=2.0)

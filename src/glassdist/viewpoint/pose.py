@@ -11,13 +11,14 @@ Method, read from the homography ``H`` from the backdrop's logical grid to the p
 image centre, square pixels), ``K^-1 H = lambda [r_1 r_2 t]``, the backdrop's normal in the
 camera frame is ``n = r_1 x r_2`` and ``cos theta = |n_z|``, the optical axis in the pane
 frame ``(r_1 . z, r_2 . z, n . z)`` gives ``psi`` (backdrop and pane parallel, the grid along
-the pane's edges). Without the projective terms (``theta`` near 0) the angle is
-0. A Comparative capture states no pose of its own (its reference is glass-less, the
-analysis is relative to it): the angle is stated, or normal incidence is assumed.
+the pane's edges). Projective terms that put the camera within 2 deg of the normal for any
+focal length up to 4 image widths (:func:`homography_is_normal`) read as normal incidence.
+A Comparative capture states no pose of its own (its reference is glass-less, the analysis
+is relative to it): the angle is stated, or normal incidence is assumed.
 
 The focal length, in this order: the lens calibration's (``--camera-file``, ``--lens-photo``);
-the photo's EXIF 35 mm-equivalent focal length (``f = f_35 W / 36``); the homography's own (the orthogonality and equal length of
-``r_1``, ``r_2``, well posed off the normal: trusted from
+the photo's EXIF 35 mm-equivalent focal length (``f = f_35 W / 36``); the homography's own
+(the orthogonality and equal length of ``r_1``, ``r_2``, well posed off the normal: trusted from
 :data:`MIN_SELF_CALIBRATED_ANGLE_DEG`); the capture's scale (``mm_per_px`` the
 geometric-mean backdrop mm per px at the centre: ``f = 1000 (Dc + L / cos theta) /
 (mm_per_px sqrt(cos theta))``). Only the field angles of off-axis pixels depend on ``f``.
@@ -112,7 +113,7 @@ def angle_from_homography(H, image_shape, focal_length_px: float) -> tuple[float
     return theta, psi % 360.0
 
 
-def homography_is_normal(H, image_shape, longest_focal_widths: float = 4.0, angle_deg: float = 0.5) -> bool:
+def homography_is_normal(H, image_shape, longest_focal_widths: float = 4.0, angle_deg: float = 2.0) -> bool:
     """Whether ``H``'s projective terms put the camera within ``angle_deg`` of the normal for any focal length
     up to ``longest_focal_widths`` image widths (``tan theta ~ f q``, ``q`` the perspective per px)."""
     G = _centred(H, image_shape)
