@@ -10,7 +10,63 @@ import numpy as np
 from ._cli_shared import folder_option
 from .validation import DISTANCE_M, SIGMA_MM, number_option
 
-__all__ = ["register"]
+__all__ = ["add_capture_options", "check_capture_options", "register", "with_capture_pose"]
+
+
+def add_capture_options(p) -> None:
+    """``analyze``'s ``--camera-angle-deg`` and ``--camera-azimuth-deg`` (the oblique capture's pose)."""
+    p.add_argument("--camera-angle-deg", type=float,
+                   help="transmission, with --camera-distance-m: angle between the camera's line of sight to the pane "
+                   "centre and the pane normal, deg (0 to 70; default: from the Direct homography where it tells, "
+                   "else 0)")
+    p.add_argument("--camera-azimuth-deg", type=float,
+                   help="with --camera-angle-deg: 0 the camera on the pane's -x side (image left) looking towards +x, "
+                   "90 on its -y side (image top) looking towards +y, deg (default 0)")
+
+
+def check_capture_options(args, optics) -> None:
+    """The capture-pose options against each other (InputError, one line)."""
+    import math
+
+    from .errors import InputError
+    from .viewpoint.view import MAX_VIEWING_ANGLE_DEG
+
+    theta, psi = args.camera_angle_deg, args.camera_azimuth_deg
+    if theta is None and psi is None:
+        return
+    if args.camera_distance_m is None or optics is not None:
+        raise InputError("--camera-angle-deg and --camera-azimuth-deg state a transmission capture's pose: add "
+                         "--camera-distance-m Dc (and leave out --optics reflection; a reflection run takes "
+                         "--incidence-deg)")
+    if theta is None:
+        raise InputError("--camera-azimuth-deg needs --camera-angle-deg (the angle to the pane normal)")
+    if not (math.isfinite(theta) and 0.0 <= theta < MAX_VIEWING_ANGLE_DEG):
+        raise InputError(f"--camera-angle-deg {theta:g} is outside [0, {MAX_VIEWING_ANGLE_DEG:g}); give the angle "
+                         "between the line of sight to the pane centre and the pane normal, deg")
+    if psi is not None and not math.isfinite(psi):
+        raise InputError(f"--camera-azimuth-deg must be a number of degrees, got {psi!r}")
+
+
+def with_capture_pose(request, result, args, camera, lens):
+    """``(request, result)`` with the capture's pose (stated, else estimated) and its warnings."""
+    from dataclasses import replace
+
+    if request.camera_distance_m is None or result.optics is not None:
+        return request, result
+    from .viewpoint.pose import capture_pose
+
+    pose = capture_pose(result, request.camera_distance_m, angle_deg=args.camera_angle_deg,
+                        azimuth_deg=args.camera_azimuth_deg or 0.0,
+                        focal_length_px=getattr(lens, "focal_px", None), camera=camera)
+    warnings = list(pose.warnings)
+    spec = getattr(request.spec, "spec", None)
+    if pose.geometry.viewing_angle_deg > 0 and getattr(spec, "reference_geometry", None) is not None:
+        warnings.append(f"the specification's reference_geometry factor is that of a capture at normal incidence; this "
+                        f"capture is {pose.geometry.viewing_angle_deg:.3g} deg off the normal, which the factor leaves "
+                        "out: 'glassdist view' predicts the reading at the specification's geometry in full")
+    if warnings:
+        result = replace(result, warnings=(*result.warnings, *warnings))
+    return replace(request, capture_pose=pose), result
 
 
 def register(subparsers):
@@ -39,7 +95,8 @@ def register(subparsers):
 
     q = subparsers.add_parser(
         "compare", help="two captures of one pane on the intrinsic axis: their difference and its uncertainty",
-        description="Both results analysed with --camera-distance-m, at normal incidence, aimed at the pane centre. "
+        description="Both results analysed with --camera-distance-m (oblique: with the angle stated or estimated), "
+        "aimed at the pane centre. "
         "Prints the intrinsic mean absolute phi_eff and mean phi_shear of each over the pane area both trust, their "
         "difference with its expanded uncertainty (k = 2), and whether it is consistent with zero.")
     q.add_argument("result_a", type=Path, help="output folder of the first capture")

@@ -22,6 +22,7 @@ import numpy as np
 
 from ._cli_shared import folder_option
 from ._version import __version__
+from ._view_cli import add_capture_options, check_capture_options, with_capture_pose
 from .errors import GlassdistError, InputError
 from .history.options import add_recording_options, recording
 from .validation import DISTANCE_M, PITCH_MM, SIGMA_MM, check_sigma_extent, number_option, safe_text
@@ -116,9 +117,10 @@ def _register_analyze(sub) -> None:
                    "pane; phi in reflective power on the pane, docs/user-guide/reflection.md)")
     p.add_argument("--camera-distance-m", type=number_option(DISTANCE_M),
                    help="reflection: camera-to-pane distance C, m (default: the camera in the board plane, C = D); "
-                   "transmission (either method): the camera-to-pane distance Dc along the pane normal, the camera facing "
-                   "the pane and aimed at its centre: the run also reports the pane's intrinsic reading (summary.json "
-                   "'intrinsic'); with --camera-file (Direct Method) it also pins the magnification for the bulk channel")
+                   "transmission (either method): the camera-to-pane distance Dc along the line of sight, the camera "
+                   "aimed at the pane centre (facing it, or at --camera-angle-deg): the run also reports the pane's "
+                   "intrinsic reading (summary.json 'intrinsic'); with --camera-file (Direct Method) it also pins the magnification for the bulk channel")
+    add_capture_options(p)
     p.add_argument("--incidence-deg", type=float,
                    help="reflection: angle between the line of sight and the pane normal at the view's centre, deg (default 0)")
     p.add_argument("--reference", type=Path, help="glass-less photo from the same camera position (Comparative Method)")
@@ -244,6 +246,7 @@ def _read_inputs(args):
                        min_period_px=params.min_period_px)
     mask = read_mask(args.mask, image.shape) if args.mask is not None else None
     lens = _lens_source(args, pinned, protocol, params, images)
+    check_capture_options(args, optics)
     request = RunRequest(fields=args.fields, report=args.report, export=args.export, spec=spec, protocol=protocol,
                          mask=mask, metadata={"pane_id": args.pane_id, "lot": args.lot, "site": args.site,
                                               "operator": args.operator}, history=recording(args),
@@ -406,6 +409,7 @@ def _run_analyze(args) -> int:
             if optics is not None:
                 result = reflect_result(result, optics)
             result = _in_option_words(result)
+            request, result = with_capture_pose(request, result, args, inputs.camera, lens)
             # a capture outside the protocol is not judged (exit 2), nothing written
             record = build_record(request, inputs, result)
             step("writing the outputs")

@@ -16,7 +16,7 @@ from typing import Any
 __all__ = ["result_sections"]
 
 
-def result_sections(result, *, camera_distance_m: float | None = None) -> dict[str, Any]:
+def result_sections(result, *, camera_distance_m: float | None = None, pose=None) -> dict[str, Any]:
     """``{"flatness": ..., "intrinsic": ...}``, each present only where it applies (module notes).
 
     Parameters
@@ -24,6 +24,9 @@ def result_sections(result, *, camera_distance_m: float | None = None) -> dict[s
     result : AnalysisResult
     camera_distance_m : float, optional
         Camera to pane, m: with a transmission result, its intrinsic reading.
+    pose : CapturePose, optional
+        The capture's angle to the pane and its sources (:mod:`glassdist.viewpoint.pose`);
+        None: normal incidence.
 
     Returns
     -------
@@ -40,5 +43,6 @@ def result_sections(result, *, camera_distance_m: float | None = None) -> dict[s
     if camera_distance_m is not None and result.optics is None:
         from .viewpoint.intrinsic import intrinsic_section, reading_of_result
 
-        out["intrinsic"] = intrinsic_section(reading_of_result(result, camera_distance_m), result.trusted)
+        reading = reading_of_result(result, camera_distance_m, geometry=None if pose is None else pose.geometry)
+        out["intrinsic"] = intrinsic_section(reading, result.trusted, None if pose is None else pose.sources())
     return out

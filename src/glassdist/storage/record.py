@@ -67,6 +67,8 @@ class RunRequest:
     camera_distance_m : float or None
         Camera to pane, m (transmission): the run also reports the pane's intrinsic reading
         (:mod:`glassdist.viewpoint`), ``intrinsic`` in ``summary.json`` and its maps in ``result.npz``.
+    capture_pose : glassdist.viewpoint.pose.CapturePose or None
+        The capture's angle to the pane normal and focal length, with their sources (None: normal incidence).
     """
 
     fields: str = "analysis"
@@ -78,6 +80,7 @@ class RunRequest:
     metadata: dict = field(default_factory=dict)
     history: object = None
     camera_distance_m: float | None = None
+    capture_pose: object = None
 
     def __post_init__(self):
         if self.fields not in FIELD_LAYOUTS:
@@ -279,7 +282,7 @@ def build_record(request: RunRequest, inputs: RunInputs, result) -> RunRecord:
     from ..measures import standard_measures
     from ..sections import result_sections
 
-    sections = result_sections(result, camera_distance_m=request.camera_distance_m)
+    sections = result_sections(result, camera_distance_m=request.camera_distance_m, pose=request.capture_pose)
     acc = assess(result, request.spec, protocol=request.protocol, mask=request.mask, metadata=request.metadata,
                  camera=inputs.camera, camera_distance_m=request.camera_distance_m, flatness=sections.get("flatness"))
     return RunRecord(request, inputs, result, acc, standard_measures(result).to_dict(), sections)

@@ -195,7 +195,9 @@ def _write_outputs(record, out, digests) -> dict:
     if request.camera_distance_m is not None and result.optics is None:  # the pane's intrinsic maps
         from ..viewpoint.intrinsic import intrinsic_members
 
-        members = itertools.chain(members, intrinsic_members(result, request.camera_distance_m, request.fields))
+        pose = request.capture_pose
+        members = itertools.chain(members, intrinsic_members(result, request.camera_distance_m, request.fields,
+                                                             None if pose is None else pose.geometry))
     atomic_write(out / "result.npz", lambda fh: write_npz(fh, members), digests=digests)
     files = [write_statistics_csv(acc.stats, out / "statistics.csv", digests=digests),
              atomic_write_text(out / "worst_regions.csv", acc.regions_csv(), digests=digests)]

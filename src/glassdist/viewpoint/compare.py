@@ -3,9 +3,10 @@
 Each capture's channels are brought to the pane's intrinsic reading
 (:func:`glassdist.viewpoint.intrinsic.intrinsic_reading`, its stored geometry), over the
 pane area both captures trust: every trusted pixel of one whose pane point falls on a
-trusted pixel of the other (nearest pixel). What it needs: both captures at normal
-incidence, the camera aimed at the pane centre (the image centre), the image axes along
-the pane's edges, and ``--camera-distance-m`` given at analysis.
+trusted pixel of the other (nearest pixel). What it needs: the camera aimed at the pane
+centre (the image centre), the image axes along the pane's edges, ``--camera-distance-m``
+given at analysis and, for an oblique capture, its angle (``--camera-angle-deg`` or the
+Direct homography's).
 
 The uncertainty of a capture's mean is the noise part, the median standard
 uncertainty over ``sqrt(n_eff)`` (``n_eff`` the trusted area over the smoothing's
@@ -24,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..analyzer.metrics import channel_statistics
-from .intrinsic import IntrinsicReading, intrinsic_reading
+from .intrinsic import IntrinsicReading, intrinsic_reading, pane_to_pixels
 from .view import capture_sigma_mm, stored_geometry, trusted_pixels
 
 __all__ = [
@@ -127,9 +128,9 @@ def stored_reading(stored) -> IntrinsicReading:
 def _covered(reading: IntrinsicReading, x_mm, y_mm, trusted) -> np.ndarray:
     """Whether pane points fall on a trusted pixel of ``reading`` (nearest pixel)."""
     H, W = trusted.shape
-    s = reading.pane_mm_per_px
-    c = np.rint(x_mm / s + (W - 1) / 2.0).astype(np.int64)
-    r = np.rint(y_mm / s + (H - 1) / 2.0).astype(np.int64)
+    g = reading.geometry
+    rows, cols = pane_to_pixels(x_mm, y_mm, (H, W), mm_per_px=reading.pane_mm_per_px / g.factor, geometry=g)
+    c, r = np.rint(cols).astype(np.int64), np.rint(rows).astype(np.int64)
     inside = (c >= 0) & (c < W) & (r >= 0) & (r < H)
     out = np.zeros(np.shape(x_mm), bool)
     out[inside] = trusted[r[inside], c[inside]]
@@ -179,7 +180,7 @@ def compare_results(stored_a, stored_b) -> Comparison:
     cb = tb & _covered(ra, rb.x_mm, rb.y_mm, ta)
     if not ca.any() or not cb.any():
         raise InputError("the two captures share no trusted pane area (pane coordinates from the image centres at "
-                         "normal incidence); compare captures of the same pane, aimed at its centre")
+                         "their geometries); compare captures of the same pane, aimed at its centre")
     warnings = []
     sa, sb = ra.pane_sigma_mm, rb.pane_sigma_mm
     if abs(sa - sb) > 0.05 * max(sa, sb):

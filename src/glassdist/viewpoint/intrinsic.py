@@ -55,8 +55,9 @@ scale). The relation above holds unchanged (:func:`projection_matrix`). Two limi
 capture itself remain: its smoothing, isotropic in its pixels, is elongated on the pane along
 the plane of incidence (``pane_sigma_mm`` is then the geometric mean), and its detrend, a
 polynomial in its pixels, is projective on the pane, so off the normal it takes a different
-field out of the pane than a normal capture does. ``glassdist analyze`` records normal
-captures so far; the oblique reading is reached from Python.
+field out of the pane than a normal capture does. ``glassdist analyze`` reads an oblique
+capture with ``--camera-angle-deg`` (or the angle the Direct homography gives,
+:mod:`glassdist.viewpoint.pose`).
 
 References
 ----------
@@ -86,6 +87,7 @@ __all__ = [
     "intrinsic_reading",
     "intrinsic_section",
     "pane_coordinates",
+    "pane_to_pixels",
     "projection_factors",
     "projection_matrix",
     "reading_of_result",
@@ -281,6 +283,26 @@ def pane_coordinates(rows_px, cols_px, image_shape, *, mm_per_px: float, geometr
     return o[0] + t * d[..., 0], o[1] + t * d[..., 1]
 
 
+def pane_to_pixels(x_mm, y_mm, image_shape, *, mm_per_px: float, geometry: CaptureGeometry):
+    """Capture pixel coordinates ``(rows, cols)`` of pane points: the inverse of :func:`pane_coordinates`.
+
+    Off the normal the pane plane maps to the image by a homography (a pinhole between
+    planes), fitted exactly to :func:`pane_coordinates` of a grid of pixels.
+    """
+    H, W = image_shape
+    x, y = np.broadcast_arrays(np.asarray(x_mm, float), np.asarray(y_mm, float))
+    if geometry.viewing_angle_deg == 0.0:
+        s = mm_per_px * geometry.factor
+        return y / s + (H - 1) / 2.0, x / s + (W - 1) / 2.0
+    import cv2
+
+    r, c = np.meshgrid(np.linspace(0, H - 1, 9), np.linspace(0, W - 1, 9), indexing="ij")
+    px, py = pane_coordinates(r, c, image_shape, mm_per_px=mm_per_px, geometry=geometry)
+    Hm, _ = cv2.findHomography(np.stack([px.ravel(), py.ravel()], -1), np.stack([c.ravel(), r.ravel()], -1), 0)
+    q = Hm @ np.stack([x.ravel(), y.ravel(), np.ones(x.size)])
+    return (q[1] / q[2]).reshape(x.shape), (q[0] / q[2]).reshape(x.shape)
+
+
 def _radial_frame(x_mm, y_mm, geometry: CaptureGeometry):
     """Incidence (rad) and the in-plane direction ``t`` (cos, sin) of the lines of sight through pane points."""
     o = geometry.position_mm
@@ -411,11 +433,12 @@ def intrinsic_reading(phi_eff_mD, phi_shear_mD, axis_deg, *, rows_px, cols_px, i
                             np.degrees(alpha), geometry, float(sigma_mm) * k, float(mm_per_px) * k)
 
 
-def intrinsic_section(reading: IntrinsicReading, trusted) -> dict:
+def intrinsic_section(reading: IntrinsicReading, trusted, sources: dict | None = None) -> dict:
     """The ``intrinsic`` section of ``summary.json``: per channel the statistics ``statistics`` holds
     (``intrinsic.phi_eff_mD.mean_abs``, ...), the noise floor, the geometry and the smoothing.
 
     ``trusted``: the pixels the capture's statistics are taken over (bool, the reading's grid).
+    ``sources``: where the angle and the focal length came from (:class:`glassdist.viewpoint.pose.CapturePose`).
     """
     g = reading.geometry
     stats = {name: channel_statistics(getattr(reading, name[len("intrinsic_"):]), trusted)
@@ -437,6 +460,8 @@ def intrinsic_section(reading: IntrinsicReading, trusted) -> dict:
         "incidence": "normal" if g.viewing_angle_deg == 0 else "oblique",
         "viewing_angle_deg": g.viewing_angle_deg,
         "viewing_azimuth_deg": g.viewing_azimuth_deg,
+        "focal_length_px": g.focal_length_px,
+        **(sources or {"angle_source": "assumed normal"}),
         "capture_factor": g.factor,
         "pane_sigma_mm": reading.pane_sigma_mm,
         "pane_mm_per_px": reading.pane_mm_per_px,
@@ -460,13 +485,16 @@ def _carried_sigma_mm(sigma_mm, effective_sigma_mm) -> float:
 
 
 def reading_of_result(result, camera_distance_m: float, *, on_grid: bool = False,
-                      refractive_index: float = DEFAULT_REFRACTIVE_INDEX) -> IntrinsicReading:
+                      refractive_index: float = DEFAULT_REFRACTIVE_INDEX,
+                      geometry: CaptureGeometry | None = None) -> IntrinsicReading:
     """:func:`intrinsic_reading` of an :class:`~glassdist.analyzer.AnalysisResult` (transmission).
 
     ``on_grid``: on the analysis grid (NaN outside its analysed samples, the layout of
     ``result.npz``), else on the photo's pixel grid (the grid of its statistics).
+    ``geometry``: the capture's (oblique) geometry; default normal incidence at ``camera_distance_m``.
     """
-    geometry = result_geometry(result, camera_distance_m, refractive_index)
+    if geometry is None:
+        geometry = result_geometry(result, camera_distance_m, refractive_index)
     held = {f.name for f in result.field_specs()}
     if on_grid:
         rows, cols = result.analysis_grid.coords()
@@ -491,9 +519,9 @@ def reading_of_result(result, camera_distance_m: float, *, on_grid: bool = False
                              phi_eff_sigma_mD=get("phi_eff_sigma_mD"), phi_shear_sigma_mD=get("phi_shear_sigma_mD"))
 
 
-def intrinsic_members(result, camera_distance_m: float, layout: str):
+def intrinsic_members(result, camera_distance_m: float, layout: str, geometry: CaptureGeometry | None = None):
     """``result.npz`` members ``(name, array, compress)`` of the intrinsic maps, in the run's ``layout``."""
-    reading = reading_of_result(result, camera_distance_m, on_grid=layout == "analysis")
+    reading = reading_of_result(result, camera_distance_m, on_grid=layout == "analysis", geometry=geometry)
     for name, a in reading.maps().items():
         yield name, a, False
 

@@ -41,6 +41,9 @@ view whose field reaches beyond 20 deg. Not modelled: the flat slab's lateral sh
 varies with the incidence across an oblique view (for a 6 mm pane, a near-linear field that
 a detrend of degree >= 1 takes out), the slab's lateral shift under slope (relative size
 ``d / (n Lo)``), and the capture's own field-angle variation of ``M`` (normal captures).
+An oblique capture (its ``intrinsic`` records the angle) is met with the pane through its
+own camera (:func:`~glassdist.viewpoint.intrinsic.pane_to_pixels`); its smoothing, elongated on
+the pane, is carried as isotropic at its geometric mean.
 """
 
 from __future__ import annotations
@@ -58,6 +61,7 @@ from .intrinsic import (
     centre_factor,
     deflection_mrad,
     pane_coordinates,
+    pane_to_pixels,
     projection_factors,
     projection_matrix,
 )
@@ -158,11 +162,11 @@ def stored_geometry(stored) -> CaptureGeometry:
     if not intr:
         raise InputError("this result records no camera-to-pane distance; analyse the photo again with "
                          "--camera-distance-m Dc (the camera to the pane, m)")
-    if float(intr.get("viewing_angle_deg", 0.0)) != 0.0:
-        raise InputError("this result is an oblique capture: the view and the comparison start from a capture at "
-                         "normal incidence so far")
+    theta = float(intr.get("viewing_angle_deg", 0.0))
     return CaptureGeometry(float(intr["camera_distance_m"]), float(s["distance_m"]),
-                           float(intr.get("refractive_index", 1.52)))
+                           float(intr.get("refractive_index", 1.52)), viewing_angle_deg=theta,
+                           viewing_azimuth_deg=float(intr.get("viewing_azimuth_deg", 0.0)),
+                           focal_length_px=intr.get("focal_length_px") if theta > 0 else None)
 
 
 def capture_sigma_mm(stored) -> float:
@@ -294,9 +298,7 @@ def predict_view(stored, *, observer_distance_m: float, background_distance_m: f
     # the photo: its pixels' lines of sight, the pane points they cross, the capture pixels there
     cam = observer_camera(Do, theta, psi, (H, W), pane_px)
     a, pane_pt, J = _observer_rays(cam, Lo)
-    cc = pane_pt[..., 0] / pane_px + (W - 1) / 2.0
-    rc = pane_pt[..., 1] / pane_px + (H - 1) / 2.0
-    coords = np.stack([rc, cc])
+    coords = np.stack(pane_to_pixels(pane_pt[..., 0], pane_pt[..., 1], (H, W), mm_per_px=mpp_c, geometry=cap))
 
     def sample(f, order=1):
         return ndimage.map_coordinates(f, coords, order=order, mode="constant", cval=0.0)
