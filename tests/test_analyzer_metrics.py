@@ -237,3 +237,19 @@ def test_a_kernel_wider_than_the_data_is_centred_on_an_odd_fft_grid(shape):
     k = np.exp(-0.5 * (ci[0, 0] * dx**2 + 2 * ci[0, 1] * dx * dy + ci[1, 1] * dy**2)) * weight.ravel()[None, :]
     want = (k @ field.ravel() / k.sum(axis=1)).reshape(shape)
     assert np.abs(got - want).max() < (3e-5 if shape == (40, 20) else 1e-12)
+
+
+@pytest.mark.parametrize("data_shape, fft_shape", [((600, 900), (640, 960)), ((37, 51), (80, 120)), ((101, 130), (125, 135))])
+def test_cropped_inverse_transform_equals_irfft2_bit_for_bit(data_shape, fft_shape):
+    """Block A's inverse transforms skip the padding's rows: the kept samples equal scipy.fft.irfft2's exactly."""
+    import scipy.fft as sfft
+
+    from glassdist.analyzer.metrics import _irfft2_cropped
+
+    rng = np.random.default_rng(7)
+    a = rng.standard_normal((3,) + data_shape)
+    spectra = sfft.rfft2(a, s=fft_shape, axes=(-2, -1)) * rng.random((fft_shape[0], fft_shape[1] // 2 + 1))
+    want = sfft.irfft2(spectra, s=fft_shape, axes=(-2, -1))[:, : data_shape[0], : data_shape[1]]
+    got = _irfft2_cropped(spectra.copy(), fft_shape, data_shape)
+    assert got.shape == want.shape
+    assert np.array_equal(got, want)

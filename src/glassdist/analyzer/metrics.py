@@ -208,7 +208,7 @@ def masked_filter(
         if shape not in spectra:
             spectra[shape] = _moment_spectra(field, weight, shape, order)
         moment_spectra, xx, yy = spectra[shape]
-        moments = sfft.irfft2(moment_spectra * T, s=shape, axes=(-2, -1), workers=-1)[:, :h, :w]
+        moments = _irfft2_cropped(moment_spectra * T, shape, (h, w))
         out.append(_normalised(moments, xx, yy, cov_idx, min_weight))
     return out if many else out[0]
 
@@ -232,6 +232,20 @@ def _moment_spectra(field, weight, shape, order):
         xx = yy = None
         arrays = (wgt, f)
     return sfft.rfft2(np.stack(arrays), s=shape, axes=(-2, -1), workers=-1), xx, yy
+
+
+def _irfft2_cropped(spectra: np.ndarray, shape, out_shape) -> np.ndarray:
+    """``irfft2(spectra, s=shape)[..., :h, :w]`` (last two axes), the padding's rows not transformed back.
+
+    The passes of :func:`scipy.fft.irfft2` on the same data, so the same values bit for bit: the
+    columns' inverse transforms unscaled, then the kept rows' real ones, the whole ``1 / (ny nx)``
+    applied once at the end (pocketfft's factor, computed in long double). ``spectra`` is overwritten.
+    """
+    h, w = out_shape
+    cols = sfft.ifft(spectra, axis=-2, norm="forward", workers=-1, overwrite_x=True)[..., :h, :]
+    out = sfft.irfft(cols, n=shape[1], axis=-1, norm="forward", workers=-1)[..., :w]
+    out *= float(np.longdouble(1) / (int(shape[0]) * int(shape[1])))
+    return out
 
 
 def _normalised(moments, xx, yy, cov_idx, min_weight):
