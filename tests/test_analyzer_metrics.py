@@ -253,3 +253,25 @@ def test_cropped_inverse_transform_equals_irfft2_bit_for_bit(data_shape, fft_sha
     got = _irfft2_cropped(spectra.copy(), fft_shape, data_shape)
     assert got.shape == want.shape
     assert np.array_equal(got, want)
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+@pytest.mark.parametrize("order", [0, 1])
+def test_moment_spectra_equal_the_padded_transform_of_the_stacked_moments(dtype, order):
+    """The moments written into the padded array: the spectra of rfft2(stack(moments), s=shape), bit for bit."""
+    import scipy.fft as sfft
+
+    from glassdist.analyzer.metrics import _moment_spectra
+
+    rng = np.random.default_rng(11)
+    h, w, shape = 37, 51, (80, 120)
+    field = rng.standard_normal((h, w)).astype(dtype)
+    field[3, 4] = np.nan
+    weight = (rng.random((h, w)) > 0.2).astype(float)
+    got, xx, yy = _moment_spectra(field, weight, shape, order)
+    f = np.where(weight > 0, np.nan_to_num(field), 0.0)
+    wgt = (weight > 0).astype(float)
+    arrays = [wgt, f]
+    if order:
+        arrays += [wgt * xx, wgt * yy, wgt * xx * xx, wgt * xx * yy, wgt * yy * yy, f * xx, f * yy]
+    assert np.array_equal(got, sfft.rfft2(np.stack(arrays), s=shape, axes=(-2, -1)))
