@@ -237,3 +237,41 @@ def test_a_kernel_wider_than_the_data_is_centred_on_an_odd_fft_grid(shape):
     k = np.exp(-0.5 * (ci[0, 0] * dx**2 + 2 * ci[0, 1] * dx * dy + ci[1, 1] * dy**2)) * weight.ravel()[None, :]
     want = (k @ field.ravel() / k.sum(axis=1)).reshape(shape)
     assert np.abs(got - want).max() < (3e-5 if shape == (40, 20) else 1e-12)
+
+
+@pytest.mark.parametrize("data_shape, fft_shape", [((600, 900), (640, 960)), ((37, 51), (80, 120)), ((101, 130), (125, 135))])
+def test_cropped_inverse_transform_equals_irfft2_bit_for_bit(data_shape, fft_shape):
+    """Block A's inverse transforms skip the padding's rows: the kept samples equal scipy.fft.irfft2's exactly."""
+    import scipy.fft as sfft
+
+    from glassdist.analyzer.metrics import _irfft2_cropped
+
+    rng = np.random.default_rng(7)
+    a = rng.standard_normal((3,) + data_shape)
+    spectra = sfft.rfft2(a, s=fft_shape, axes=(-2, -1)) * rng.random((fft_shape[0], fft_shape[1] // 2 + 1))
+    want = sfft.irfft2(spectra, s=fft_shape, axes=(-2, -1))[:, : data_shape[0], : data_shape[1]]
+    got = _irfft2_cropped(spectra.copy(), fft_shape, data_shape)
+    assert got.shape == want.shape
+    assert np.array_equal(got, want)
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+@pytest.mark.parametrize("order", [0, 1])
+def test_moment_spectra_equal_the_padded_transform_of_the_stacked_moments(dtype, order):
+    """The moments written into the padded array: the spectra of rfft2(stack(moments), s=shape), bit for bit."""
+    import scipy.fft as sfft
+
+    from glassdist.analyzer.metrics import _moment_spectra
+
+    rng = np.random.default_rng(11)
+    h, w, shape = 37, 51, (80, 120)
+    field = rng.standard_normal((h, w)).astype(dtype)
+    field[3, 4] = np.nan
+    weight = (rng.random((h, w)) > 0.2).astype(float)
+    got, xx, yy = _moment_spectra(field, weight, shape, order)
+    f = np.where(weight > 0, np.nan_to_num(field), 0.0)
+    wgt = (weight > 0).astype(float)
+    arrays = [wgt, f]
+    if order:
+        arrays += [wgt * xx, wgt * yy, wgt * xx * xx, wgt * xx * yy, wgt * yy * yy, f * xx, f * yy]
+    assert np.array_equal(got, sfft.rfft2(np.stack(arrays), s=shape, axes=(-2, -1)))

@@ -208,7 +208,7 @@ def masked_filter(
         if shape not in spectra:
             spectra[shape] = _moment_spectra(field, weight, shape, order)
         moment_spectra, xx, yy = spectra[shape]
-        moments = sfft.irfft2(moment_spectra * T, s=shape, axes=(-2, -1), workers=-1)[:, :h, :w]
+        moments = _irfft2_cropped(moment_spectra * T, shape, (h, w))
         out.append(_normalised(moments, xx, yy, cov_idx, min_weight))
     return out if many else out[0]
 
@@ -222,16 +222,34 @@ def _moment_spectra(field, weight, shape, order):
     f = np.where(weight > 0, np.nan_to_num(field), 0.0)
     wgt = (weight > 0).astype(float)
     h, w = f.shape
+    # The moments are written straight into the zero-padded array the transform reads.
+    buf = np.zeros((9 if order >= 1 else 2,) + tuple(shape), np.result_type(f, wgt))
+    m = buf[:, :h, :w]
+    m[0], m[1] = wgt, f
+    xx = yy = None
     if order >= 1:
         yy, xx = np.mgrid[0:h, 0:w].astype(float)
         xx -= w / 2.0
         yy -= h / 2.0
-        wx, wy = wgt * xx, wgt * yy
-        arrays = (wgt, f, wx, wy, wx * xx, wx * yy, wy * yy, f * xx, f * yy)
-    else:
-        xx = yy = None
-        arrays = (wgt, f)
-    return sfft.rfft2(np.stack(arrays), s=shape, axes=(-2, -1), workers=-1), xx, yy
+        np.multiply(wgt, xx, out=m[2])  # w x
+        np.multiply(wgt, yy, out=m[3])  # w y
+        for k, (a, b) in enumerate(((m[2], xx), (m[2], yy), (m[3], yy), (f, xx), (f, yy)), start=4):
+            np.multiply(a, b, out=m[k])  # w x^2, w x y, w y^2, w f x, w f y
+    return sfft.rfft2(buf, axes=(-2, -1), workers=-1, overwrite_x=True), xx, yy
+
+
+def _irfft2_cropped(spectra: np.ndarray, shape, out_shape) -> np.ndarray:
+    """``irfft2(spectra, s=shape)[..., :h, :w]`` (last two axes), the padding's rows not transformed back.
+
+    The passes of :func:`scipy.fft.irfft2` on the same data, so the same values bit for bit: the
+    columns' inverse transforms unscaled, then the kept rows' real ones, the whole ``1 / (ny nx)``
+    applied once at the end (pocketfft's factor, computed in long double). ``spectra`` is overwritten.
+    """
+    h, w = out_shape
+    cols = sfft.ifft(spectra, axis=-2, norm="forward", workers=-1, overwrite_x=True)[..., :h, :]
+    out = sfft.irfft(cols, n=shape[1], axis=-1, norm="forward", workers=-1)[..., :w]
+    out *= float(np.longdouble(1) / (int(shape[0]) * int(shape[1])))
+    return out
 
 
 def _normalised(moments, xx, yy, cov_idx, min_weight):
