@@ -9,7 +9,8 @@ reading rests on that baseline and returns a warning (a string) when it matters,
   and N + 1;
 * :func:`rig_floor_warning`: the calibration photo's own reading is a sizeable share of the pane's;
 * :func:`lens_power_warning`: the lens fitted from the photo holds more centred power than the pane reads;
-* :func:`refused_lens_warning`: the lens fitted from the photo was not applied, and the bias it leaves if it is the camera's.
+* :func:`refused_lens_warning`: the lens fitted from the photo was not applied, and the bias it leaves if it is the camera's;
+* :func:`baseline_take_warning`: the homography takes in part of a local feature (a lens region), and by how much.
 
 They all look at the analysis-grid samples beyond the guard band from the region's border
 (:func:`beyond_guard`, computed once by the caller and handed to each).
@@ -24,12 +25,12 @@ from scipy import ndimage
 
 from .analysis_grid import AnalysisGrid
 from .components import Components
-from .homography import HomographyFit, logical_coordinates
+from .homography import HomographyFit, _lsq, logical_coordinates
 from .metrics import detrend_increment, masked_gaussian, polynomial_detrend, strain_tensor
 from .params import AnalyzerParams
 
-__all__ = ["DirectReading", "beyond_guard", "lens_power_warning", "n_dependence_warning", "n_move", "plain_phi_eff",
-           "refused_lens_warning", "rig_floor_warning"]
+__all__ = ["DIRECT_CHECKS", "DirectReading", "baseline_take_warning", "beyond_guard", "lens_power_warning",
+           "n_dependence_warning", "n_move", "plain_phi_eff", "refused_lens_warning", "rig_floor_warning"]
 
 
 @dataclass(frozen=True)
@@ -263,3 +264,86 @@ def lens_power_warning(r: DirectReading) -> str | None:
             "or use the Comparative Method"
         )
     return None
+
+
+# A local feature is one connected part of the samples reading more than this share of the p95 |phi_eff| ...
+_LOCAL_LEVEL = 0.5
+# ... holding at least this share of them and, grown by sigma, covering between these shares of the samples beyond the
+# guard band.
+_LOCAL_MAIN, _LOCAL_MIN, _LOCAL_MAX = 0.8, 0.05, 0.75
+# The baseline refitted without it must keep at least this share of the valid samples.
+_LOCAL_KEEP = 0.3
+# The homography's take is stated when it moves mean or p95 |phi_eff| by more than this share (and 0.01 mD).
+_TAKE_WARN = 0.03
+
+
+def _local_feature(r: DirectReading) -> np.ndarray | None:
+    """The samples of one compact feature standing out of the map (a lens region), grown by the reporting sigma, or None."""
+    a = np.abs(r.phi_eff_mD)
+    ok = r.trusted & np.isfinite(a)
+    if ok.sum() < 64:
+        return None
+    high = ok & (a > _LOCAL_LEVEL * np.percentile(a[ok], 95))
+    grow = max(1, int(round(r.sigma_mm / r.mm_per_px / min(r.ag.grid.step))))
+    # grown by sigma first: a lens's centre and the ring of opposite power at its rim are one feature
+    lab, n = ndimage.label(ndimage.binary_dilation(high, iterations=grow) & ok)
+    if n == 0:
+        return None
+    main = lab == 1 + int(np.argmax(np.bincount(lab.ravel())[1:]))
+    share = main.sum() / ok.sum()
+    if (main & high).sum() < _LOCAL_MAIN * high.sum() or not _LOCAL_MIN <= share <= _LOCAL_MAX:
+        return None
+    return ndimage.binary_dilation(main, iterations=grow)
+
+
+def baseline_take_warning(r: DirectReading) -> str | None:
+    """State how much of a local feature (a lens region) the homography takes in.
+
+    The homography is fitted to the whole view, and a feature covering a good part of it
+    steers the fit: its uniform and linearly varying parts become the baseline's scale and
+    keystone, and what the Direct Method reads inside it is short by that much. Where the map
+    shows one compact feature (one connected part of the samples above ``_LOCAL_LEVEL`` of the
+    p95 |phi_eff|, ``_LOCAL_MIN``-``_LOCAL_MAX`` of the view), the homography is refitted by least
+    squares to the measured logical grid (the baseline's coordinates plus the phases) outside
+    it, grown by the reporting sigma; the change of baseline, ``p_c (H_out^-1(r) - H^-1(r))``,
+    read as glass by Block A's rule (degree-N detrend per region, :func:`plain_phi_eff`), taken
+    from the reading gives the reading the glass around the feature would fix. The change of
+    mean and p95 |phi_eff| beyond the guard band is stated where either exceeds ``_TAKE_WARN``.
+    Only without a lens model applied (the refit is a bare homography).
+    """
+    fit, ag, p = r.fit, r.ag, r.params
+    if fit.lens_model is not None or p.a1_mode != "projective":
+        return None
+    feature = _local_feature(r)
+    if feature is None:
+        return None
+    yy, xx = np.broadcast_arrays(*ag.grid.coords())
+    u0, v0 = logical_coordinates(fit.matrix, None, xx, yy)
+    U, V = u0 + ag.phases[..., 0] / (2 * np.pi), v0 + ag.phases[..., 1] / (2 * np.pi)
+    keep = ag.valid & ~feature & np.isfinite(U) & np.isfinite(V)
+    if keep.sum() < max(64, _LOCAL_KEEP * ag.valid.sum()):
+        return None
+    H = _lsq(np.stack([U[keep], V[keep]], 1), np.stack([xx[keep], yy[keep]], 1))
+    if H is None:
+        return None
+    u1, v1 = logical_coordinates(H, None, xx, yy)
+    d = np.stack([u1 - u0, v1 - v0], axis=-1) * r.carrier_period_mm
+    d = polynomial_detrend(d, np.where(ag.valid, ag.labels, 0), p.detrend_degree, ag.grid.step)
+    phi = plain_phi_eff(d, r.components.jacobian, r)
+    ok = r.trusted & np.isfinite(r.phi_eff_mD) & np.isfinite(phi)
+    if ok.sum() < 64:
+        return None
+    a, b = np.abs(r.phi_eff_mD[ok]), np.abs(r.phi_eff_mD[ok] - phi[ok])
+    (m0, m1), (q0, q1) = (float(np.mean(a)), float(np.mean(b))), (float(np.percentile(a, 95)), float(np.percentile(b, 95)))
+    if max(abs(m0 - m1) - _TAKE_WARN * m1, abs(q0 - q1) - _TAKE_WARN * q1) <= 0 or max(abs(m0 - m1), abs(q0 - q1)) <= 0.01:
+        return None
+    return (
+        f"Direct Method: the homography takes in part of a local feature covering {100 * feature.mean():.0f}% of the "
+        f"analysis grid: this reading is biased by {100 * (m0 - m1) / m1:+.0f}% in mean |phi_eff| ({m0:.3g} mD, {m1:.3g} "
+        f"mD against the homography of the glass around it) and {100 * (q0 - q1) / q1:+.0f}% in p95 |phi_eff| ({q0:.3g} "
+        f"mD, {q1:.3g} mD) - use the Comparative Method, or a view with more glass around the feature"
+    )
+
+
+#: The Direct Method's checks, in the order their warnings are given.
+DIRECT_CHECKS = (n_dependence_warning, rig_floor_warning, lens_power_warning, baseline_take_warning)
