@@ -26,6 +26,7 @@ from scipy import ndimage
 from .analysis_grid import AnalysisGrid
 from .components import Components
 from .homography import HomographyFit, _lsq, logical_coordinates
+from .lens import LensModel
 from .metrics import detrend_increment, masked_gaussian, polynomial_detrend, strain_tensor
 from .params import AnalyzerParams
 
@@ -175,7 +176,7 @@ def rig_floor_warning(r: DirectReading) -> str | None:
 _LENS_SHARE_WARN = 1.0
 
 
-def _lens_as_glass(r: DirectReading, lens) -> np.ndarray | None:
+def _lens_as_glass(r: DirectReading, lens: LensModel) -> np.ndarray | None:
     """phi_eff (mD, analysis grid) of the displacement ``p_c (H^-1(L^-1(r)) - H^-1(r))`` of ``lens`` against the bare
     homography, read as glass by Block A's rule (degree-N detrend per region, :func:`plain_phi_eff` through the
     baseline's Jacobian); None where too few samples beyond the guard band take part."""
