@@ -210,7 +210,9 @@ def refused_lens_warning(r: DirectReading) -> str | None:
     none if the fitted form is the glass's.
     """
     cal, p = r.fit.lens, r.params
-    if cal is None or cal.source != "self" or cal.identifiable or p.a1_mode != "projective":
+    # refused for a radial profile that moves without part of the view (cal.consistency): by the photo's own
+    # test the form is the glass's, not a camera lens's, and Block I's warning says so
+    if cal is None or cal.source != "self" or cal.identifiable or cal.consistency or p.a1_mode != "projective":
         return None
     phi = _lens_as_glass(r, cal.model)
     if phi is None:
