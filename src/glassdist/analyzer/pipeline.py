@@ -74,7 +74,7 @@ from .demodulate import (
     smooth_with_coherence,
     unwrapped_phases,
 )
-from .direct_checks import DirectReading, beyond_guard, lens_power_warning, n_dependence_warning, rig_floor_warning
+from .direct_checks import DIRECT_CHECKS, DirectReading, beyond_guard
 from .homography import HomographyFit, fit_grid_homography
 from .lens import LensCalibration
 from .params import AnalyzerParams, given_settings, load_params
@@ -338,7 +338,7 @@ def _direct_warnings(meas: Measurement, ag: AnalysisGrid, phi_eff_mD: np.ndarray
     assert meas.fit is not None
     r = DirectReading(meas.inputs.params, meas.fit, meas.baseline, meas.inputs.carrier_period_mm, meas.mm_per_px,
                       meas.sigma_mm, meas.distance_m, ag, phi_eff_mD, beyond_guard(ag, meas.guard_px), comp)
-    return tuple(w for w in (n_dependence_warning(r), rig_floor_warning(r), lens_power_warning(r)) if w)
+    return tuple(w for w in (check(r) for check in DIRECT_CHECKS) if w)
 
 
 def evaluate(meas: Measurement, ag: AnalysisGrid, prior: Sequence[str] = ()) -> Evaluation:

@@ -64,10 +64,24 @@ incidence ``P = (m / D) eps``: the transmission channels at the effective distan
 ``L = D / m`` (``D / 2`` with the camera in the board plane), which is how
 :func:`analyze_reflection` runs the Analyzer before turning its strain into ``P``.
 
+The frame. ``P`` is the reflected beam's vergence tensor in the beam's transverse frame
+``(t', s)``, ``t'`` the tangential direction across the beam, identified with ``t`` on the
+image: the camera sees the pane foreshortened by ``cos(theta)`` along ``t``, as the beam width
+is, so the image frame and the beam frame agree up to a scale and the maps' axes are read
+on the image. The tangential, sagittal and cross factors are checked against the exact
+reflection of cylinders at 0-60 deg incidence turned 0-90 deg to the plane of incidence
+(``tests/test_reflection_oblique.py``).
+
 What a single photo cannot give: in the Direct Method a uniform power is a uniform change
 of scale of the board's image, which the homography absorbs, and a power changing linearly
 across the view is, to first order, its keystone (projective) terms; a whole-pane bow is
-read by the Comparative Method (a flat reference surface at the same place).
+read by the Comparative Method (a flat reference surface at the same place). A wave with a
+few periods in view is not orthogonal to those terms either: its map is right but for a
+plane of power. And the Direct Method measures the photo's carrier phase against the
+homography's analytic one, so the demodulation's own small phase error on the board's
+image (of the order of 1e-3 carrier period, which a reference photo cancels) is read as
+power; at the short effective distance of reflection (``D / m``) it is a floor of a few
+tenths of a millidioptre (``tests/test_reflection_oblique.py``: p95 |phi_eff| of a flat pane).
 
 References
 ----------
