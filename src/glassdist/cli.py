@@ -369,8 +369,17 @@ def _in_option_words(result):
     return replace(result, warnings=tuple(option_words(w) for w in result.warnings), bulk=bulk)
 
 
+#: what the figures import (glassdist.report.maps), loaded in the background by analyze
+_OUTPUT_STACKS = ("matplotlib.figure", "matplotlib.backends.backend_agg", "matplotlib.colors", "matplotlib.patches",
+                  "matplotlib.lines", "matplotlib.patheffects", "matplotlib.contour", "matplotlib.legend")
+
+
 def _run_analyze(args) -> int:
     """One run as a straight line: request, inputs, folder, analysis, record, files, console lines, exit code."""
+    from ._lazy import import_in_background
+
+    # the output stage's stacks load on another core while the photo is decoded and analysed
+    import_in_background(*_OUTPUT_STACKS, *(() if args.no_history else ("glassdist.history.models",)))
     with _stage_progress(not args.quiet) as step:
         step("reading the inputs")
         request, inputs, params, images, reference, optics, lens = _read_inputs(args)
