@@ -371,19 +371,24 @@ def _in_option_words(result):
 
 #: what the figures import (glassdist.report.maps), loaded in the background by analyze
 _OUTPUT_STACKS = ("matplotlib.figure", "matplotlib.backends.backend_agg", "matplotlib.colors", "matplotlib.patches",
-                  "matplotlib.lines", "matplotlib.patheffects", "matplotlib.contour", "matplotlib.legend")
+                  "matplotlib.lines", "matplotlib.patheffects", "matplotlib.contour", "matplotlib.legend",
+                  "multiprocessing.connection", "multiprocessing.context")
+
+
+#: what recording the run in the history imports (SQLAlchemy; glassdist.history.models imports nothing of glassdist)
+_HISTORY_STACK = ("glassdist.history.models", "sqlalchemy.orm", "sqlalchemy.dialects.sqlite", "sqlite3")
 
 
 def _run_analyze(args) -> int:
     """One run as a straight line: request, inputs, folder, analysis, record, files, console lines, exit code."""
     from ._lazy import import_in_background
 
-    # the output stage's stacks load on another core while the photo is decoded and analysed
-    import_in_background(*_OUTPUT_STACKS, *(() if args.no_history else ("glassdist.history.models",)))
     with _stage_progress(not args.quiet) as step:
         step("reading the inputs")
         request, inputs, params, images, reference, optics, lens = _read_inputs(args)
-        # imported once the inputs are good: a refused run does not pay for the analysis and output stacks
+        # imported once the inputs are good: a refused run does not pay for the analysis and output stacks;
+        # the output stage's stacks load on another core while the photo is analysed
+        import_in_background(*_OUTPUT_STACKS, *(() if args.no_history else _HISTORY_STACK))
         from .analyzer import FIELDS, analyze, analyze_captures, prepare_reference
         from .analyzer.reflection import reflect_result
         from .report.console import run_lines, warning_lines
@@ -429,7 +434,9 @@ def _run_analyze(args) -> int:
     return record.exit_code
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The ``glassdist`` parser with every sub-command; with ``command='analyze'``, with that one alone (the
+    other commands' modules, imported to register them, are then not imported)."""
     parser = OneLineErrorParser(
         prog="glassdist",
         description="Measure see-through optical distortion of architectural glass (lengths mm, L in m, power mD).",
@@ -438,9 +445,15 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--debug", action="store_true", help="show tracebacks and debug logging")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     _register_analyze(sub)
-    for name in COMMAND_MODULES:
+    for name in COMMAND_MODULES if command != "analyze" else ():
         importlib.import_module(name).register(sub)
     return parser
+
+
+def _command_named(argv: list[str] | None) -> str | None:
+    """The sub-command ``argv`` names: its first word that is not an option (the main parser's options take no value)."""
+    words = sys.argv[1:] if argv is None else argv
+    return next((w for w in words if not w.startswith("-")), None)
 
 
 def exit_status(exc: SystemExit) -> int:
@@ -503,7 +516,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _main(argv: list[str] | None) -> int:
-    parser = build_parser()
+    parser = build_parser(_command_named(argv))
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.debug else logging.ERROR, format="%(levelname)s: %(message)s")
     if not getattr(args, "func", None):

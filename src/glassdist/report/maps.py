@@ -360,14 +360,20 @@ def _draw_in_child(draws: list[Callable[[], Figure3]],
 
 
 def _child_main(draws: list[Callable[[], Figure3]], send: Any) -> None:
+    """The child's work: its figures' PNG bytes (None if one failed: the parent draws them) down ``send``; then it
+    ends at once, flushing nothing the parent's streams held at the fork and running no exit handler of the parent's."""
+    import os
     import pickle
 
     try:
-        payload = pickle.dumps([draw() for draw in draws], protocol=pickle.HIGHEST_PROTOCOL)
-    except BaseException:  # noqa: BLE001 - the parent draws them
-        payload = pickle.dumps(None)
-    send.send_bytes(payload)
-    send.close()
+        try:
+            payload = pickle.dumps([draw() for draw in draws], protocol=pickle.HIGHEST_PROTOCOL)
+        except BaseException:  # noqa: BLE001 - the parent draws them
+            payload = pickle.dumps(None)
+        send.send_bytes(payload)
+        send.close()
+    finally:
+        os._exit(0)
 
 
 def _map_axes(result, acceptance):
