@@ -272,7 +272,7 @@ def table(rows) -> str:
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], allow_abbrev=False)
-    p.add_argument("--sizes", nargs="+", default=["3000x2000", "6000x4000"], help="WxH, px")
+    p.add_argument("--sizes", nargs="*", default=["3000x2000", "6000x4000"], help="WxH, px (none: the Quick start alone)")
     p.add_argument("--pixel-max-mpx", type=float, default=30.0, help="largest image with a --fields pixel row, Mpx")
     p.add_argument("--floor-only", action="store_true", help="only the rfft2 unit and the floor rows")
     p.add_argument("--out", type=Path, help="JSON of the rows")
