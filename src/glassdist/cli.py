@@ -381,7 +381,7 @@ _HISTORY_STACK = ("glassdist.history.models", "sqlalchemy.orm", "sqlalchemy.dial
 
 def _run_analyze(args) -> int:
     """One run as a straight line: request, inputs, folder, analysis, record, files, console lines, exit code."""
-    from ._lazy import import_in_background
+    from ._lazy import import_in_background, wait_background_imports
 
     with _stage_progress(not args.quiet) as step:
         step("reading the inputs")
@@ -394,7 +394,6 @@ def _run_analyze(args) -> int:
         from .report.console import run_lines, warning_lines
         from .storage import open_output_folder, plan_outputs
         from .storage.record import build_record
-        from .storage.writer import write_run
 
         planned = plan_outputs(FIELDS, fields=request.fields, report=request.report, export=request.export,
                                limits=request.limits)
@@ -420,6 +419,11 @@ def _run_analyze(args) -> int:
             # a capture outside the protocol is not judged (exit 2), nothing written
             record = build_record(request, inputs, result)
             step("writing the outputs")
+            # the thread has loaded the figures' stack by now (else this waits for it): no module is imported
+            # by both threads at once (test_cli_first_use)
+            wait_background_imports()
+            from .storage.writer import write_run
+
             summary = write_run(record, folder)
     for line in warning_lines(record, folder.problems):
         print(line, file=sys.stderr)
