@@ -35,8 +35,9 @@ command records its run in a history database of the benchmark's own (``GLASSDIS
   grid's reference photo;
 * ``WxH ... report+export``: the first such command with ``--report --export``.
 
-Each row: the median wall (s), the median ``load + rfft2`` wall of the same case, their ratio,
-the largest peak RSS (MB) and the output folder's size (MB). ``--baseline-src DIR`` runs each
+Each row: the median wall (s), the median CPU time (user + system, the process and its
+children), the median ``load + rfft2`` wall of the same case, their ratio, the largest peak RSS
+(MB) and the output folder's size (MB). ``--baseline-src DIR`` runs each
 command a second time, alternating, with ``PYTHONPATH=DIR`` (another checkout's ``src``): a
 before/after in one sitting::
 
@@ -86,13 +87,14 @@ def _timed(cmd, env=None) -> dict:
     """Wall time (s) and peak RSS (MB) of one process (the largest of it and its children), by /usr/bin/time."""
     with tempfile.NamedTemporaryFile("r", suffix=".time") as t:
         t0 = time.perf_counter()
-        proc = subprocess.run(["/usr/bin/time", "-o", t.name, "-f", "%e %M", *cmd], capture_output=True, text=True,
-                              env=env)
+        proc = subprocess.run(["/usr/bin/time", "-o", t.name, "-f", "%e %M %U %S", *cmd], capture_output=True,
+                              text=True, env=env)
         wall = time.perf_counter() - t0
-        elapsed, kb = t.read().split()[-2:]
+        elapsed, kb, user, system = t.read().split()[-4:]
     if proc.returncode not in (0, 3):
         raise RuntimeError(f"{' '.join(cmd)} exited {proc.returncode}: {proc.stderr[-2000:]}")
-    return {"wall_s": wall, "time_s": float(elapsed), "peak_rss_mb": int(kb) / 1024.0}
+    return {"wall_s": wall, "time_s": float(elapsed), "peak_rss_mb": int(kb) / 1024.0,
+            "cpu_s": float(user) + float(system)}
 
 
 def _rfft2(png: Path) -> dict:
@@ -202,7 +204,7 @@ def _process_case(name, image, command, out: Path, repeat: int, baseline_src) ->
     if baseline_src and BASELINE_CASES and not any(w in name for w in BASELINE_CASES):
         baseline_src = None
     variants = [("", os.environ.get("PYTHONPATH"))] + ([(" (baseline)", str(baseline_src))] if baseline_src else [])
-    unit, walls = [], {v: [] for v, _ in variants}
+    unit, walls, cpu = [], {v: [] for v, _ in variants}, {v: [] for v, _ in variants}
     rss, folder = {v: 0.0 for v, _ in variants}, {}
     for _ in range(repeat):
         unit.append(_timed([sys.executable, "-c", _LOAD_RFFT2, str(image)])["wall_s"])
@@ -214,6 +216,7 @@ def _process_case(name, image, command, out: Path, repeat: int, baseline_src) ->
                 env["PYTHONPATH"] = src
             m = _timed([sys.executable, "-m", "glassdist", *command, "--out", str(out)], env=env)
             walls[v].append(m["wall_s"])
+            cpu[v].append(m["cpu_s"])
             rss[v] = max(rss[v], m["peak_rss_mb"])
             folder[v] = _folder_mb(out)
     shutil.rmtree(out, ignore_errors=True)
@@ -221,7 +224,8 @@ def _process_case(name, image, command, out: Path, repeat: int, baseline_src) ->
     rows = []
     for v, _ in variants:
         w = float(np.median(walls[v]))
-        rows.append({"case": name + v, "wall_s": w, "walls_s": walls[v], "unit_wall_s": u, "unit_walls_s": unit,
+        rows.append({"case": name + v, "wall_s": w, "walls_s": walls[v], "cpu_s": float(np.median(cpu[v])),
+                     "cpus_s": cpu[v], "unit_wall_s": u, "unit_walls_s": unit,
                      "x_load_rfft2": w / u, "peak_rss_mb": rss[v], "folder_mb": folder[v]})
         print(json.dumps(rows[-1]), flush=True)
     return rows
@@ -255,11 +259,11 @@ def bench_processes(sizes, periods, repeat: int, quick_start: bool, baseline_src
 
 def process_table(rows) -> str:
     """The ``--processes`` rows as a table (medians; the unit: one process loading the image and running one rfft2)."""
-    lines = ["| case | wall s (median) | load + rfft2 s (median) | x load + rfft2 | peak RSS MB | output folder MB |",
-             "|---|---|---|---|---|---|"]
+    lines = ["| case | wall s (median) | CPU s (median) | load + rfft2 s (median) | x load + rfft2 | peak RSS MB | "
+             "output folder MB |", "|---|---|---|---|---|---|---|"]
     for r in rows:
-        lines.append(f"| {r['case']} | {r['wall_s']:.2f} | {r['unit_wall_s']:.2f} | {r['x_load_rfft2']:.1f} | "
-                     f"{r['peak_rss_mb']:.0f} | {r['folder_mb']:.1f} |")
+        lines.append(f"| {r['case']} | {r['wall_s']:.2f} | {r['cpu_s']:.2f} | {r['unit_wall_s']:.2f} | "
+                     f"{r['x_load_rfft2']:.1f} | {r['peak_rss_mb']:.0f} | {r['folder_mb']:.1f} |")
     return "\n".join(lines)
 
 
