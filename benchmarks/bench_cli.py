@@ -194,6 +194,8 @@ def make_line_grid(shape, period_px: float, folder: Path) -> tuple[Path, Path]:
 
 #: with --baseline-src: the cases (words of their names) run with it too; empty: every case
 BASELINE_CASES: list[str] = []
+#: with --only: the cases (words of their names) run; empty: every case
+ONLY_CASES: list[str] = []
 
 _LOAD_RFFT2 = ("import sys, numpy as np, cv2\n"
                "x = cv2.imread(sys.argv[1], cv2.IMREAD_GRAYSCALE).astype(np.float32)\nnp.fft.rfft2(x)\n")
@@ -201,6 +203,8 @@ _LOAD_RFFT2 = ("import sys, numpy as np, cv2\n"
 
 def _process_case(name, image, command, out: Path, repeat: int, baseline_src) -> list[dict]:
     """``repeat`` rounds of (load + rfft2, the command, the command with ``baseline_src``): the case's rows."""
+    if ONLY_CASES and not any(w in name for w in ONLY_CASES):
+        return []
     if baseline_src and BASELINE_CASES and not any(w in name for w in BASELINE_CASES):
         baseline_src = None
     variants = [("", os.environ.get("PYTHONPATH"))] + ([(" (baseline)", str(baseline_src))] if baseline_src else [])
@@ -292,11 +296,13 @@ def main(argv=None) -> int:
     p.add_argument("--baseline-src", type=Path, help="with --processes: also each command with PYTHONPATH=this")
     p.add_argument("--baseline-cases", nargs="*", default=[],
                    help="with --baseline-src: only the cases whose name holds one of these words")
+    p.add_argument("--only", nargs="*", default=[], help="with --processes: only the cases whose name holds one of these")
     p.add_argument("--note", default="", help="with --processes: the record's note (the machine, its load)")
     args = p.parse_args(argv)
     sizes = [tuple(int(v) for v in s.split("x")) for s in args.sizes]
     if args.processes:
         BASELINE_CASES[:] = args.baseline_cases
+        ONLY_CASES[:] = args.only
         load = os.getloadavg()
         rows = bench_processes(sizes, args.periods, args.repeat, args.quick_start, args.baseline_src)
         print(process_table(rows))

@@ -188,21 +188,6 @@ def _write_files(record, folder) -> dict:
     return summary
 
 
-def _write_exports(result, out, digests) -> list:
-    """``fields.npz`` and ``tiff/*.tif``, written at once by two threads; their paths.
-
-    Each brings every field to the pixel grid and deflates it (numpy, zlib and the disk release
-    the GIL), so on two cores the pair costs about the larger one. Both are waited for before
-    this returns or raises (a run stopped on one's error takes back the other's files too).
-    """
-    from concurrent.futures import ThreadPoolExecutor
-
-    with ThreadPoolExecutor(max_workers=2, thread_name_prefix="glassdist-export") as pool:
-        npz = pool.submit(write_fields_npz, result, out / "fields.npz", digests=digests)
-        tiff = pool.submit(write_fields_tiff, result, out / "tiff", digests=digests)
-    return [npz.result(), *tiff.result()]
-
-
 def _write_outputs(record, out, digests) -> dict:
     """Every file of the run into ``out``, ``summary.json`` last; ``digests`` collects what was written."""
     result, request, acc = record.result, record.request, record.acceptance
@@ -217,7 +202,8 @@ def _write_outputs(record, out, digests) -> dict:
     figs = run_figures(result, record.inputs.preview, request.limits, heatmaps=True, acceptance=acc)
     files += [atomic_write_bytes(out / f"{stem}.png", png, digests=digests) for stem, _, png in figs]
     if request.export:
-        files += _write_exports(result, out, digests)
+        files += [write_fields_npz(result, out / "fields.npz", digests=digests),
+                  *write_fields_tiff(result, out / "tiff", digests=digests)]
     if request.report:
         html = render_report(result, stats=acc.stats, figures=figs, inputs=record.described_inputs(),
                              verdict=acc.verdict, acceptance=acc, mask_given=request.mask is not None,
