@@ -283,17 +283,18 @@ _COST = {"input": 0.8, "heatmap": 1.0, "axis": 1.0, "map": 0.8, "quality": 0.35,
 
 
 def figure_workers() -> int:
-    """Processes drawing a run's figures: 2 where the process may use two cores and can fork, else 1.
+    """Processes drawing a run's figures: 2 on Linux where the process may use two cores, else 1.
 
     ``GLASSDIST_FIGURE_WORKERS=1`` draws every figure in the calling process (so that a test
     can spy on each plotting call).
     """
     import os
+    import sys
 
     env = os.environ.get("GLASSDIST_FIGURE_WORKERS", "").strip()
     if env:
         return max(1, int(env)) if env.isdigit() else 1
-    if not hasattr(os, "fork"):
+    if not sys.platform.startswith("linux"):  # fork after numpy and OpenCV is safe on Linux; elsewhere one process
         return 1
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     return 2 if cores >= 2 else 1
