@@ -185,3 +185,39 @@ def test_help_and_a_refused_input_load_no_analysis_or_plotting_stack(argv, tmp_p
             f"print(sorted(m for m in {_HEAVY!r} if m in sys.modules))")
     r = subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True, cwd=tmp_path)
     assert r.stdout.strip().splitlines()[-1] == "[]", r.stdout[-500:] + r.stderr[-500:]
+
+
+_IMPORTS_OF = """
+import importlib, json, sys
+import glassdist._lazy as lazy
+from glassdist import cli
+from glassdist.storage import record
+seen = {}
+read = cli._read_inputs
+def read_then_note(args):
+    out = read(args)
+    seen["before"] = set(sys.modules)
+    return out
+def stop(*a, **k):
+    main = set(sys.modules) - seen["before"]  # what the analysis imported, in the main thread
+    before = set(sys.modules)
+    for name in (*cli._OUTPUT_STACKS, *cli._HISTORY_STACK):
+        importlib.import_module(name)
+    print(json.dumps([sorted(main), sorted(set(sys.modules) - before)]))
+    raise SystemExit(0)
+cli._read_inputs, record.build_record = read_then_note, stop
+lazy.import_in_background = lambda *names: None
+cli.main(sys.argv[1:])
+"""
+
+
+def test_the_background_imports_share_no_module_with_the_analysis(pair, tmp_path):
+    """analyze imports the output stage's stacks in a thread while the main thread analyses: no module is imported
+    by both, so neither can wait on an import the other holds."""
+    import json
+
+    r = subprocess.run([sys.executable, "-c", _IMPORTS_OF, *map(str, _analyze(pair, tmp_path / "o"))],
+                       capture_output=True, text=True)
+    main, background = (set(s) for s in json.loads(r.stdout.strip().splitlines()[-1]))
+    assert len(main) > 100 and {"matplotlib.figure", "sqlalchemy.orm"} <= background
+    assert not main & background

@@ -109,6 +109,27 @@ def test_heatmap_caption_speaks_of_trusted_pixels():
         assert np.nanmax(reported) > acc.stats[name]["max_abs"]  # the guard band holds larger values
 
 
+def test_figures_drawn_in_two_processes_are_those_of_one():
+    """The forked second process draws the very bytes, captions and order one process draws; a child that fails
+    leaves its figures to the caller."""
+    import glassdist
+    from glassdist.acceptance.assess import assess
+    from glassdist.report import maps
+    from glassdist.synthetic import synthetic_capture, wave_displacement
+
+    cap = synthetic_capture((240, 320), pitch_mm=8.0, mm_per_px=1.0, displacement=wave_displacement(0.6, 90.0, 25.0))
+    res = glassdist.analyze(cap.image, pitch_mm=8.0, distance_m=10.0, reference=cap.reference)
+    acc = assess(res)
+    kw = dict(limits={"phi_eff": [5.0, 10.0]}, heatmaps=True, acceptance=acc)
+    one = maps.run_figures(res, cap.image, workers=1, **kw)
+    two = maps.run_figures(res, cap.image, workers=2, **kw)
+    assert len(one) == 9 and [f[0] for f in two] == [f[0] for f in one]
+    assert two == one
+    jobs = [(1.0, (lambda i=i: ("f", str(i), b"")) if i != 1 else (lambda: 1 / 0)) for i in range(4)]
+    with pytest.raises(ZeroDivisionError):  # a figure that cannot be drawn fails the run, in either process
+        maps.draw_figures(jobs, workers=2)
+
+
 def test_quality_map_legend_names_each_label_present_with_its_share():
     from glassdist.analyzer import QUALITY_LABELS
 

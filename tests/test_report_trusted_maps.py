@@ -71,6 +71,9 @@ def run(request, tmp_path_factory):
 
     out = tmp_path_factory.mktemp(request.param) / "out"
     with pytest.MonkeyPatch.context() as mp:
+        # every map drawn in this process, where the spies see it (two processes draw the same bytes:
+        # test_report_figures.test_figures_drawn_in_two_processes_are_those_of_one)
+        mp.setenv("GLASSDIST_FIGURE_WORKERS", "1")
         for name in ("plot_channel", "plot_axis", "plot_threshold_mask"):
             mp.setattr(F, name, spy(getattr(F, name)))
         glassdist.write_outputs(res, out, report=True, spec=spec, history=False)

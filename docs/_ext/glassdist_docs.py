@@ -329,6 +329,15 @@ def _nested_table(d: dict) -> str:
 def performance_page() -> str:
     cli = _bench("bench_cli")
     parts = []
+    rec = _record("performance/cli_processes.json")
+    parts += ["## What a user waits for: whole commands against one load + rfft2 process",
+              (f"{rec['cpus']} cores, load average {rec['load_average_before'][0]:g} before the run and "
+               f"{rec['load_average_after'][0]:g} after it (1-minute). Medians (wall; CPU: user + system of the "
+               f"process and its children) of {len(rec['rows'][0]['walls_s'])} "
+               "alternating rounds; the unit: one process that starts Python, loads the image and runs one "
+               "`numpy.fft.rfft2` of it. `(baseline)`: the same command from the checkout the note names. "
+               "The record's note: " + _cell(rec["note"])),
+              cli.process_table(rec["rows"]), _source("performance/cli_processes.json")]
     rec = _record("performance/results.json")
     parts += ["## The analysis in Python (`bench_analyze.py`)", rec["table"].strip(), _source("performance/results.json")]
     rec = _record("performance/cli_results.json")

@@ -8,8 +8,11 @@ child process would load the analysis, plotting and database stacks they never t
 from __future__ import annotations
 
 import importlib
+import threading
 
-__all__ = ["lazy_exports"]
+__all__ = ["lazy_exports", "import_in_background", "wait_background_imports"]
+
+_THREADS: list[threading.Thread] = []
 
 
 def lazy_exports(package: str, homes: dict[str, str]):
@@ -53,3 +56,34 @@ def lazy_exports(package: str, homes: dict[str, str]):
         return sorted(set(namespace) | set(homes))
 
     return __getattr__, __dir__
+
+
+def import_in_background(*modules: str) -> threading.Thread:
+    """Import ``modules`` in a daemon thread while the caller goes on (its numpy, OpenCV and FFT calls
+    release the GIL, so the imports run on another core); returns the thread.
+
+    For third-party stacks that the caller's next steps do not import (matplotlib's figure
+    stack, SQLAlchemy) and leaf modules of glassdist's own that import nothing else of
+    glassdist: two threads importing one module take turns on its import lock, and import
+    cycles across the two threads are thereby kept out. A module that fails to import here
+    is left alone; the caller's own import of it raises as it would have.
+    """
+
+    def run() -> None:
+        for name in modules:
+            try:
+                importlib.import_module(name)
+            except BaseException:  # noqa: BLE001 - the caller's own import reports it
+                return
+
+    thread = threading.Thread(target=run, name="glassdist-imports", daemon=True)
+    thread.start()
+    _THREADS.append(thread)
+    return thread
+
+
+def wait_background_imports() -> None:
+    """Wait for the imports :func:`import_in_background` started (before a fork: a module lock a thread holds
+    at that moment would be held for ever in the child)."""
+    while _THREADS:
+        _THREADS.pop().join()

@@ -373,18 +373,31 @@ def _in_option_words(result):
     return replace(result, warnings=tuple(option_words(w) for w in result.warnings), bulk=bulk)
 
 
+#: what the figures import (glassdist.report.maps), loaded in the background by analyze
+_OUTPUT_STACKS = ("matplotlib.figure", "matplotlib.backends.backend_agg", "matplotlib.colors", "matplotlib.patches",
+                  "matplotlib.lines", "matplotlib.patheffects", "matplotlib.contour", "matplotlib.legend",
+                  "multiprocessing.connection", "multiprocessing.context")
+
+
+#: what recording the run in the history imports (SQLAlchemy; glassdist.history.models imports nothing of glassdist)
+_HISTORY_STACK = ("glassdist.history.models", "sqlalchemy.orm", "sqlalchemy.dialects.sqlite", "sqlite3")
+
+
 def _run_analyze(args) -> int:
     """One run as a straight line: request, inputs, folder, analysis, record, files, console lines, exit code."""
+    from ._lazy import import_in_background, wait_background_imports
+
     with _stage_progress(not args.quiet) as step:
         step("reading the inputs")
         request, inputs, params, images, reference, optics, lens = _read_inputs(args)
-        # imported once the inputs are good: a refused run does not pay for the analysis and output stacks
+        # imported once the inputs are good: a refused run does not pay for the analysis and output stacks;
+        # the output stage's stacks load on another core while the photo is analysed
+        import_in_background(*_OUTPUT_STACKS, *(() if args.no_history else _HISTORY_STACK))
         from .analyzer import FIELDS, analyze, analyze_captures, prepare_reference
         from .analyzer.reflection import reflect_result
         from .report.console import run_lines, warning_lines
         from .storage import open_output_folder, plan_outputs
         from .storage.record import build_record
-        from .storage.writer import write_run
 
         planned = plan_outputs(FIELDS, fields=request.fields, report=request.report, export=request.export,
                                limits=request.limits)
@@ -413,6 +426,11 @@ def _run_analyze(args) -> int:
             # a capture outside the protocol is not judged (exit 2), nothing written
             record = build_record(request, inputs, result)
             step("writing the outputs")
+            # the thread has loaded the figures' stack by now (else this waits for it): no module is imported
+            # by both threads at once (test_cli_first_use)
+            wait_background_imports()
+            from .storage.writer import write_run
+
             summary = write_run(record, folder)
     for line in warning_lines(record, folder.problems):
         print(line, file=sys.stderr)
@@ -427,7 +445,9 @@ def _run_analyze(args) -> int:
     return record.exit_code
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The ``glassdist`` parser with every sub-command; with ``command='analyze'``, with that one alone (the
+    other commands' modules, imported to register them, are then not imported)."""
     parser = OneLineErrorParser(
         prog="glassdist",
         description="Measure see-through optical distortion of architectural glass (lengths mm, L in m, power mD).",
@@ -436,9 +456,15 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--debug", action="store_true", help="show tracebacks and debug logging")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     _register_analyze(sub)
-    for name in COMMAND_MODULES:
+    for name in COMMAND_MODULES if command != "analyze" else ():
         importlib.import_module(name).register(sub)
     return parser
+
+
+def _command_named(argv: list[str] | None) -> str | None:
+    """The sub-command ``argv`` names: its first word that is not an option (the main parser's options take no value)."""
+    words = sys.argv[1:] if argv is None else argv
+    return next((w for w in words if not w.startswith("-")), None)
 
 
 def exit_status(exc: SystemExit) -> int:
@@ -520,7 +546,7 @@ def run_request_json(text: str) -> int:
 
 
 def _main(argv: list[str] | None, record_as: dict | None = None) -> int:
-    parser = build_parser()
+    parser = build_parser(_command_named(argv))
     args = parser.parse_args(argv)
     if record_as is not None:
         args.record_as = record_as

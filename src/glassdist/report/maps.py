@@ -12,8 +12,11 @@ share, the Results table's number.
 
 from __future__ import annotations
 
+import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -24,6 +27,9 @@ from . import figures as F
 
 __all__ = ["MAP_PX", "MapSamples", "draw_overlays", "describe_clipping", "heatmap_axes", "map_samples", "overlay_legend",
            "run_figures"]
+
+#: one figure of a run: (file stem, caption, PNG bytes)
+Figure3 = tuple[str, str, bytes]
 
 #: largest side (samples) of a map drawn: a photo up to this size is drawn pixel for pixel
 MAP_PX = 1200
@@ -107,7 +113,7 @@ def overlay_legend(acceptance, channel) -> list:
 
 
 def _heatmap(name, samples, v, chosen, axes, acceptance):
-    """``(stem, caption, png)`` of one channel's heatmap, with the acceptance overlays."""
+    """``(stem, caption, png)`` of one channel's heatmap, with the acceptance overlays (drawn when called)."""
     extent, to_axes, units, px_axis = axes
     _, label, cmap, signed = F.CHANNEL_STYLES[name]
     field = samples.fields[F.CHANNEL_STYLES[name][0]]
@@ -131,33 +137,36 @@ def _heatmap(name, samples, v, chosen, axes, acceptance):
 
 
 def _surface_figures(result, axes):
-    """Reflection: the front face's height (µm) and slope magnitude (mrad) over the reported region, guard band
-    included (the edge lift lies there: :mod:`glassdist.flatness`); none for a result without them."""
+    """Jobs drawing, in reflection, the front face's height (µm) and slope magnitude (mrad) over the reported
+    region, guard band included (the edge lift lies there: :mod:`glassdist.flatness`); none for a result
+    without them."""
     if "surface_height_um" not in {f.name for f in result.field_specs()}:
         return []
     _, to_axes, units, px_axis = axes
     samples = map_samples(result, ["surface_height_um", "surface_slope_mrad"])
     shown = samples.trusted | samples.guard
     slope = np.hypot(*np.moveaxis(np.asarray(samples.fields["surface_slope_mrad"], float), -1, 0))
-    out = []
-    for stem, field, signed, unit, title, what in (
-            ("surface_height", samples.fields["surface_height_um"], True, "µm", "Surface height Z",
-             "Front-face height Z (away from the camera), detrended at degree N"),
-            ("surface_slope", slope, False, "mrad", "Surface slope |grad Z|",
-             "Front-face slope magnitude |grad Z|, its trend of degree N - 1 removed")):
+
+    def draw(stem, field, signed, unit, title, what) -> Figure3:
         v = shared_limit(field, valid=shown)
         fig, ax = F.plot_channel(field, shown, signed=signed, vmax=v, title=f"{title}, {unit}",
                                  extent=_extent(samples, to_axes), axis_units=units, px_axis=px_axis, colorbar=False)
         fig.colorbar(ax.images[0], ax=ax, label=unit, extend="both" if signed else "max")
         span = f"[-{v:.3g}, {v:.3g}]" if signed else f"[0, {v:.3g}]"
-        out.append((stem, f"{what}, {unit} (glassdist.flatness; the measures are summary.json's flatness); colour "
-                          f"limits {span} {unit}; over the reported region, guard band included (where the edge "
-                          "lift lies).", F.figure_png(fig)))
-    return out
+        return (stem, f"{what}, {unit} (glassdist.flatness; the measures are summary.json's flatness); colour "
+                      f"limits {span} {unit}; over the reported region, guard band included (where the edge "
+                      "lift lies).", F.figure_png(fig))
+
+    return [(_COST["map"], functools.partial(draw, *args)) for args in (
+        ("surface_height", samples.fields["surface_height_um"], True, "µm", "Surface height Z",
+         "Front-face height Z (away from the camera), detrended at degree N"),
+        ("surface_slope", slope, False, "mrad", "Surface slope |grad Z|",
+         "Front-face slope magnitude |grad Z|, its trend of degree N - 1 removed"))]
 
 
 def _quality_figures(result, samples, axes, max_px=900):
-    """The quality map (labels, reduced by striding to at most ``max_px`` a side) and the phi_eff uncertainty map.
+    """Jobs drawing the quality map (labels, reduced by striding to at most ``max_px`` a side) and the phi_eff
+    uncertainty map.
 
     ``axes``: ``(extent, to_axes, units, px_axis)`` of every map (:func:`_map_axes`).
     """
@@ -167,45 +176,52 @@ def _quality_figures(result, samples, axes, max_px=900):
     if "quality" in held:
         q = np.asarray(result.quality)
         k = max(1, -(-max(q.shape) // max_px))
-        fig, _ = F.plot_quality(q[::k, ::k], counts=result.quality_counts(), title="Quality labels", extent=extent,
-                                axis_units=units, px_axis=px_axis)
-        out.append(("quality", "Quality map: every pixel's label (README, quality labels). Statistics, verdicts and "
-                               "the maximum use label 0 only; label 6 is reported but not trusted.", F.figure_png(fig)))
+        labels, counts = q[::k, ::k], result.quality_counts()
+
+        def quality() -> Figure3:
+            fig, _ = F.plot_quality(labels, counts=counts, title="Quality labels", extent=extent, axis_units=units,
+                                    px_axis=px_axis)
+            return ("quality", "Quality map: every pixel's label (README, quality labels). Statistics, verdicts and "
+                               "the maximum use label 0 only; label 6 is reported but not trusted.", F.figure_png(fig))
+        out.append((_COST["quality"], quality))
     if "phi_eff_sigma_mD" in samples.fields:
         sig = samples.fields["phi_eff_sigma_mD"]
         floor = result.noise_floor()["phi_eff_sigma_mD"]["median"]
-        fig, _ = F.plot_channel(sig, samples.trusted, signed=False, vmax=shared_limit(sig, valid=samples.trusted),
-                                cmap="magma", guard=samples.guard,
-                                title=f"standard uncertainty of $\\phi_{{eff}}$, mD\nnoise floor {floor:.3g} mD",
-                                extent=_extent(samples, to_axes), axis_units=units, px_axis=px_axis)
-        out.append(("uncertainty", f"Standard uncertainty of phi_eff from the image noise (phi_eff_sigma_mD), mD; "
+
+        def uncertainty() -> Figure3:
+            fig, _ = F.plot_channel(sig, samples.trusted, signed=False, vmax=shared_limit(sig, valid=samples.trusted),
+                                    cmap="magma", guard=samples.guard,
+                                    title=f"standard uncertainty of $\\phi_{{eff}}$, mD\nnoise floor {floor:.3g} mD",
+                                    extent=_extent(samples, to_axes), axis_units=units, px_axis=px_axis)
+            return ("uncertainty", f"Standard uncertainty of phi_eff from the image noise (phi_eff_sigma_mD), mD; "
                                    f"noise floor (median over the trusted pixels) {floor:.3g} mD. Values of |phi_eff| "
                                    "within about 2 of it are not distinguishable from noise. Trusted pixels only.",
-                    F.figure_png(fig)))
+                    F.figure_png(fig))
+        out.append((_COST["map"], uncertainty))
     return out
 
 
 def _threshold_masks(samples, limits, stats, axes):
-    """One mask per limit of each power channel, titled with the statistics' share (the Results table's number)."""
+    """Jobs drawing one mask per limit of each power channel, titled with the statistics' share (the Results table's
+    number)."""
     extent, to_axes, units, px_axis = axes
-    out = []
-    for name, lims in ((n, v) for n, v in limits.items() if n in F.CHANNEL_STYLES):
-        field = samples.fields[F.CHANNEL_STYLES[name][0]]
-        for lim in lims:
-            share = (stats.get(name) or {}).get(format_limit(lim))
-            fig, ax = F.plot_threshold_mask(field, samples.trusted, limit_mD=lim, name=name,
-                                            extent=_extent(samples, to_axes), axis_units=units, px_axis=px_axis,
-                                            guard=samples.guard, share_percent=share)
-            ax.set_xlim(extent[0], extent[1])
-            ax.set_ylim(extent[2], extent[3])
-            shown = ax.get_title().split(": ", 1)[-1]
-            out.append((f"mask_{name}_{lim:g}mD", f"{name}: pixels with |{name}| > {lim:g} mD in red, {shown} "
-                                                  "(the Results table's share); greys: not judged.",
-                        F.figure_png(fig)))
-    return out
+
+    def mask(name: str, field: np.ndarray, lim: float) -> Figure3:
+        share = (stats.get(name) or {}).get(format_limit(lim))
+        fig, ax = F.plot_threshold_mask(field, samples.trusted, limit_mD=lim, name=name,
+                                        extent=_extent(samples, to_axes), axis_units=units, px_axis=px_axis,
+                                        guard=samples.guard, share_percent=share)
+        ax.set_xlim(extent[0], extent[1])
+        ax.set_ylim(extent[2], extent[3])
+        shown = ax.get_title().split(": ", 1)[-1]
+        return (f"mask_{name}_{lim:g}mD", f"{name}: pixels with |{name}| > {lim:g} mD in red, {shown} "
+                                          "(the Results table's share); greys: not judged.", F.figure_png(fig))
+
+    return [(_COST["mask"], functools.partial(mask, name, samples.fields[F.CHANNEL_STYLES[name][0]], lim))
+            for name, lims in limits.items() if name in F.CHANNEL_STYLES for lim in lims]
 
 
-def run_figures(result, image=None, limits=None, *, heatmaps=True, acceptance=None):
+def run_figures(result, image=None, limits=None, *, heatmaps=True, acceptance=None, workers=None):
     """Render the figures of a run.
 
     Every map draws the pixel-grid fields at the samples of :func:`map_samples` (every pixel
@@ -229,6 +245,8 @@ def run_figures(result, image=None, limits=None, *, heatmaps=True, acceptance=No
         Zones and numbered worst regions drawn on the heatmaps, which then have
         millimetre axes and the colour limits it chose, and the statistics whose
         shares the masks state (:mod:`glassdist.acceptance`).
+    workers : int, optional
+        Processes drawing the figures (:func:`draw_figures`); default :func:`figure_workers`.
 
     Returns
     -------
@@ -243,7 +261,7 @@ def run_figures(result, image=None, limits=None, *, heatmaps=True, acceptance=No
     samples = map_samples(result, [n for n in dict.fromkeys(names) if n in held])
     stats = acceptance.stats if acceptance is not None else {}
     eff, shear = samples.fields["phi_eff_mD"], samples.fields["phi_shear_mD"]
-    out = []
+    jobs = []  # (relative cost, draw() -> (stem, caption, png)), in report order
     vmax = shared_limit(eff, shear, valid=samples.trusted)
     vmaxes = dict(acceptance.colour_limits) if acceptance is not None else {}
     axes = _map_axes(result, acceptance)
@@ -253,31 +271,139 @@ def run_figures(result, image=None, limits=None, *, heatmaps=True, acceptance=No
 
         small = preview(image)
         region = cv2.resize(np.asarray(result.valid, np.uint8), small.shape[::-1], interpolation=cv2.INTER_NEAREST)
-        fig, _ = F.plot_input(small, region.astype(bool), extent=extent, axis_units=units, px_axis=px_axis)
-        out.append(("input_region", "Input photograph; the analysed region is outlined in orange.", F.figure_png(fig)))
+
+        def input_region() -> Figure3:
+            fig, _ = F.plot_input(small, region.astype(bool), extent=extent, axis_units=units, px_axis=px_axis)
+            return "input_region", "Input photograph; the analysed region is outlined in orange.", F.figure_png(fig)
+        jobs.append((_COST["input"], input_region))
     for name in ("phi_eff", "phi_shear") if heatmaps else ():
-        out.append(_heatmap(name, samples, vmaxes.get(name, vmax), bool(vmaxes), axes, acceptance))
+        jobs.append((_COST["heatmap"], functools.partial(_heatmap, name, samples, vmaxes.get(name, vmax), bool(vmaxes),
+                                                         axes, acceptance)))
     if heatmaps and "axis_deg" in samples.fields:
-        fig, _ = F.plot_axis(samples.fields["axis_deg"], shear, samples.trusted, extent=_extent(samples, to_axes),
-                             axis_units=units, px_axis=px_axis, guard=samples.guard)
-        out.append(("axis", "Astigmatism axis (direction of largest stretch), degrees from +x towards +y (down), "
+        def axis() -> Figure3:
+            fig, _ = F.plot_axis(samples.fields["axis_deg"], shear, samples.trusted, extent=_extent(samples, to_axes),
+                                 axis_units=units, px_axis=px_axis, guard=samples.guard)
+            return ("axis", "Astigmatism axis (direction of largest stretch), degrees from +x towards +y (down), "
                             "over the trusted pixels; white where phi_shear is too small for the axis to be "
-                            "meaningful.", F.figure_png(fig)))
-    out += _quality_figures(result, samples, axes)
-    out += _surface_figures(result, axes)
-    out += _threshold_masks(samples, limits, stats, axes)
-    fig = Figure(figsize=(10, 3.8))
-    fig.subplots_adjust(left=0.09, right=0.98, bottom=0.14, top=0.9, wspace=0.3)
-    for ax, name in zip(fig.subplots(1, 2), ("phi_eff", "phi_shear")):
-        _, label, _, signed = F.CHANNEL_STYLES[name]
-        F.plot_histogram(samples.fields[F.CHANNEL_STYLES[name][0]], samples.trusted, signed=signed,
-                         limits_mD=limits.get(name, ()), ax=ax, title=label, weight=samples.step ** 2,
-                         max_abs_mD=stats.get(name, {}).get("max_abs"))
-    out.append(("histograms", "Histograms over the trusted pixels (quality label 0, the statistics' pixels"
+                            "meaningful.", F.figure_png(fig))
+        jobs.append((_COST["axis"], axis))
+    jobs += _quality_figures(result, samples, axes)
+    jobs += _surface_figures(result, axes)
+    jobs += _threshold_masks(samples, limits, stats, axes)
+
+    def histograms() -> Figure3:
+        fig = Figure(figsize=(10, 3.8))
+        fig.subplots_adjust(left=0.09, right=0.98, bottom=0.14, top=0.9, wspace=0.3)
+        for ax, name in zip(fig.subplots(1, 2), ("phi_eff", "phi_shear")):
+            _, label, _, signed = F.CHANNEL_STYLES[name]
+            F.plot_histogram(samples.fields[F.CHANNEL_STYLES[name][0]], samples.trusted, signed=signed,
+                             limits_mD=limits.get(name, ()), ax=ax, title=label, weight=samples.step ** 2,
+                             max_abs_mD=stats.get(name, {}).get("max_abs"))
+        return ("histograms", "Histograms over the trusted pixels (quality label 0, the statistics' pixels"
                               + ("" if samples.step == 1 else f"; every {samples.step}th pixel, weighted by "
                                  f"{samples.step ** 2}") + "); axis range: the statistics' largest "
-                              "|value| (or a specification limit beyond it, dashed red).", F.figure_png(fig)))
-    return out
+                              "|value| (or a specification limit beyond it, dashed red).", F.figure_png(fig))
+    jobs.append((_COST["histograms"], histograms))
+    return draw_figures(jobs, workers=figure_workers() if workers is None else workers)
+
+
+#: relative drawing cost of each kind of figure (process time, 1 Mpx example): how jobs are shared between processes
+_COST = {"input": 0.8, "heatmap": 1.0, "axis": 1.0, "map": 0.8, "quality": 0.35, "mask": 0.6, "histograms": 0.5}
+
+
+def figure_workers() -> int:
+    """Processes drawing a run's figures: 2 on Linux where the process may use two cores, else 1.
+
+    ``GLASSDIST_FIGURE_WORKERS=1`` draws every figure in the calling process (so that a test
+    can spy on each plotting call).
+    """
+    import os
+    import sys
+
+    env = os.environ.get("GLASSDIST_FIGURE_WORKERS", "").strip()
+    if env:
+        return max(1, int(env)) if env.isdigit() else 1
+    if not sys.platform.startswith("linux"):  # fork after numpy and OpenCV is safe on Linux; elsewhere one process
+        return 1
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return 2 if cores >= 2 else 1
+
+
+def draw_figures(jobs: list[tuple[float, Callable[[], Figure3]]], *, workers: int = 1) -> list[Figure3]:
+    """Run the figure ``jobs`` (``(cost, draw)``, ``draw() -> (stem, caption, png)``); their results in job order.
+
+    With ``workers`` 2, a forked child draws about half of them (by cost, the largest first,
+    each to the process with less so far), the caller the rest, at once: the child has the
+    caller's memory as it was (nothing is sent to it) and sends back only its PNG bytes.
+    Both processes run the same code on the same arrays, so the bytes are those one process
+    would draw (``test_report_figures``). Should the child fail or die, the caller draws its
+    share itself: a run never loses a figure to the second process.
+    """
+    if workers < 2 or len(jobs) < 3:
+        return [draw() for _, draw in jobs]
+    order = sorted(range(len(jobs)), key=lambda i: -jobs[i][0])
+    load, share = [0.0, 0.0], ([], [])  # type: tuple[list[float], tuple[list[int], list[int]]]
+    for i in order:
+        k = 0 if load[0] <= load[1] else 1
+        share[k].append(i)
+        load[k] += jobs[i][0]
+    mine, theirs = sorted(share[0]), sorted(share[1])
+    drawn_there, drawn_here = _draw_in_child([jobs[i][1] for i in theirs], lambda: [jobs[i][1]() for i in mine])
+    done = {**dict(zip(theirs, drawn_there)), **dict(zip(mine, drawn_here))}
+    return [done[i] for i in range(len(jobs))]
+
+
+def _draw_in_child(draws: list[Callable[[], Figure3]],
+                   in_parent: Callable[[], list[Figure3]]) -> tuple[list[Figure3], list[Figure3]]:
+    """``draws`` run in a forked child while ``in_parent()`` runs here; the child's results (or, failing, ours)
+    in order, followed by ``in_parent()``'s."""
+    import multiprocessing
+    import pickle
+
+    from .._lazy import wait_background_imports
+
+    wait_background_imports()  # a module lock held by a thread at the fork would be held for ever in the child
+    ctx = multiprocessing.get_context("fork")
+    receive, send = ctx.Pipe(duplex=False)
+    child: Any = ctx.Process(target=_child_main, args=(draws, send), daemon=True)
+    try:
+        child.start()
+    except Exception:  # noqa: BLE001 - no second process here (none left, or a daemonic one's): drawn here
+        child = None
+    send.close()
+    theirs = None
+    try:
+        ours = in_parent()
+    finally:  # the child is waited for, even when a figure of ours failed
+        if child is not None:
+            try:
+                theirs = pickle.loads(receive.recv_bytes())
+            except (EOFError, OSError, pickle.UnpicklingError):
+                theirs = None
+            child.join()
+            if child.exitcode != 0 or not isinstance(theirs, list) or len(theirs) != len(draws):
+                theirs = None
+        receive.close()
+    if theirs is None:  # the child could not draw them: this process does
+        theirs = [draw() for draw in draws]
+    return theirs, ours
+
+
+def _child_main(draws: list[Callable[[], Figure3]], send: Any) -> None:
+    """The child's work: its figures' PNG bytes (None if one failed: the parent draws them) down ``send``; then it
+    ends at once, flushing nothing the parent's streams held at the fork and running no exit handler of the parent's."""
+    import os
+    import pickle
+
+    try:
+        try:
+            payload = pickle.dumps([draw() for draw in draws], protocol=pickle.HIGHEST_PROTOCOL)
+        except BaseException:  # noqa: BLE001 - the parent draws them
+            payload = pickle.dumps(None)
+        send.send_bytes(payload)
+        send.close()
+    finally:
+        os._exit(0)
 
 
 def _map_axes(result, acceptance):
@@ -334,6 +460,10 @@ def heatmap_axes(frame, mm_per_px, shape):
     return (float(x0), float(x1), float(y1), float(y0)), to_axes, label
 
 
+#: samples (largest side) of the zone masks outlined on a map: about its drawn width (440 px), so an outline
+#: is placed to within half a drawn pixel
+_CONTOUR_PX = 512
+
 _ZONE_COLOURS = ("black", "tab:orange", "tab:purple", "tab:brown", "tab:pink", "tab:olive")
 
 
@@ -353,13 +483,17 @@ def draw_overlays(ax, acc, channel, to_axes, extent):
 
     halo = [pe.withStroke(linewidth=2.5, foreground="white")]
     h, w = acc.frame.shape
-    step = max(1, int(max(h, w) // 1000))  # contours of a decimated mask: enough for a figure
+    # contours of a decimated mask, at about the figure's own resolution (a map is drawn some 440 px wide)
+    step = max(1, int(max(h, w) // _CONTOUR_PX))
+    # both frames are axis-aligned scalings of the pixel grid: X depends on x alone, Y on y alone
+    xs, ys = np.arange(0, w, step, dtype=float), np.arange(0, h, step, dtype=float)
+    X = np.asarray(to_axes(xs, np.zeros_like(xs))[0], float)
+    Y = np.asarray(to_axes(np.zeros_like(ys), ys)[1], float)
     for i, (name, m) in enumerate(acc.masks.items()):
         if not m.any():
             continue
         colour = _ZONE_COLOURS[i % len(_ZONE_COLOURS)]
-        sub = m[::step, ::step].astype(float)
-        X, Y = to_axes(*np.meshgrid(np.arange(0, w, step), np.arange(0, h, step)))
+        sub = m[::step, ::step].astype(np.float32)
         ax.contour(X, Y, sub, levels=[0.5], colors=[colour], linewidths=1.2, linestyles="--")
         yy, xx = np.nonzero(m[::step, ::step])
         k = np.argmin(yy * w + xx)  # label at the zone's top-left-most pixel
