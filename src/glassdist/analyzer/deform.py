@@ -424,8 +424,8 @@ def follow_local_grid(spectrum: F.Spectrum, img: np.ndarray, refm: ReferenceMode
 
     ``spectrum``: the photo's spectrum (:attr:`Demodulation.spectrum`, the one FFT of the photo);
     ``img``: the photo (its photo passes deform it). Returns None when no pass is needed
-    (``deformation_passes`` 0, or the one-pass local frequency within ``deformation_min_deviation``
-    of the carrier), else an :class:`F5Result`: the demodulation whose phase is ``predictor +
+    (``deformation_passes`` 0, or the one-pass local frequency, the demodulation's blur divided out
+    (:func:`compensated_deviation`), within ``deformation_min_deviation`` of the carrier), else an :class:`F5Result`: the demodulation whose phase is ``predictor +
     residual`` (transfer in :mod:`~glassdist.analyzer.transfer`), on a grid fine enough for the
     reach (:func:`deformation_grid`), and the region the predictor was measured on: the one-pass
     region grown by up to ``deformation_growth_passes`` passes (:func:`grow`), then up to
