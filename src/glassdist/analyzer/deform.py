@@ -74,9 +74,11 @@ from .demodulate import (
 from .metrics import masked_gaussian
 from .params import AnalyzerParams
 from .region import PHASE_RESIDUE, Region, grid_seen
+from .transfer import MIN_RESPONSE, gaussian_response
 
 __all__ = [
-    "F5Result", "deformation_grid", "deformed_photo", "displacement_to_phase", "fill_nearest", "follow_local_grid",
+    "F5Result", "compensated_deviation", "deformation_grid", "deformed_photo", "displacement_to_phase", "fill_nearest",
+    "follow_local_grid",
     "grow", "low_passed", "off_frame", "own_phasors", "own_shift", "phase_to_displacement_px", "photo_passes",
     "photo_spline", "rms_update_periods", "to_frame", "to_grid", "warped_heterodyne", "warped_reference",
 ]
@@ -415,6 +417,42 @@ def _read(z: np.ndarray, maps: _Maps) -> np.ndarray:
 
 
 
+def compensated_deviation(phases: np.ndarray, valid: np.ndarray, carriers: F.CarrierPair, step: tuple[float, float],
+                          blur_px2: np.ndarray) -> float:
+    """The local grid frequency's departure from the carrier with the demodulation's own blur divided out.
+
+    :func:`~glassdist.analyzer.demodulate.frequency_deviation` (99th percentile of
+    ``|grad phi_i| / (2 pi |f_i|)``) of the one-pass phases (h, w, 2), rad, on a grid of
+    ``step`` px, after dividing each phase's spectrum by the response ``G_i`` of the
+    Gaussian stages it went through (``blur_px2[i]``, spatial covariance px^2,
+    :func:`~glassdist.analyzer.demodulate.demodulation_blur_px2`) where ``G_i`` is at least
+    :data:`~glassdist.analyzer.transfer.MIN_RESPONSE` (what Block A's compensation restores)
+    and discarding it beyond. The one-pass phase of a wave a few carrier periods long is
+    attenuated by ``G_i`` while the non-linearity of the demodulation follows the photo's own
+    local frequency: F5's trigger reads the field the report will carry, not the attenuated
+    one. Each phase is first detrended by its least-squares plane over ``valid`` and extended
+    by mirror symmetry (the FFT's wrap-around then adds no step at the border); samples
+    outside ``valid`` take the nearest valid one's phase.
+    """
+    if valid.sum() < 16:
+        return 0.0
+    h, w = valid.shape
+    filled = fill_nearest(np.nan_to_num(phases.astype(np.float64)), valid)
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
+    A = np.stack([np.ones(int(valid.sum())), xx[valid], yy[valid]], 1)
+    fy = np.fft.fftfreq(2 * h, d=step[0])[:, None]
+    fx = np.fft.rfftfreq(2 * w, d=step[1])[None, :]
+    out = np.empty(filled.shape)
+    for i in range(2):
+        c = np.linalg.lstsq(A, filled[..., i][valid], rcond=None)[0]
+        plane = c[0] + c[1] * xx + c[2] * yy
+        ext = np.pad(filled[..., i] - plane, ((0, h), (0, w)), mode="symmetric")
+        g = gaussian_response(blur_px2[i], fy, fx)
+        gain = np.where(g >= MIN_RESPONSE, 1.0 / np.maximum(g, MIN_RESPONSE), 0.0)
+        out[..., i] = np.fft.irfft2(np.fft.rfft2(ext) * gain, s=ext.shape)[:h, :w] + plane
+    return frequency_deviation(out, valid, (carriers.k1, carriers.k2), step)
+
+
 # --------------------------------------------------------------------------- the F5 loop
 
 
@@ -468,8 +506,8 @@ def follow_local_grid(spectrum: F.Spectrum, img: np.ndarray, refm: ReferenceMode
 
     ``spectrum``: the photo's spectrum (:attr:`Demodulation.spectrum`, the one FFT of the photo);
     ``img``: the photo (its photo passes deform it). Returns None when no pass is needed
-    (``deformation_passes`` 0, or the one-pass local frequency within ``deformation_min_deviation``
-    of the carrier), else an :class:`F5Result`: the demodulation whose phase is ``predictor +
+    (``deformation_passes`` 0, or the one-pass local frequency, the demodulation's blur divided out
+    (:func:`compensated_deviation`), within ``deformation_min_deviation`` of the carrier), else an :class:`F5Result`: the demodulation whose phase is ``predictor +
     residual`` (transfer in :mod:`~glassdist.analyzer.transfer`), on a grid fine enough for the
     reach (:func:`deformation_grid`), and the region the predictor was measured on: the one-pass
     region grown by up to ``deformation_growth_passes`` passes (:func:`grow`), then up to
@@ -480,9 +518,10 @@ def follow_local_grid(spectrum: F.Spectrum, img: np.ndarray, refm: ReferenceMode
     ks = demod.carriers
     if p.deformation_passes == 0 or img is None or region.n == 0:
         return None
-    if frequency_deviation(phases, region.valid, (ks.k1, ks.k2), demod.grid.step) <= p.deformation_min_deviation:
-        return None
     covs = demod.covariances
+    if compensated_deviation(phases, region.valid, ks, demod.grid.step,
+                             demodulation_blur_px2(ks, covs, p)) <= p.deformation_min_deviation:
+        return None
     period = max(ks.k1.period_px, ks.k2.period_px)
     grid = deformation_grid(demod.grid, p.deformation_max_deviation, min(ks.k1.period_px, ks.k2.period_px), p.decimation)
     own = None if refm is None else np.stack(refm.baseband, axis=-1)  # the reference's own phase (its lens, its print)

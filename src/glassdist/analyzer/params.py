@@ -150,7 +150,8 @@ class AnalyzerParams(BaseModel):
     deformation_min_deviation: float = Field(
         0.2, ge=0, le=1.0,
         description="F5: the passes run only where the one-pass local grid frequency departs from the carrier by more "
-        "than this fraction of |f| (99th percentile; below it the one-pass demodulation is linear)",
+        "than this fraction of |f| (99th percentile, the demodulation's blur divided out; below it the one-pass "
+        "demodulation is linear)",
     )
     deformation_max_deviation: float = Field(
         0.75, gt=0, le=1.5,

@@ -360,8 +360,8 @@ def evaluate(meas: Measurement, ag: AnalysisGrid, prior: Sequence[str] = ()) -> 
         "phi_total_mD": ch.phi_total_mD, "displacement_detrended_mm": ch.displacement_detrended_mm,
         "axis_deg": ch.axis_deg,
     }
-    fields.update(field_uncertainty(ag.report, ag.transfer, meas.phase_noise, ch.strain, ev.a1,
-                                    meas.sigma_mm / meas.mm_per_px, meas.distance_m))
+    fields.update(field_uncertainty(ag.report, ag.transfer, meas.phase_noise, ch.strain, ev.a1, meas.sigma_mm / meas.mm_per_px,
+                                    meas.distance_m, (ag.labels, p.detrend_degree, ag.grid.step)))
     valid_full, idx, w_region = reported_region(fields, ag, meas.inputs.mask, meas.margin_px[1])
     warn += w_region + trusted_warnings(meas.quality, meas.label_grid, meas.inputs.mask)
     return Evaluation(ag, fields, valid_full, idx, comp, warn)

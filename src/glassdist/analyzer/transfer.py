@@ -172,13 +172,16 @@ class InstrumentTransfer:
     def residual_cov_px2(self, component: int, sigma_px: float) -> np.ndarray:
         """Covariance of the Gaussian still to apply, px^2.
 
-        One pass: ``sigma^2 I - Sigma_i`` clipped to be positive. After F5 the demodulation's
-        response is not Gaussian and :meth:`component_correction` divides it out: the whole
-        Gaussian of the sigma reached (:meth:`effective_sigma_px`) remains to apply.
+        One pass: ``s^2 I - Sigma_i`` with ``s`` the sigma reached (:meth:`effective_sigma_px`,
+        at least the largest blur of either component, so the difference is positive and every
+        direction and component carries the same Gaussian of ``s``, the one the result states).
+        After F5 the demodulation's response is not Gaussian and :meth:`component_correction`
+        divides it out: the whole Gaussian of ``s`` remains to apply.
         """
+        s = self.effective_sigma_px(sigma_px)
         if self.total_passes > 1:
-            return self.effective_sigma_px(sigma_px) ** 2 * np.eye(2)
-        w, V = np.linalg.eigh(sigma_px**2 * np.eye(2) - np.asarray(self.gaussian_px2[component], float))
+            return s**2 * np.eye(2)
+        w, V = np.linalg.eigh(s**2 * np.eye(2) - np.asarray(self.gaussian_px2[component], float))
         return (V * np.clip(w, 0.0, None)) @ V.T
 
     def correction(self, fy: np.ndarray, fx: np.ndarray) -> np.ndarray:
