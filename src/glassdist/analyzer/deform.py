@@ -504,16 +504,16 @@ def follow_local_grid(spectrum: F.Spectrum, img: np.ndarray, refm: ReferenceMode
                       contrast: Callable[[F.SamplingGrid], np.ndarray]) -> F5Result | None:
     """F5: iterative deformation of the reference (module docstring).
 
-    ``spectrum``: the photo's spectrum (:attr:`Demodulation.spectrum`, the one FFT of the photo);
-    ``img``: the photo (its photo passes deform it). Returns None when no pass is needed
-    (``deformation_passes`` 0, or the one-pass local frequency, the demodulation's blur divided out
-    (:func:`compensated_deviation`), within ``deformation_min_deviation`` of the carrier), else an :class:`F5Result`: the demodulation whose phase is ``predictor +
-    residual`` (transfer in :mod:`~glassdist.analyzer.transfer`), on a grid fine enough for the
-    reach (:func:`deformation_grid`), and the region the predictor was measured on: the one-pass
-    region grown by up to ``deformation_growth_passes`` passes (:func:`grow`), then up to
-    ``deformation_passes`` passes to converge. ``contrast(grid)``: the photo's local contrast on
-    ``grid`` (:func:`~glassdist.analyzer.region.local_contrast`); the growth enters only where it
-    shows a grid (:func:`~glassdist.analyzer.region.grid_seen`).
+    ``spectrum``: the photo's spectrum (:attr:`Demodulation.spectrum`, the one FFT of the photo); ``img``: the
+    photo (its photo passes deform it). Returns None when no pass is needed (``deformation_passes`` 0, or the
+    one-pass local frequency, the demodulation's blur divided out (:func:`compensated_deviation`), within
+    ``deformation_min_deviation`` of the carrier), else an :class:`F5Result`: the demodulation whose phase is
+    ``predictor + residual`` (transfer in :mod:`~glassdist.analyzer.transfer`), on a grid fine enough for the
+    reach (:func:`deformation_grid`), and the region the predictor was measured on: the one-pass region grown by
+    up to ``deformation_growth_passes`` passes (:func:`grow`), then up to ``deformation_passes`` passes to
+    converge. ``contrast(grid)``: the photo's local contrast on ``grid``
+    (:func:`~glassdist.analyzer.region.local_contrast`); the growth enters only where it shows a grid
+    (:func:`~glassdist.analyzer.region.grid_seen`).
     """
     ks = demod.carriers
     if p.deformation_passes == 0 or img is None or region.n == 0:
