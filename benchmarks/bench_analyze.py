@@ -357,7 +357,8 @@ def bench(sizes, peers=True, full_res_check=None):
                     r["mpx_per_s"] = row["megapixels"] / r["seconds"]
                 row["openlsa"] = r
             if full_res_check and tuple(full_res_check) == tuple(shape):
-                row["direct_full_resolution"] = _run_worker(dict(base, kind="direct", params={"decimation": 1, "analysis_block": 1}))
+                row["direct_full_resolution"] = _run_worker(
+                    dict(base, kind="direct", params={"decimation": 1, "analysis_block": 1}))
                 row["comparative_full_resolution"] = _run_worker(
                     dict(base, kind="comparative", params={"decimation": 1, "analysis_block": 1}))
         rows.append(row)

@@ -39,8 +39,8 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 
-from _fcd import fcd_carriers, fcd_displacement
-from _flow import dis_displacement, farneback_displacement
+from _fcd import fcd_carriers, fcd_displacement  # noqa: E402 (the benchmarks' own helpers, after sys.path)
+from _flow import dis_displacement, farneback_displacement  # noqa: E402
 
 TOL_PERIODS = 0.1
 

@@ -34,8 +34,8 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _data import REAL_PHOTOS as DATA
-from _data import real_photos
+from _data import REAL_PHOTOS as DATA  # noqa: E402 (the benchmarks' own helpers, after sys.path)
+from _data import real_photos  # noqa: E402
 
 
 def _glassdist(*args):

@@ -112,7 +112,8 @@ def table(rows: list[dict]) -> str:
             cells += [f"{r[k][ch]:.4f}" if ch in r[k] else "—" for k in cols]
             cells.append("—" if r["asymmetry"] is None else f"{100 * r['asymmetry']:.2f} %")
             lines.append("| " + " | ".join(cells) + " |")
-    lines += ["", "| scene | method | pixels: growth off | growth on | shared | added | mirror |", "|---|---|---|---|---|---|---|"]
+    lines += ["", "| scene | method | pixels: growth off | growth on | shared | added | mirror |",
+              "|---|---|---|---|---|---|---|"]
     lines += [f"| {r['scene']} | {r['method']} | {r['pixels']['growth_off']} | {r['pixels']['all']} | {r['pixels']['shared']} | "
               f"{r['pixels']['added']} | {r['pixels']['mirror']} |" for r in rows]
     return "\n".join(lines)

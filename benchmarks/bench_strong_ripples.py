@@ -36,8 +36,7 @@ ROOT = HERE.parent
 
 
 def _scene(n: float | None, peak_pitch: float, dome_pitch: float | None, scale: float):
-    from glassdist.experiments.transfer import _amplitude_for, _ripple_scene
-    from glassdist.experiments.transfer import RIPPLE_AMPLITUDE_PERIODS
+    from glassdist.experiments.transfer import RIPPLE_AMPLITUDE_PERIODS, _amplitude_for, _ripple_scene
     from glassdist.render import landing_points
     from glassdist.scene import load_scene
 

@@ -126,7 +126,8 @@ def matched(u: np.ndarray, res) -> np.ndarray:
     import scipy.fft as sfft
 
     from glassdist.analyzer import deform as D
-    from glassdist.analyzer.demodulate import covariances as _covariances, demodulation_blur_px2 as _demodulation_blur_px2
+    from glassdist.analyzer.demodulate import covariances as _covariances
+    from glassdist.analyzer.demodulate import demodulation_blur_px2 as _demodulation_blur_px2
     from glassdist.analyzer.transfer import InstrumentTransfer
 
     ks = res.carriers
@@ -267,7 +268,8 @@ def run(image: Path, reference: Path, params: dict) -> dict:
     dropped_by = {LABELS[int(k)]: float(c / max(dropped.sum(), 1)) for k, c in zip(*np.unique(q, return_counts=True))}
     return {"period_px": period, "analysed": float(valid.mean()), "inner_share": float(inner.sum() / max(valid.sum(), 1)),
             "farneback": FARNEBACK, "agree_area": float(both.mean()), "coverage": cov,
-            "inside": inside, "accuracy": acc, "parts": int(n_parts), "dropped_by_label": dropped_by, "glassdist_s": t_gd, "methods": rows,
+            "inside": inside, "accuracy": acc, "parts": int(n_parts), "dropped_by_label": dropped_by, "glassdist_s": t_gd,
+            "methods": rows,
             "warnings": list(res.warnings), "quality_counts": res.quality_counts(),
             "border_bands": border_bands(res, warped_by, img)}
 

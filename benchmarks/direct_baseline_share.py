@@ -1,4 +1,6 @@
-"""How much of a Direct Method reading is its homography's: the accuracy scenes read with Block I's own A1 Jacobian and with the glass-less grid's.
+"""How much of a Direct Method reading is its homography's.
+
+The accuracy scenes read with Block I's own A1 Jacobian and with the glass-less grid's.
 
 The Direct Method takes its gradients with respect to backdrop mm through the Jacobian of the
 homography Block I fits on the photo itself, through the glass. Where the glass stretches the
@@ -12,14 +14,16 @@ homographies' area scales at the view's centre. ``--also`` adds Direct runs with
 inputs replaced: ``reference-carriers`` (F1's carriers of the glass-less reference instead of the
 photo's own) and ``zero-offsets`` (every part of the region joins the baseline at the integer
 offset its unwrapping gave it, instead of Block I's choice: the offsets read from the largest part's
-homography, or, where those are ambiguous, the largest part alone); ``a+b`` replaces both. ``--ripple PERIODS SIGMA`` does the same for one
+homography, or, where those are ambiguous, the largest part alone); ``a+b`` replaces both.
+``--ripple PERIODS SIGMA`` does the same for one
 cell of ``benchmarks/bench_strong_ripples.py`` (its ratios over the interior, through the stack and
 through the independent evaluation). A diagnostic, not a method: a user of the Direct Method has
 no reference::
 
     python benchmarks/direct_baseline_share.py [--scenes wavy_slab_A0.5,biconvex_lens_p48,biconvex_lens_p64]
     python benchmarks/direct_baseline_share.py --scenes "" --ripple 4 3
-    python benchmarks/direct_baseline_share.py --scenes wavy_slab_A0.75 --also reference-carriers,zero-offsets,reference-carriers+zero-offsets
+    python benchmarks/direct_baseline_share.py --scenes wavy_slab_A0.75 \
+        --also reference-carriers,zero-offsets,reference-carriers+zero-offsets
 """
 
 from __future__ import annotations

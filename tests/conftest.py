@@ -159,7 +159,8 @@ def real_pane_outputs(tmp_path_factory):
 #: with (the project's own example specification is written for its rendered example, examples/factory).
 REAL_PAIR_SPEC = {
     "name": "Example line acceptance (Comparative, L = 1 m, 5 mm checkerboard, sigma 2 periods, N = 2)",
-    "description": "Area-change and shape-change limits on the detrended local distortion, tighter in the vision area than along the edge.",
+    "description": ("Area-change and shape-change limits on the detrended local distortion, tighter in the vision area "
+                    "than along the edge."),
     "protocol": {
         "method": "comparative",
         "distance_m": 1.0,

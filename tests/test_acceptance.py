@@ -7,12 +7,11 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from glassdist.errors import InputError
 from glassdist.acceptance.regions import all_worst_regions, regions_csv, worst_regions
 from glassdist.acceptance.spec import Protocol, Spec, Zone, check_capture, resolve_protocol, spec_limits, spec_verdict
 from glassdist.acceptance.stats import result_statistics
-from glassdist.acceptance.zones import pane_frame, pane_frame_from_corners, pane_frame_from_region, zone_masks
-from glassdist.acceptance.zones import zone_statistics
+from glassdist.acceptance.zones import pane_frame, pane_frame_from_corners, pane_frame_from_region, zone_masks, zone_statistics
+from glassdist.errors import InputError
 
 # ----------------------------------------------------------------- protocol
 

@@ -8,10 +8,10 @@ of the displacement and of phi, and the reporting smoothing width. Images are sm
 
 import numpy as np
 import pytest
-from _truth import axis_difference_deg, evaluate, truth_for
 
+from _truth import axis_difference_deg, evaluate, truth_for
 from glassdist import analyze
-from glassdist.synthetic import lens_displacement, synthetic_capture, wave_displacement
+from glassdist.synthetic import synthetic_capture, wave_displacement
 
 L = 10.0
 PITCH = 8.0

@@ -25,8 +25,8 @@ import numpy as np
 import pytest
 import tifffile
 import yaml
-from conftest import run_cli
 
+from conftest import run_cli
 from glassdist.synthetic import synthetic_capture
 
 IS_ROOT = hasattr(os, "geteuid") and os.geteuid() == 0

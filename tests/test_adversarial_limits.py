@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 import tifffile
 
+from glassdist.acceptance.spec import Check, Verdict
 from glassdist.errors import InputError
 from glassdist.io import image_shape, read_image, read_mask
 from glassdist.jobs.batch import Pane, check_panes, read_manifest, run_batch, write_index
 from glassdist.jobs.runner import PaneOutcome
-from glassdist.acceptance.spec import Check, Verdict
 from glassdist.validation import load_document, safe_text
 
 

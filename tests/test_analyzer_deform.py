@@ -15,7 +15,8 @@ from scipy import ndimage
 from glassdist import analyze
 from glassdist.analyzer import deform as D
 from glassdist.analyzer import fourier as F
-from glassdist.analyzer.demodulate import covariances as _covariances, demodulation_blur_px2 as _demodulation_blur_px2
+from glassdist.analyzer.demodulate import covariances as _covariances
+from glassdist.analyzer.demodulate import demodulation_blur_px2 as _demodulation_blur_px2
 from glassdist.synthetic import synthetic_capture, wave_displacement
 
 PITCH = 8.0  # mm, 1 mm/px: carrier period 8 px
@@ -28,7 +29,8 @@ def strong_wave():
                              noise_std=0.01, rng=2)
 
 
-def _through_transfer(t: np.ndarray, cov: np.ndarray, n: int, step, coarse, photo: int = 0, restart_px: float = 0.0) -> np.ndarray:
+def _through_transfer(t: np.ndarray, cov: np.ndarray, n: int, step, coarse, photo: int = 0,
+                      restart_px: float = 0.0) -> np.ndarray:
     """``t`` (h, w) through the displacement output's transfer, in the spectrum of its odd-reflected extension.
 
     ``(1 - (1 - G B)^n) / B`` (n = 1: ``G``) on the demodulation grid (``step``), times the
@@ -226,7 +228,8 @@ def test_own_shift_is_the_references_phase_across_the_displacement():
     # displacement u the Comparative phase differs from -2 pi f u by own(r - u) - own(r) = -2 pi 0.02 f u_x.
     from types import SimpleNamespace
 
-    from glassdist.analyzer.deform import own_phasors as _own_phasors, own_shift as _own_shift
+    from glassdist.analyzer.deform import own_phasors as _own_phasors
+    from glassdist.analyzer.deform import own_shift as _own_shift
 
     ks = F.CarrierPair(F.Carrier(0.125, 0.0), F.Carrier(0.0, 0.125))
     grid = F.SamplingGrid((128, 160), (64, 80))

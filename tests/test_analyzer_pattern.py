@@ -5,9 +5,9 @@ import math
 
 import numpy as np
 import pytest
-from conftest import DATA, REPO, needs_real_photos, run_cli
 
 import glassdist
+from conftest import DATA, REPO, needs_real_photos, run_cli
 from glassdist.analyzer.pattern import detect_pattern
 from glassdist.synthetic import synthetic_capture, wave_displacement
 

@@ -8,8 +8,8 @@ region (``valid``, which adds the guard band) is checked for coverage.
 
 import numpy as np
 import pytest
-from conftest import agreement, truth_channels
 
+from conftest import agreement, truth_channels
 from glassdist import analyze
 from glassdist.analyzer.region import LOW_MODULATION
 from glassdist.synthetic import lens_displacement, synthetic_capture, wave_displacement
@@ -67,7 +67,8 @@ def test_noisy_capture_within_five_percent():
 def test_displacement_sign_convention():
     # Landing points shifted by +0.9 mm along x and -0.5 mm along y (backdrop seen shifted).
     shift = (0.9, -0.5)
-    cap = synthetic_capture((256, 320), pitch_mm=PITCH, mm_per_px=1.0, displacement=lambda X, Y: (shift[0] + 0 * X, shift[1] + 0 * Y),
+    cap = synthetic_capture((256, 320), pitch_mm=PITCH, mm_per_px=1.0,
+                            displacement=lambda X, Y: (shift[0] + 0 * X, shift[1] + 0 * Y),
                             rotation_deg=20.0)
     res = _run(cap, "comparative")
     d = res.displacement_mm[res.valid]
@@ -148,7 +149,8 @@ def test_narrow_frame_band_splits_regions():
     assert not res.valid[:, 205:214].any()
     # The global threshold alone misses it (the local-frequency limit, which the phase across
     # the band also exceeds, switched off too).
-    off = analyze(img, pitch_mm=PITCH, distance_m=L, params=dict(PARAMS, local_modulation_threshold=0.0, max_frequency_deviation=1.0))
+    off = analyze(img, pitch_mm=PITCH, distance_m=L,
+                  params=dict(PARAMS, local_modulation_threshold=0.0, max_frequency_deviation=1.0))
     assert off.n_regions == 1
 
 

@@ -11,7 +11,15 @@ from scipy.special import ndtri
 
 from glassdist import analyze
 from glassdist.analyzer.region import (
-    ANALYSED, BEYOND_RANGE, GUARD_BAND, IMAGE_EDGE, LABELS, LOW_MODULATION, PHASE_RESIDUE, USER_MASK, contamination_px,
+    ANALYSED,
+    BEYOND_RANGE,
+    GUARD_BAND,
+    IMAGE_EDGE,
+    LABELS,
+    LOW_MODULATION,
+    PHASE_RESIDUE,
+    USER_MASK,
+    contamination_px,
 )
 from glassdist.synthetic import backdrop_pattern, synthetic_capture, wave_displacement
 

@@ -13,7 +13,6 @@ from glassdist.scene import load_scene
 from glassdist.synthetic import lens_displacement, synthetic_capture
 from glassdist.theory import predict_displacement
 from glassdist.virtual import compare_with_scene
-
 from test_validate import EXAMPLES
 
 

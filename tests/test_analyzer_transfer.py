@@ -6,7 +6,7 @@ from scipy import ndimage
 
 import glassdist
 from glassdist.analyzer import metrics as M
-from glassdist.analyzer.transfer import InstrumentTransfer, bspline_response, dirichlet_response, difference_response
+from glassdist.analyzer.transfer import InstrumentTransfer, bspline_response, difference_response, dirichlet_response
 from glassdist.synthetic import synthetic_capture, wave_displacement
 
 
@@ -57,9 +57,9 @@ def test_block_means_keep_what_the_demodulation_resolves(step_px, passes, expect
     """
     from scipy.optimize import brentq
 
+    from glassdist.analyzer.analysis_grid import analysis_block as _analysis_block
     from glassdist.analyzer.fourier import SamplingGrid
     from glassdist.analyzer.params import AnalyzerParams
-    from glassdist.analyzer.analysis_grid import analysis_block as _analysis_block
 
     c = 16.0
 
@@ -155,10 +155,8 @@ def test_ray_traced_ripple_reduced():
     """Reduced ray-traced ripple (6 carrier periods, sigma 2 periods, Comparative, 384 x 288 px): the
     Analyzer's phi_eff amplitude over the interior against the exact truth, through the Analyzer's
     stack and through the independent evaluation."""
-    from glassdist.experiments import render_inputs, scaled_scene
-    from glassdist.experiments.transfer import _SCENES, _amplitude_for, _interior, _ripple_scene, _rms_ratio
-    from glassdist.experiments import evaluate
-    from glassdist.experiments.transfer import independent_phi_eff
+    from glassdist.experiments import evaluate, render_inputs, scaled_scene
+    from glassdist.experiments.transfer import _SCENES, _amplitude_for, _interior, _ripple_scene, _rms_ratio, independent_phi_eff
     from glassdist.scene import landing_jacobian, load_scene
     from glassdist.theory import analysis_params
 

@@ -202,7 +202,8 @@ def test_manifest_paths_defaults_and_comments(tmp_path):
     "text, words",
     [
         ("image,pitch,distance_m\na.png,5,1\n", "unknown column(s) pitch"),
-        ("image;pitch_mm;distance_m\na.png;2,5;1\n", "separates its columns with ';', not commas"),  # where ',' is the decimal mark
+        # where ',' is the decimal mark
+        ("image;pitch_mm;distance_m\na.png;2,5;1\n", "separates its columns with ';', not commas"),
         ("image\tpitch_mm\tdistance_m\na.png\t5\t1\n", "separates its columns with '\\t', not commas"),
         # a duplicated column: the last one used to win silently (a pane analysed from the other photo)
         ("image,image,pitch_mm,distance_m\na.png,b.png,5,1\n", "column(s) image appear more than once"),

@@ -7,11 +7,10 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import EXAMPLES, run_cli
 
+from conftest import EXAMPLES, run_cli
 from glassdist.io import write_png16
 from glassdist.synthetic import synthetic_capture, wave_displacement
-
 
 _cli = run_cli  # in this process; _child where a process of its own is the point
 
@@ -89,7 +88,8 @@ BAD = [
     (["analyze", "{d}/noise.png", "--pitch-mm", 8, "--distance-m", 10], "no grid"),
     (["analyze", "{d}/tiny.png", "--pitch-mm", 8, "--distance-m", 10], "too small|at least"),
     (["analyze", "{d}/img.png", "--reference", "{d}/small_ref.png", "--pitch-mm", 8, "--distance-m", 10], "same"),
-    (["analyze", "{d}/img.png", "--params", "{d}/bad_params.json", "--pitch-mm", 8, "--distance-m", 10], "unknown key 'detrend_degre'"),
+    (["analyze", "{d}/img.png", "--params", "{d}/bad_params.json", "--pitch-mm", 8, "--distance-m", 10],
+     "unknown key 'detrend_degre'"),
     (["analyze", "{d}/img.png", "--params", "{d}/not_json.json", "--pitch-mm", 8, "--distance-m", 10], "not valid JSON"),
     (["analyze", "{d}/img.png", "--mask", "{d}/tiny.png", "--pitch-mm", 8, "--distance-m", 10], "same size"),
 ]
@@ -229,7 +229,8 @@ def test_rerun_removes_only_the_previous_runs_own_leftovers(photos, tmp_path):
 
 
 def _record(*paths):
-    return {"size": sum(p.stat().st_size for p in paths), "sha256": hashlib.sha256(b"".join(p.read_bytes() for p in paths)).hexdigest()}
+    return {"size": sum(p.stat().st_size for p in paths),
+            "sha256": hashlib.sha256(b"".join(p.read_bytes() for p in paths)).hexdigest()}
 
 
 def test_recorded_outputs_never_leave_the_folder(tmp_path):

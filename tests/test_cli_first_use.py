@@ -6,10 +6,9 @@ import subprocess
 import sys
 
 import pytest
+
 from conftest import run_cli, write_lens_pair
-
 from glassdist import cli
-
 
 _cli = run_cli  # in this process (conftest.run_cli)
 

@@ -21,9 +21,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import REPO, write_lens_pair
 
 import glassdist
+from conftest import REPO, write_lens_pair
 from glassdist.cli import main
 from glassdist.io import write_png16
 from glassdist.scene import load_scene

@@ -20,10 +20,10 @@ import pytest
 from scipy import ndimage
 
 from glassdist.errors import InputError
-from glassdist.render import render_scene
 from glassdist.render import _cycles_worker as worker
-from glassdist.render import cycles
+from glassdist.render import cycles, render_scene
 from glassdist.scene import scene_from_dict
+
 
 def small_wavy_slab(**changes) -> dict:
     """The paper's wavy slab (§3.1: d = 20 mm, n = 1.52, L = 10 m, f = 300 mm on 36 mm) at 256 x 192 px.

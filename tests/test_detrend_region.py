@@ -12,8 +12,8 @@ import json
 
 import numpy as np
 import pytest
-from _truth import evaluate
 
+from _truth import evaluate
 from glassdist import analyze, load_result, write_outputs
 from glassdist.synthetic import synthetic_capture, wave_displacement
 

@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 
 import pytest
+
 from conftest import child_env
 
 distributed = pytest.importorskip("distributed", reason="the distributed tests need glassdist[distributed]")

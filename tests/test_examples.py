@@ -15,6 +15,7 @@ import subprocess
 import cv2
 import numpy as np
 import pytest
+
 from conftest import DATA, REPO, needs_real_photos
 
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from glassdist.cli import main
-from glassdist.experiments import run_parity, run_pitch, run_rotation, scaled_scene
+from glassdist.experiments import run_pitch, run_rotation, scaled_scene
 from glassdist.experiments._common import relative_difference
 
 REPO = Path(__file__).resolve().parents[1]

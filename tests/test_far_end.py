@@ -8,9 +8,9 @@ import json
 
 import numpy as np
 import pytest
-from conftest import run_cli
 from scipy import ndimage
 
+from conftest import run_cli
 from glassdist import analyze
 from glassdist.io import write_png16
 from glassdist.synthetic import backdrop_pattern

@@ -12,10 +12,10 @@ from __future__ import annotations
 import json
 import math
 
-import _truth
 import numpy as np
 import pytest
 
+import _truth
 from glassdist.analyzer.reflection import ReflectionGeometry, analyze_reflection
 from glassdist.cli import main
 from glassdist.flatness import (

@@ -18,7 +18,7 @@ import pytest
 
 from conftest import write_lens_pair
 from glassdist.cli import main
-from glassdist.history import HistoryFilter, Recording, open_store, query_runs, record_run, trends
+from glassdist.history import HistoryFilter, open_store, query_runs, record_run, trends
 from glassdist.history.models import REGION, SCHEMA_REVISION, Base
 from glassdist.history.store import insert_runs, run_rows
 
@@ -243,7 +243,8 @@ import os, signal, sqlite3, sys
 con = sqlite3.connect(sys.argv[1], isolation_level=None)
 con.execute("BEGIN IMMEDIATE")
 con.execute("INSERT INTO runs (recorded_utc, source, exit_code, pane_id) VALUES ('2020-01-01', 'cli', 0, 'ghost')")
-con.execute("INSERT INTO statistics (run_id, zone, channel, statistic, value) VALUES (last_insert_rowid(), 'all', 'phi_eff', 'p95_abs', 1)")
+con.execute("INSERT INTO statistics (run_id, zone, channel, statistic, value) "
+            "VALUES (last_insert_rowid(), 'all', 'phi_eff', 'p95_abs', 1)")
 print("in transaction", flush=True)
 os.kill(os.getpid(), signal.SIGKILL)
 """

@@ -11,11 +11,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import EXAMPLES, REPO, run_cli
 
+from conftest import EXAMPLES, REPO, run_cli
 from glassdist.io import write_png16
 from glassdist.synthetic import synthetic_capture, wave_displacement
-
 
 _cli = run_cli  # in this process (conftest.run_cli)
 
@@ -102,8 +101,7 @@ def _png_header_only(path: Path, width: int, height: int) -> None:
 
 
 def test_a_100_mpx_photo_never_prints_pillows_bomb_warning(tmp_path):
-    from glassdist.io import image_shape
-    from glassdist.io import camera_metadata
+    from glassdist.io import camera_metadata, image_shape
 
     big = tmp_path / "big.png"
     _png_header_only(big, 12000, 8400)  # 100.8 Mpx, over Pillow's 89 Mpx warning level

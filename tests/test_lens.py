@@ -12,14 +12,13 @@ import numpy as np
 import pytest
 
 import glassdist
+from conftest import DATA, EXAMPLES, REPO, needs_real_photos, run_cli
 from glassdist.analyzer.homography import logical_coordinates, logical_jacobian
 from glassdist.analyzer.lens import LensModel, fit_lens_homography, radial_ambiguity, radial_consistency
 from glassdist.brown import BrownDistortion
 from glassdist.experiments.transfer import independent_phi_eff
 from glassdist.render import landing_points, render_scene
 from glassdist.scene import landing_jacobian, load_scene, pixel_directions, scene_from_dict, straight_landing
-
-from conftest import DATA, EXAMPLES, REPO, needs_real_photos, run_cli
 
 SCENES = REPO / "examples" / "scenes"
 LENSES = {"barrel": "lens_barrel_50mm", "pincushion": "lens_pincushion_50mm", "moustache": "lens_moustache_24mm"}
@@ -351,8 +350,8 @@ def test_calibration_photo_and_camera_file_agree(tmp_path):
     """A calibration photo (no glass, another pose) and the camera file of the rendered lens give the
     same model within 5% (measured: k1 0.2%, k2 0.05% apart), through the command line as well; a
     specification requiring a calibration source refuses a run without one (exit 2)."""
-    from glassdist.analyzer.lens import calibration_from_camera_file
     from glassdist.analyzer.calibrate import calibrate_from_photo
+    from glassdist.analyzer.lens import calibration_from_camera_file
     from glassdist.io import write_png16
 
     sc = _render("lens_moustache_24mm").with_changes(render={"samples_per_pixel": 4})

@@ -11,8 +11,8 @@ apart.
 
 import numpy as np
 import pytest
-from _truth import truth_for
 
+from _truth import truth_for
 from glassdist import analyze
 from glassdist.analyzer.metrics import evaluate_displacement
 from glassdist.synthetic import synthetic_capture, wave_displacement

@@ -12,13 +12,21 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import REPO, run_cli
 
+from conftest import REPO, run_cli
 from glassdist import analyze
+from glassdist.analyzer.plausibility import (
+    EXIF_SCALE_FACTOR,
+    MIN_VIEW_ANGLE_DEG,
+    SWAP_RATIO,
+    distance_warning,
+    exif_scale_mm_per_px,
+    exif_scale_warning,
+    grid_spread,
+    swap_warning,
+    view_angle_deg,
+)
 from glassdist.io import write_png16
-from glassdist.analyzer.plausibility import (EXIF_SCALE_FACTOR, MIN_VIEW_ANGLE_DEG, SWAP_RATIO, distance_warning,
-                                    exif_scale_mm_per_px, exif_scale_warning, grid_spread, swap_warning,
-                                    view_angle_deg)
 from glassdist.synthetic import lens_displacement, synthetic_capture
 
 REAL = REPO.parent / "shared" / "data" / "real-checkerboard-water"

@@ -11,9 +11,9 @@ import hashlib
 import json
 
 import pytest
-from conftest import run_cli, write_lens_pair
 
 import glassdist
+from conftest import run_cli, write_lens_pair
 from glassdist.errors import InputError
 
 

@@ -170,8 +170,8 @@ def test_the_boards_own_reading_is_said_when_the_lens_comes_from_a_calibration_p
     (the board of these photos is not a perfect grid: mean |phi_eff| 3.97 mD at N = 2 and L = 0.5 m, 18 times
     its noise), reported with the lens, and the pane's reading is compared with it: 14 % of the waves'
     (29 mD) and 70 % of the floating ring's (5.7 mD), both said."""
-    from glassdist.analyzer.params import load_params
     from glassdist.analyzer.calibrate import calibrate_from_photo
+    from glassdist.analyzer.params import load_params
 
     p = load_params({"pattern": "checkerboard", "detrend_degree": 2})
     ref = real_data["reference"]

@@ -28,9 +28,9 @@ from glassdist.analyzer.reflection import (
 )
 from glassdist.cli import main
 from glassdist.io import write_png16
+from glassdist.measures import standard_measures
 from glassdist.render import landing_points, render_scene
 from glassdist.render.tracer import fresnel_reflectance
-from glassdist.measures import standard_measures
 from glassdist.report.html import measures_rows
 from glassdist.scene import load_scene, pixel_directions, pixel_grid, scene_from_dict
 from glassdist.theory import predict_displacement

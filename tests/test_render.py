@@ -7,7 +7,6 @@ from glassdist.errors import InputError
 from glassdist.render import ExactTracer, Renderer, get_renderer, landing_points, render_scene, trace_rays
 from glassdist.render.tracer import strata
 from glassdist.scene import landing_jacobian
-
 from test_scene_helpers import make_scene
 
 AXIS = np.array([[0.0, 0.0, 1.0]])

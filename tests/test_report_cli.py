@@ -12,6 +12,7 @@ import sys
 import time
 
 import pytest
+
 from conftest import child_env, run_cli  # analyze in this process; the batches run as processes, their panes too
 
 

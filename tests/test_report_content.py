@@ -10,13 +10,12 @@ import shutil
 import subprocess
 import tempfile
 from html.parser import HTMLParser
-from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import write_lens_pair
 
 import glassdist
+from conftest import write_lens_pair
 from glassdist.acceptance.assess import assess
 from glassdist.report.console import acceptance_lines
 from glassdist.storage import EXIT_SPEC_FAIL, write_outputs
@@ -191,8 +190,8 @@ def test_report_parameters_show_the_smoothing_used(analysed):
 
 
 def test_direct_report_shows_the_homography_fit(analysed):
-    from glassdist.report.html import render_report
     from glassdist.acceptance.stats import result_statistics
+    from glassdist.report.html import render_report
 
     result = glassdist.analyze(analysed["image"], pitch_mm=2.0, distance_m=1.0)  # the Direct Method
     fit = result.homography_fit

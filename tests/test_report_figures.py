@@ -6,8 +6,8 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from conftest import DATA, needs_real_photos
 
+from conftest import DATA, needs_real_photos
 from glassdist.acceptance.stats import shared_limit
 from glassdist.report import figures
 

@@ -141,7 +141,10 @@ def test_angular_deviation_of_a_linear_field_is_the_closed_form():
 
 
 def test_angular_deviation_rate_of_a_thin_lens():
-    """A lens of P = 0.1 D (phi_eff = -200 mD) over g = 4 mm: |rate| = P g = 4e-4 rad = 1.375 arcmin, sign of a converging lens."""
+    """A lens of P = 0.1 D (phi_eff = -200 mD) over g = 4 mm: |rate| = P g = 4e-4 rad = 1.375 arcmin.
+
+    With the sign of a converging lens.
+    """
     s = 2.0
     X, Y = _grid(60, 60, s, s)
     P, L, g = 0.1, 5.0, 4.0
@@ -251,8 +254,8 @@ def test_standard_measures_of_an_analysis_find_the_roll_wave():
 
 def test_result_profile_in_backdrop_and_pane_mm():
     import glassdist
-    from glassdist.measures import result_profile
     from glassdist.acceptance.zones import pane_frame_from_corners
+    from glassdist.measures import result_profile
     from glassdist.synthetic import synthetic_capture
 
     pitch, mmpx, L = 5.0, 0.625, 2.0
@@ -265,7 +268,8 @@ def test_result_profile_in_backdrop_and_pane_mm():
     prof = result_profile(res, "phi_eff_mD", start_mm=(40 * mmpx, row * mmpx), end_mm=(280 * mmpx, row * mmpx))
     cols = np.rint(prof.x_mm / mmpx).astype(int)
     on_px = np.abs(prof.x_mm / mmpx - cols) < 1e-6
-    np.testing.assert_allclose(prof.values[on_px], res.phi_eff_mD[row, cols[on_px]], atol=0.02 * np.nanmax(np.abs(res.phi_eff_mD)))
+    np.testing.assert_allclose(prof.values[on_px], res.phi_eff_mD[row, cols[on_px]],
+                               atol=0.02 * np.nanmax(np.abs(res.phi_eff_mD)))
     # a pane frame: the image's corner pixels as a pane of 1.25 pane mm per px; the same line in both frames
     frame = pane_frame_from_corners([(0, 0), (W - 1, 0), (W - 1, H - 1), (0, H - 1)], (400.0 * (W - 1) / W, 320.0 * (H - 1) / H),
                                     (H, W))
@@ -282,7 +286,8 @@ def test_measures_rows_state_units_and_conventions():
 
     s = 2.0
     X, Y = _grid(100, 100, s, s)
-    d = _field(wave_displacement(0.2, 50.0, 0.0, polarization="transverse"), X, Y) + _field(wave_displacement(0.1, 40.0, 90.0), X, Y)
+    d = (_field(wave_displacement(0.2, 50.0, 0.0, polarization="transverse"), X, Y)
+         + _field(wave_displacement(0.1, 40.0, 90.0), X, Y))
     gl = grid_line_slope(d, step_mm=s)
     m = {
         "field": "test", "step_mm": [s, s],
@@ -294,7 +299,8 @@ def test_measures_rows_state_units_and_conventions():
     rows = dict(measures_rows(m))
     assert f"1 in {gl.one_in_n[0]:.3g} (lines at 0°)" in rows["grid-line slope (ASTM F2156)"]
     assert "period 40 mm along 90°" in rows["roll wave (ASTM C1651 quantities)"]
-    assert "mean 10 mD" in rows["sphere-equivalent power P = −φ_eff/2"] and "-phi_eff/2" in rows["sphere-equivalent power P = −φ_eff/2"]
+    sphere = rows["sphere-equivalent power P = −φ_eff/2"]
+    assert "mean 10 mD" in sphere and "-phi_eff/2" in sphere
     assert "change over 4 mm" in rows["angular deviation (ECE R43 / ISO 3538)"]
 
 

@@ -18,8 +18,8 @@ from collections import Counter
 from pathlib import Path
 
 import pytest
-from conftest import EXAMPLES
 
+from conftest import EXAMPLES
 from glassdist import cli
 
 FACTORY_SPEC = Path(__file__).resolve().parents[1] / "examples" / "factory" / "spec.json"

@@ -9,8 +9,8 @@ import time
 from pathlib import Path
 
 import pytest
-from conftest import child_env, write_lens_pair
 
+from conftest import child_env, write_lens_pair
 from glassdist.jobs import runner
 from glassdist.jobs.runner import run_glassdist
 
@@ -214,8 +214,8 @@ def test_a_forked_child_reports_an_internal_error_as_a_process_does(pair, tmp_pa
     """Exit 1: one line without ``--debug``; with it, the traceback the interpreter would print
     (``main`` lets the exception through and the child prints it). The fault is planted in this
     process, which then forks the child body itself, as the server does."""
-    from glassdist import _childserver
     import glassdist.analyzer as analyzer
+    from glassdist import _childserver
 
     def fault(*args, **kwargs):
         raise RuntimeError("planted fault")

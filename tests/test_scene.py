@@ -6,10 +6,17 @@ import pytest
 
 from glassdist.errors import InputError
 from glassdist.scene import (
-    EdgeLift, GaussianBump, Pillow, Plane, RollerWave, SphericalCap, landing_jacobian, load_scene, pattern_intensity,
+    EdgeLift,
+    GaussianBump,
+    Pillow,
+    Plane,
+    RollerWave,
+    SphericalCap,
+    landing_jacobian,
+    load_scene,
+    pattern_intensity,
 )
 from glassdist.theory import carrier_period_mm, nominal_mm_per_px
-
 from test_scene_helpers import make_scene
 
 EXAMPLES = sorted((Path(__file__).parents[1] / "examples" / "scenes").glob("*.yaml"))

@@ -8,9 +8,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from glassdist.errors import InputError
 from glassdist.acceptance.spec import load_spec, spec_limits, spec_verdict
 from glassdist.acceptance.stats import acceptance_statistics, area_over_percent, result_statistics
+from glassdist.errors import InputError
 
 
 def _write(tmp_path, data, name="spec.json"):

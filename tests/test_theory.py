@@ -1,4 +1,3 @@
-import math
 from pathlib import Path
 
 import numpy as np
@@ -7,7 +6,6 @@ import pytest
 from glassdist.render import landing_points
 from glassdist.scene import load_scene
 from glassdist.theory import nominal_mm_per_px, predict_channels, predict_displacement, slab_shift
-
 from test_scene_helpers import make_scene
 
 EXAMPLES = Path(__file__).parents[1] / "examples" / "scenes"

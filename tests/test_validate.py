@@ -21,7 +21,8 @@ def test_procrustes_recovers_rotation_and_scale(angle, scale):
     rot, s = procrustes(X, Y)
     assert rot == pytest.approx(angle, abs=1e-9) and s == pytest.approx(scale, rel=1e-9)
     # the rotation sign: +x mapped towards +y is positive
-    rot90, _ = procrustes(np.array([[1.0, 0.0], [0.0, 1.0], [-1, 0], [0, -1]]), np.array([[0.0, 1.0], [-1.0, 0.0], [0, -1], [1, 0]]))
+    rot90, _ = procrustes(np.array([[1.0, 0.0], [0.0, 1.0], [-1, 0], [0, -1]]),
+                          np.array([[0.0, 1.0], [-1.0, 0.0], [0, -1], [1, 0]]))
     assert rot90 == pytest.approx(90.0)
 
 
@@ -50,7 +51,6 @@ def test_validate_command_on_a_small_wavy_slab(tmp_path, method):
     method), 0.02 deg on the rotation.
     """
     import _truth
-
     from glassdist.render import landing_points
     from glassdist.scene import landing_jacobian
     from glassdist.virtual import validate_scene

@@ -10,10 +10,10 @@ region the result documents.
 
 import json
 
-import _truth
 import numpy as np
 import pytest
 
+import _truth
 from glassdist.analyzer.metrics import channel_statistics
 from glassdist.cli import main
 from glassdist.render import landing_points, render_scene

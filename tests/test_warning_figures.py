@@ -4,8 +4,8 @@ import re
 
 import numpy as np
 import pytest
-from conftest import REPO
 
+from conftest import REPO
 from glassdist import analyze
 
 REAL = REPO.parent / "shared" / "data" / "real-checkerboard-water"

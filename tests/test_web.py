@@ -495,7 +495,6 @@ def test_a_server_reachable_from_elsewhere_says_so(capsys, monkeypatch):
 def test_history_page_filters_by_lot_shows_the_chart_and_links_kept_jobs(server, tmp_path, monkeypatch):
     """Runs recorded before (lots A and B) and a job run from the page (lot A): the page filtered by lot A."""
     from conftest import write_lens_pair
-
     from glassdist.history import open_store
     from glassdist.history.store import insert_runs, run_rows
 

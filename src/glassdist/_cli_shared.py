@@ -12,7 +12,8 @@ from pathlib import Path
 
 from .validation import SIGMA_MM, number_option
 
-__all__ = ["folder_option", "progress_reporter", "apply_render_overrides", "add_render_options", "add_scene_command", "add_analysis_options"]
+__all__ = ["folder_option", "progress_reporter", "apply_render_overrides", "add_render_options", "add_scene_command",
+           "add_analysis_options"]
 
 
 def folder_option(text: str) -> Path:
@@ -54,7 +55,8 @@ def apply_render_overrides(scene, args):
 def add_render_options(p) -> None:
     """Options shared by render and validate."""
     p.add_argument("--engine", default="exact", help="render engine: exact (default) or cycles")
-    p.add_argument("--spp", "--samples", dest="spp", type=int, help="samples per pixel (default: the scene's render.samples_per_pixel)")
+    p.add_argument("--spp", "--samples", dest="spp", type=int,
+                   help="samples per pixel (default: the scene's render.samples_per_pixel)")
     p.add_argument("--seed", type=int, help="random seed (default: the scene's render.seed)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 

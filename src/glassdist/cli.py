@@ -36,7 +36,9 @@ EXIT_INTERNAL = 1
 EXIT_BAD_INPUT = 2
 
 # Modules adding sub-commands: each provides register(subparsers) -> sets func=run(args) -> int.
-COMMAND_MODULES = ["glassdist.jobs._cli", "glassdist.render._cli", "glassdist.theory._cli", "glassdist.virtual._cli", "glassdist.render.cycles", "glassdist.experiments._cli", "glassdist.virtual._sweep_cli", "glassdist.web._cli", "glassdist.history._cli", "glassdist._view_cli"]
+COMMAND_MODULES = ["glassdist.jobs._cli", "glassdist.render._cli", "glassdist.theory._cli", "glassdist.virtual._cli",
+                   "glassdist.render.cycles", "glassdist.experiments._cli", "glassdist.virtual._sweep_cli", "glassdist.web._cli",
+                   "glassdist.history._cli", "glassdist._view_cli"]
 
 
 class _StoreOnce(argparse._StoreAction):
@@ -110,8 +112,12 @@ def _register_analyze(sub) -> None:
     p.add_argument("image", type=Path, nargs="+",
                    help="photo of the grid through the glass (PNG/TIFF/BMP/JPEG, 8/16-bit); several photos of one set-up "
                    "(repeated exposures, small camera moves) are registered and averaged into one map")
-    p.add_argument("--pitch-mm", type=number_option(PITCH_MM), help="grid pitch on the backdrop, mm (line spacing, or square size); required unless the --spec protocol pins pitch_mm")
-    p.add_argument("--distance-m", type=number_option(DISTANCE_M), help="glass-to-grid distance L, m (reflection: board-to-pane distance D); required unless the --spec protocol pins distance_m")
+    p.add_argument("--pitch-mm", type=number_option(PITCH_MM),
+                   help="grid pitch on the backdrop, mm (line spacing, or square size); "
+                        "required unless the --spec protocol pins pitch_mm")
+    p.add_argument("--distance-m", type=number_option(DISTANCE_M),
+                   help="glass-to-grid distance L, m (reflection: board-to-pane distance D); "
+                        "required unless the --spec protocol pins distance_m")
     p.add_argument("--optics", choices=["transmission", "reflection"],
                    help="transmission (default: the grid seen through the pane) or reflection (a grid board seen in the "
                    "pane; phi in reflective power on the pane, docs/user-guide/reflection.md)")
@@ -119,7 +125,8 @@ def _register_analyze(sub) -> None:
                    help="reflection: camera-to-pane distance C, m (default: the camera in the board plane, C = D); "
                    "transmission (either method): the camera-to-pane distance Dc along the line of sight, the camera "
                    "aimed at the pane centre (facing it, or at --camera-angle-deg): the run also reports the pane's "
-                   "intrinsic reading (summary.json 'intrinsic'); with --camera-file (Direct Method) it also pins the magnification for the bulk channel")
+                   "intrinsic reading (summary.json 'intrinsic'); with --camera-file (Direct Method) it also pins the "
+                   "magnification for the bulk channel")
     add_capture_options(p)
     p.add_argument("--incidence-deg", type=float,
                    help="reflection: angle between the line of sight and the pane normal at the view's centre, deg (default 0)")
@@ -128,7 +135,8 @@ def _register_analyze(sub) -> None:
                    help="backdrop pattern (default: from --spec or --params, else auto: decided from the photo's spectrum; "
                    "a given pattern the spectrum contradicts gets a warning)")
     p.add_argument("--detrend-degree", type=int, help="A2 polynomial detrend total degree N (default 2)")
-    p.add_argument("--sigma-mm", type=number_option(SIGMA_MM), help="reporting smoothing scale on the backdrop, mm (reflection: on the pane; default: 2 carrier periods)")
+    p.add_argument("--sigma-mm", type=number_option(SIGMA_MM),
+                   help="reporting smoothing scale on the backdrop, mm (reflection: on the pane; default: 2 carrier periods)")
     p.add_argument("--params", type=Path, help="JSON file of analyzer parameters (unknown keys are errors)")
     p.add_argument("--mask", type=Path, help="image whose non-zero pixels mark the region to analyse")
     p.add_argument("--lens-photo", type=Path, help="Direct Method: calibration photo of the same grid without glass "
@@ -136,14 +144,17 @@ def _register_analyze(sub) -> None:
     p.add_argument("--camera-file", type=Path, help="Direct Method: OpenCV-style camera file (JSON/YAML: camera_matrix, "
                    "dist_coeffs k1 k2 p1 p2): the camera lens it states is used")
     p.add_argument("--out", type=folder_option, required=True, help="output folder (created if needed)")
-    p.add_argument("--spec", type=Path, help="acceptance specification JSON: prints PASS/FAIL, exit 3 on FAIL; its protocol supplies omitted options and refuses contradicting ones (exit 2)")
+    p.add_argument("--spec", type=Path,
+                   help="acceptance specification JSON: prints PASS/FAIL, exit 3 on FAIL; its protocol supplies omitted "
+                        "options and refuses contradicting ones (exit 2)")
     p.add_argument("--pane-id", help="pane identifier, stated in the report and summary.json")
     p.add_argument("--site", help="where the pane was measured (factory line, building), for the report")
     p.add_argument("--operator", help="who took the photo, for the report")
     p.add_argument("--lot", help="production lot of the pane, for the report and the history's trend charts")
     add_recording_options(p)
     p.add_argument("--report", action="store_true", help="also write a self-contained HTML report")
-    p.add_argument("--export", action="store_true", help="also export the fields as NPZ and 32-bit TIFF (statistics.csv is always written)")
+    p.add_argument("--export", action="store_true",
+                   help="also export the fields as NPZ and 32-bit TIFF (statistics.csv is always written)")
     p.add_argument("--fields", choices=["analysis", "pixel"], default="analysis",
                    help="result.npz layout: 'analysis' (default, compact: the analysis grid with pixel coordinates; "
                    "glassdist.load_result brings it to the pixel grid) or 'pixel' (every field on the image's pixel grid)")
@@ -309,8 +320,8 @@ def _pattern_from_photo(protocol, protocol_with, photo):
 def _lens_source(args, pinned, protocol, params, images):
     """The camera lens from ``--camera-file`` or ``--lens-photo`` (Direct Method), or None; ``pinned``: the spec's protocol."""
     from .acceptance.spec import check_lens_source
-    from .analyzer.lens import calibration_from_camera_file
     from .analyzer.calibrate import calibrate_from_photo
+    from .analyzer.lens import calibration_from_camera_file
     from .io import read_image
 
     check_lens_source(pinned, lens_photo=args.lens_photo is not None,
@@ -468,7 +479,9 @@ def _command_named(argv: list[str] | None) -> str | None:
 
 
 def exit_status(exc: SystemExit) -> int:
-    """The status a process ends with on ``exc`` (argparse's ``--help``, ``--version``, option errors), as the interpreter maps it.
+    """The status a process ends with on ``exc`` (argparse's ``--help``, ``--version``, option errors).
+
+    As the interpreter maps it.
 
     For callers that run :func:`main` inside a process of their own (the batch's forked children, the tests).
     """
@@ -570,5 +583,6 @@ def _main(argv: list[str] | None, record_as: dict | None = None) -> int:
     except Exception as exc:  # noqa: BLE001 - last resort: one line, traceback with --debug
         if args.debug:
             raise
-        print(f"glassdist: internal error: {type(exc).__name__}: {safe_text(exc, 2000)} (run with --debug for details)", file=sys.stderr)
+        print(f"glassdist: internal error: {type(exc).__name__}: {safe_text(exc, 2000)} (run with --debug for details)",
+              file=sys.stderr)
         return EXIT_INTERNAL

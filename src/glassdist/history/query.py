@@ -32,7 +32,8 @@ _STAT_RE = re.compile(r"^([a-z_]+)\.([A-Za-z0-9_]+)$")
 COLUMNS = ("run", "record_id", "recorded_utc", "source", "job", "pane_id", "lot", "site", "operator", "camera",
            "verdict", "spec_name", "spec_sha256", "exit_code", "zone", "statistic", "value", "phi_eff_p95_abs_mD",
            "phi_shear_p95_abs_mD", "roller_wave_pv_mm", "edge_lift_mm", "valid_percent", "trusted_percent", "method",
-           "pattern", "pitch_mm", "distance_m", "sigma_mm", "detrend_degree", "protocol", "measures", "image", "image_sha256", "reference",
+           "pattern", "pitch_mm", "distance_m", "sigma_mm", "detrend_degree", "protocol", "measures", "image", "image_sha256",
+           "reference",
            "reference_sha256", "warnings", "out_dir", "glassdist_version")
 
 #: the statistics that cannot be negative, and their range (a control limit beyond it is drawn at its edge)
@@ -146,6 +147,7 @@ class HistoryFilter:
 
     @property
     def requires_value(self) -> bool:
+        """True when the filter asks for a statistic's value (a zone, a statistic or a bound)."""
         return any(v is not None for v in (self.zone, self.statistic, self.above, self.below))
 
 
@@ -295,6 +297,7 @@ class Trend:
     unit: str = "mD"
 
     def to_dict(self) -> dict:
+        """The trend as a JSON-ready mapping (lot, statistic, unit, mean, sigma, limits, runs)."""
         return {"lot": self.lot, "statistic": self.statistic, "unit": self.unit, "mean": self.mean,
                 "sigma": self.sigma, "lower": self.lower, "upper": self.upper, "runs": list(self.runs),
                 "pane_ids": list(self.pane_ids),

@@ -253,6 +253,7 @@ class Store:
         self.location, self.engine, self.write = loc, engine, write
 
     def close(self) -> None:
+        """Release the database connections."""
         self.engine.dispose()
 
     def __enter__(self):

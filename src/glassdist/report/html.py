@@ -122,7 +122,8 @@ def _verdict_section(verdict):
             f"<p>Specification <b>{escape(verdict.spec_name)}</b>: {n_ok} of {len(verdict.checks)} criteria passed. "
             f"Specification file <code>{escape(verdict.spec_path)}</code>, SHA-256 "
             f"<code>{escape(verdict.spec_sha256)}</code>.</p>"
-            f'<table id="criteria"><tr><th>criterion</th><th>value</th><th>limit</th><th>judged over (trusted share)</th><th>result</th></tr>{rows}</table>')
+            '<table id="criteria"><tr><th>criterion</th><th>value</th><th>limit</th><th>judged over (trusted share)</th>'
+            f'<th>result</th></tr>{rows}</table>')
 
 
 def _input_rows(label, info):
@@ -300,7 +301,8 @@ def render_report(result, *, stats, figures, inputs, verdict=None, generated=Non
     fig_html = "".join(_img(png, fid, cap) for fid, cap, png in figures)
     body = f"""
 <h1>{escape(title)}</h1>
-<p class="small">glassdist {escape(version)} · {escape(method)} method · generated {escape(generated.strftime('%Y-%m-%d %H:%M:%S'))} UTC</p>
+<p class="small">glassdist {escape(version)} · {escape(method)} method ·
+generated {escape(generated.strftime('%Y-%m-%d %H:%M:%S'))} UTC</p>
 {_verdict_section(verdict)}
 <h2>1. Identification</h2>
 {_kv_table(_input_rows('input image', inputs['image']) + _input_rows('reference image', inputs.get('reference'))
@@ -309,11 +311,13 @@ def render_report(result, *, stats, figures, inputs, verdict=None, generated=Non
 <h2>2. Capture geometry</h2>
 {_kv_table(geometry)}
 {proto_html}
-<details><summary>carriers detected in the photograph</summary><pre>{escape(json.dumps(to_jsonable(carriers), indent=1))}</pre></details>
+<details><summary>carriers detected in the photograph</summary>
+<pre>{escape(json.dumps(to_jsonable(carriers), indent=1))}</pre></details>
 <h2>3. Method</h2>
 <p>{escape(METHOD_TEXT.get(method, method))}</p>
 <p class="small">{escape(_CONVENTIONS)}</p>
-<details><summary>all analysis parameters (resolved)</summary><pre>{escape(json.dumps(to_jsonable(params), indent=1))}</pre></details>
+<details><summary>all analysis parameters (resolved)</summary>
+<pre>{escape(json.dumps(to_jsonable(params), indent=1))}</pre></details>
 <h2>4. Results</h2>
 {_stats_table(stats)}
 {measures_html}
@@ -392,8 +396,10 @@ def measures_rows(measures: dict) -> list[tuple[str, str]]:
             ("reflected roll wave", f"period {_g(r['period_mm'], ' mm', 4)} along {_direction(r['direction_deg'])}; "
              f"reflective power amplitude {_g(r['power_amplitude_mD'], ' mD')} (peak-to-valley {_g(r['power_pv_mD'], ' mD')}); "
              f"surface peak-to-valley {_g(r['surface_pv_mm'], ' mm')} ({r['assumptions']})"),
-            ("deviation of the reflected ray", f"max {_g(ad['angle_max_arcmin'], ' arcmin')}, p95 {_g(ad['angle_p95_arcmin'], ' arcmin')}; "
-             f"change over {_g(ad['gauge_mm'], ' mm')}: p95 {_g(ad['rate_p95_arcmin'], ' arcmin')} ({mean['angular_deviation']})"),
+            ("deviation of the reflected ray",
+             f"max {_g(ad['angle_max_arcmin'], ' arcmin')}, p95 {_g(ad['angle_p95_arcmin'], ' arcmin')}; "
+             f"change over {_g(ad['gauge_mm'], ' mm')}: p95 {_g(ad['rate_p95_arcmin'], ' arcmin')} "
+             f"({mean['angular_deviation']})"),
             ("grid-line slope of the reflected board", slopes),
             ("sphere-equivalent power of the pane as a mirror P = −φ_eff/2",
              f"mean {_g(ep['mean_mD'], ' mD')}, p95 |P| {_g(ep['p95_abs_mD'], ' mD')} ({mean['equivalent_power']})"),
@@ -401,8 +407,10 @@ def measures_rows(measures: dict) -> list[tuple[str, str]]:
         ]
     return [
         ("roll wave (ASTM C1651 quantities)",
-         f"period {_g(rw['period_mm'], ' mm', 4)} along {_direction(rw['direction_deg'])}; amplitude {_g(rw['amplitude_mm'], ' mm')} "
-         f"= {_g(rw['power_amplitude_mD'], ' mD')} along the roll direction (peak-to-valley {_g(rw['displacement_pv_mm'], ' mm')}, "
+         f"period {_g(rw['period_mm'], ' mm', 4)} along {_direction(rw['direction_deg'])}; "
+         f"amplitude {_g(rw['amplitude_mm'], ' mm')} "
+         f"= {_g(rw['power_amplitude_mD'], ' mD')} along the roll direction "
+         f"(peak-to-valley {_g(rw['displacement_pv_mm'], ' mm')}, "
          f"{_g(rw['power_pv_mD'], ' mD')}); the wave explains {_g(100 * rw['explained_fraction'], ' %', 2)} of the "
          "displacement along it"),
         ("angular deviation (ECE R43 / ISO 3538)",

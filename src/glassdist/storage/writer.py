@@ -33,8 +33,15 @@ from ..fs import atomic_write, atomic_write_bytes, atomic_write_text
 from ..io import to_jsonable
 from ..report.html import render_report
 from ..report.maps import run_figures
-from .fields import SUMMARY_NAME, grid_members, pixel_members, write_fields_npz, write_fields_tiff, write_npz
-from .fields import write_statistics_csv
+from .fields import (
+    SUMMARY_NAME,
+    grid_members,
+    pixel_members,
+    write_fields_npz,
+    write_fields_tiff,
+    write_npz,
+    write_statistics_csv,
+)
 from .folder import OutputFolder, estimate_output_bytes, open_output_folder, plan_outputs, remove_outputs
 from .record import EXIT_OK, EXIT_SPEC_FAIL, RunRequest, build_record, read_inputs, result_protocol
 
