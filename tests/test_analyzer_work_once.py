@@ -135,3 +135,30 @@ def test_a_comparative_photo_without_a_grid_is_refused():
     blank = (0.5 + 0.05 * rng.standard_normal(cap.image.shape)).astype(np.float32)
     with pytest.raises(InputError, match="grid|periodic"):
         analyze(blank, pitch_mm=10.0, distance_m=2.0, reference=cap.reference)
+
+
+def test_the_pattern_is_read_once_per_photo(tmp_path, monkeypatch):
+    """``glassdist analyze`` decides 'auto' from the photo before the analysis, which checks it on the same photo:
+    the photo's spectrum is read for its pattern once (it was twice)."""
+    from glassdist import cli
+    from glassdist.analyzer import pattern
+    from glassdist.io import write_png16
+    from glassdist.synthetic import synthetic_capture
+
+    cap = synthetic_capture((256, 320), pitch_mm=4.0, mm_per_px=0.5, pattern="checkerboard")
+    write_png16(tmp_path / "photo.png", cap.image)
+    calls: Counter[str] = Counter()
+    orig = fourier.compute_spectrum
+
+    def counted(image, *a, **k):
+        if np.shape(image) == (256, 256):  # the pattern check's centred square crop (the photo is 256 x 320)
+            calls["pattern spectrum"] += 1
+        return orig(image, *a, **k)
+
+    monkeypatch.setattr(fourier, "compute_spectrum", counted)
+    monkeypatch.setattr(pattern, "_EVIDENCE", {}, raising=False)
+    monkeypatch.setenv("GLASSDIST_DB", str(tmp_path / "history.sqlite"))
+    status = cli.main(["analyze", str(tmp_path / "photo.png"), "--pitch-mm", "4", "--distance-m", "1",
+                       "--out", str(tmp_path / "out")])
+    assert status == 0
+    assert calls["pattern spectrum"] == 1

@@ -33,6 +33,7 @@ with neither above the noise (a sinusoidal grid, harmonics beyond Nyquist), the 
 
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -164,7 +165,24 @@ def detect_pattern(image: np.ndarray, *, max_px: int = 1024, min_period_px: floa
     H, W = img.shape[:2]
     s = min(H, W, max_px)
     y0, x0 = (H - s) // 2, (W - s) // 2
-    crop = img[y0 : y0 + s, x0 : x0 + s]
+    crop = np.ascontiguousarray(img[y0 : y0 + s, x0 : x0 + s])
+    # the command line decides 'auto' from the photo before the analysis, which checks the pattern on the same
+    # photo: the evidence of a crop already read is kept (keyed by its bytes, so an edited image is read again)
+    key = (hashlib.blake2b(crop.tobytes(), digest_size=16).digest(), crop.shape, float(min_period_px))
+    if key not in _EVIDENCE:
+        while len(_EVIDENCE) >= 4:  # a run reads two photos at most (the photo, its reference): a few are enough
+            del _EVIDENCE[next(iter(_EVIDENCE))]
+        _EVIDENCE[key] = _crop_evidence(crop, min_period_px)
+    return _EVIDENCE[key]
+
+
+#: the last crops' evidence (:func:`detect_pattern`), by the crop's digest, oldest first
+_EVIDENCE: dict[tuple[bytes, tuple[int, ...], float], PatternEvidence] = {}
+
+
+def _crop_evidence(crop: np.ndarray, min_period_px: float) -> PatternEvidence:
+    """:func:`detect_pattern` on its centred square ``crop`` (float32)."""
+    s = crop.shape[0]
     window = np.hanning(s).astype(np.float32)
     spectrum = F.compute_spectrum((crop - crop.mean()) * window[:, None] * window[None, :])
     pair = F.find_carriers(spectrum, min_period_px=min_period_px)
