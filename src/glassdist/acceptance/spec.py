@@ -76,10 +76,9 @@ if TYPE_CHECKING:
     from ..analyzer.params import AnalyzerParams
     from ..analyzer.result import Result
 
-__all__ = [
-    "Criterion", "Protocol", "Pane", "Zone", "WorstRegions", "Figures", "Spec", "Check", "Verdict", "ResolvedProtocol",
-    "LoadedSpec", "load_spec", "as_spec", "spec_verdict", "spec_channels", "spec_limits", "resolve_protocol", "check_capture",
-]
+__all__ = ["Criterion", "Protocol", "Pane", "Zone", "WorstRegions", "Figures", "Spec", "Check", "Verdict", "ResolvedProtocol",
+           "LoadedSpec", "load_spec", "as_spec", "spec_verdict", "spec_channels", "spec_limits", "resolve_protocol",
+           "check_capture"]
 
 _SYMBOL = {"phi_eff": "phi_eff", "phi_shear": "phi_shear", "phi_total": "phi_total",
            "phi_eff_sigma": "sigma(phi_eff)", "phi_shear_sigma": "sigma(phi_shear)"}
@@ -534,10 +533,6 @@ def _same(a: Any, b: Any) -> bool:
     return bool(a == b)
 
 
-def _carrier_period_mm(pitch_mm: float, pattern: str) -> float:
-    return pitch_mm * math.sqrt(2.0) if pattern == "checkerboard" else pitch_mm
-
-
 @dataclass(frozen=True)
 class ResolvedProtocol:
     """The settings of one analysis after a specification's protocol was applied.
@@ -636,7 +631,7 @@ def resolve_protocol(protocol: Protocol | None = None, *, reference_given: bool,
              "detrend_degree": detrend_degree}
     from_file = _file_settings(params)
     values, sources = _merged_settings(given, pinned, from_file, spec_label)
-    p_c = _carrier_period_mm(float(values["pitch_mm"]), values["pattern"])
+    p_c = float(values["pitch_mm"]) * (math.sqrt(2.0) if values["pattern"] == "checkerboard" else 1.0)  # carrier period
     overrides = {k: values[k] for k in ("pattern", "detrend_degree") if sources[k] != "default"}
     values["sigma_mm"], sources["sigma_mm"], passed_on = _sigma_setting(protocol, values, sources, from_file, params,
                                                                         p_c, spec_label)

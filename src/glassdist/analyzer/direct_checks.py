@@ -193,6 +193,10 @@ def _lens_as_glass(r: DirectReading, lens: LensModel) -> np.ndarray | None:
 # A lens fitted from the photo but not applied is named with its bias when, applied, it would move mean or p95
 # |phi_eff| by more than this share of the reading (and by at least 0.01 mD).
 _REFUSED_LENS_WARN = 0.03
+#: least share of what a bare homography leaves that the fitted lens terms must explain for the refused lens's
+#: bias to be stated: lens-free views read 0-5 % (a 12 % strain wave: 5 %), a k1 = -/+0.05 lens under glass
+#: strong enough to refuse it 8-11 % (tests/test_direct_lens_bias), a judgement between the two
+_REFUSED_LENS_MIN_GAIN = 0.065
 
 
 def refused_lens_warning(r: DirectReading) -> str | None:
@@ -213,6 +217,8 @@ def refused_lens_warning(r: DirectReading) -> str | None:
     # refused for a radial profile that moves without part of the view (cal.consistency): by the photo's own
     # test the form is the glass's, not a camera lens's, and Block I's warning says so
     if cal is None or cal.source != "self" or cal.identifiable or cal.consistency or p.a1_mode != "projective":
+        return None
+    if not cal.gain >= _REFUSED_LENS_MIN_GAIN:  # the lens terms explain next to nothing: no lens form to speak of
         return None
     phi = _lens_as_glass(r, cal.model)
     if phi is None:

@@ -128,6 +128,9 @@ class LensCalibration:
         Self-calibration only: how far the radial profile moves when the fit leaves out the
         inner disc (``"inner"``) or the worst quadrant (``"quadrants"``) of the view
         (:func:`radial_consistency`; a camera lens's distortion is global).
+    gain : float
+        Self-calibration only: the share of what a bare homography leaves on the fitted samples
+        that the lens terms explain (NaN where not measured).
     floor : dict
         Calibration photo only: that photo (no glass) read by the Direct Method through this
         lens, at the analysis's detrend degree, smoothing and distance L:
@@ -147,6 +150,7 @@ class LensCalibration:
     note: str = ""
     consistency: dict = field(default_factory=dict)
     floor: dict = field(default_factory=dict)
+    gain: float = float("nan")
 
     def to_dict(self) -> dict:
         """The record as a JSON-ready mapping."""

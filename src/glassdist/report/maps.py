@@ -312,18 +312,19 @@ _COST = {"input": 0.8, "heatmap": 1.0, "axis": 1.0, "map": 0.8, "quality": 0.35,
 
 
 def figure_workers() -> int:
-    """Processes drawing a run's figures: 2 on Linux where the process may use two cores, else 1.
+    """Processes drawing a run's figures: 1, or 2 where ``GLASSDIST_FIGURE_WORKERS=2`` asks for it (Linux only).
 
-    ``GLASSDIST_FIGURE_WORKERS=1`` draws every figure in the calling process (so that a test
-    can spy on each plotting call).
+    One process by default: a forked child shares the parent's open font files, and a font
+    object made before the fork and used by both (matplotlib caches them, mathtext's parses
+    among them) reads from one file offset in two processes, which fails at random under load
+    ("FT_Load_Glyph failed"). The child drops the caches it knows of (:func:`_child_main`);
+    the two-process path stays an explicit choice until no such cache is left.
     """
     import os
     import sys
 
     env = os.environ.get("GLASSDIST_FIGURE_WORKERS", "").strip()
-    if env:
-        return max(1, int(env)) if env.isdigit() else 1
-    if not sys.platform.startswith("linux"):  # fork after numpy and OpenCV is safe on Linux; elsewhere one process
+    if env != "2" or not sys.platform.startswith("linux"):
         return 1
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     return 2 if cores >= 2 else 1
@@ -397,6 +398,11 @@ def _child_main(draws: list[Callable[[], Figure3]], send: Any) -> None:
 
     try:
         try:
+            # font objects made before the fork read the parent's file offsets: this process opens its own
+            from matplotlib import font_manager, mathtext
+
+            font_manager._get_font.cache_clear()
+            mathtext.MathTextParser._parse_cached.cache_clear()
             payload = pickle.dumps([draw() for draw in draws], protocol=pickle.HIGHEST_PROTOCOL)
         except BaseException:  # noqa: BLE001 - the parent draws them
             payload = pickle.dumps(None)

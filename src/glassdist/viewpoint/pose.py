@@ -32,10 +32,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .intrinsic import DEFAULT_REFRACTIVE_INDEX, CaptureGeometry
+
+if TYPE_CHECKING:
+    from ..analyzer.result import AnalysisResult
 
 __all__ = ["CapturePose", "angle_from_homography", "capture_pose", "focal_from_homography",
            "homography_is_normal"]
@@ -126,7 +130,7 @@ def _exif_focal_px(camera, width_px: int) -> float | None:
     return float(f35) * width_px / 36.0 if f35 else None
 
 
-def capture_pose(result, camera_distance_m: float, *, angle_deg: float | None = None, azimuth_deg: float = 0.0,
+def capture_pose(result: AnalysisResult, camera_distance_m: float, *, angle_deg: float | None = None, azimuth_deg: float = 0.0,
                  focal_length_px: float | None = None, camera=None,
                  refractive_index: float = DEFAULT_REFRACTIVE_INDEX) -> CapturePose:
     """The capture's :class:`CapturePose`: the angle stated, else the Direct homography's, else normal (module notes).
@@ -149,7 +153,7 @@ def capture_pose(result, camera_distance_m: float, *, angle_deg: float | None = 
     focal, fsource = focal_length_px, "lens calibration"
     if focal is None:
         focal, fsource = _exif_focal_px(camera, shape[1]), "EXIF"
-    H = getattr(result, "homography", None)
+    H = result.homography  # None in the Comparative Method
     if focal is None and H is not None:
         focal, fsource = focal_from_homography(H, shape), "homography"
     source = "stated"
