@@ -44,6 +44,7 @@ from .errors import InputError
 
 __all__ = [
     "Limits",
+    "carrier_period_mm",
     "limits",
     "MODEL_CONFIG",
     "FiniteFloat",
@@ -616,6 +617,15 @@ def number_option(rng: Range):
     return parse
 
 
+def carrier_period_mm(pitch_mm: float, pattern: str) -> float:
+    """The grid's carrier period on the backdrop, mm: the pitch, or ``pitch * sqrt(2)`` for a checkerboard.
+
+    For the input checks (plain floats); the analysis has its own, typed for its float32 phases
+    (:func:`glassdist.analyzer.demodulate.carrier_period_mm`).
+    """
+    return pitch_mm * (math.sqrt(2.0) if pattern == "checkerboard" else 1.0)
+
+
 def check_sigma_extent(sigma_mm: float | None, image_shape, pitch_mm: float, *, pattern: str = "lines",
                        min_period_px: float = 3.0) -> None:
     """Refuse a smoothing scale larger than the image's extent on the backdrop.
@@ -637,7 +647,7 @@ def check_sigma_extent(sigma_mm: float | None, image_shape, pitch_mm: float, *, 
     """
     if sigma_mm is None:
         return
-    period = pitch_mm * (math.sqrt(2.0) if pattern == "checkerboard" else 1.0)
+    period = carrier_period_mm(pitch_mm, pattern)
     extent = max(image_shape[:2]) * period / min_period_px
     if sigma_mm > extent:
         raise InputError(

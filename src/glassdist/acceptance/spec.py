@@ -65,7 +65,7 @@ from typing import TYPE_CHECKING, Any, Literal, Mapping
 from pydantic import BaseModel, Field, field_validator, model_validator
 
 from ..errors import InputError
-from ..validation import MODEL_CONFIG, SIGMA_MM, check_input_file, load_mapping, safe_text, validate_model
+from ..validation import MODEL_CONFIG, SIGMA_MM, carrier_period_mm, check_input_file, load_mapping, safe_text, validate_model
 from .flatness_limits import WithFlatnessLimits
 from .geometry import ReferenceGeometry, check_convertible
 from .stats import format_limit, share_percent
@@ -631,7 +631,7 @@ def resolve_protocol(protocol: Protocol | None = None, *, reference_given: bool,
              "detrend_degree": detrend_degree}
     from_file = _file_settings(params)
     values, sources = _merged_settings(given, pinned, from_file, spec_label)
-    p_c = float(values["pitch_mm"]) * (math.sqrt(2.0) if values["pattern"] == "checkerboard" else 1.0)  # carrier period
+    p_c = carrier_period_mm(float(values["pitch_mm"]), values["pattern"])
     overrides = {k: values[k] for k in ("pattern", "detrend_degree") if sources[k] != "default"}
     values["sigma_mm"], sources["sigma_mm"], passed_on = _sigma_setting(protocol, values, sources, from_file, params,
                                                                         p_c, spec_label)

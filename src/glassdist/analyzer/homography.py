@@ -573,10 +573,10 @@ def _judged_lens(fit: HomographyFit, best: _JointFit, S: _StrainSamples, g: Logi
     # (a glass distortion over the whole view projects only partly on the lens's radial form).
     H0 = _lsq(S.src[m], S.dst[m])
     bare_ms = 0.0 if H0 is None else float(np.mean(_reproj_error(H0, S.src[m], S.dst[m]) ** 2))
-    gain = 0.0 if H0 is None else 1.0 - float(np.mean(e2)) / max(bare_ms, 1e-30)
+    gain = 0.0 if H0 is None else max(0.0, 1.0 - float(np.mean(e2)) / max(bare_ms, 1e-30))
     if gain < _LENS_MIN_GAIN:
-        cal = LensCalibration(lens, "self", sig, False, float(m.mean()), rms, None, gain=max(gain, 0.0), note=(
-            f"the lens terms explain {100 * max(gain, 0.0):.0f}% of what a bare homography leaves (needs "
+        cal = LensCalibration(lens, "self", sig, False, float(m.mean()), rms, None, gain=gain, note=(
+            f"the lens terms explain {100 * gain:.0f}% of what a bare homography leaves (needs "
             f"{100 * _LENS_MIN_GAIN:.0f}%): no lens distortion stands out of the glass's own"))
         return bare(cal, *([f"{ambiguous}: it was kept as glass (no lens distortion stands out of it) - {_LENS_ADVICE}"]
                            if ambiguous else []))
@@ -594,7 +594,7 @@ def _judged_lens(fit: HomographyFit, best: _JointFit, S: _StrainSamples, g: Logi
         note = (f"the lens fitted without the {'inner disc' if centred else 'worst quadrant'} of the view differs by "
                 f"{100 * cons[key]:.0f}% (at most {100 * bound:.0f}% for a camera lens, whose distortion is global): "
                 + what)
-        return bare(LensCalibration(lens, "self", sig, False, float(m.mean()), rms, None, gain=max(gain, 0.0), note=note,
+        return bare(LensCalibration(lens, "self", sig, False, float(m.mean()), rms, None, gain=gain, note=note,
                                     consistency=dict(cons)),
                     f"Block I did not apply the lens model fitted from the photo: {note}; it was kept as glass - {_LENS_ADVICE}")
     radius = np.linalg.norm(S.dst - np.asarray(center), axis=1)
@@ -602,15 +602,15 @@ def _judged_lens(fit: HomographyFit, best: _JointFit, S: _StrainSamples, g: Logi
     if reach < _LENS_MIN_REACH:
         note = (f"the unstrained part of the view reaches {100 * reach:.0f}% of the view's radius (needs "
                 f"{100 * _LENS_MIN_REACH:.0f}%): the lens's growth with radius is not pinned")
-        return bare(LensCalibration(lens, "self", sig, False, float(m.mean()), rms, None, gain=max(gain, 0.0), note=note),
+        return bare(LensCalibration(lens, "self", sig, False, float(m.mean()), rms, None, gain=gain, note=note),
                     f"Block I could not calibrate the camera lens from the photo: {note}; the baseline is a bare "
                     "homography - give a calibration photo or a camera file "
                     "(lens: calibrate_from_photo, calibration_from_camera_file)")
     if ambiguous:  # the lens fit may hold part of it (its tail reaches the unstrained part): not applied
         note = "a centred radially symmetric feature and the camera lens cannot be separated from the photo alone"
-        return bare(LensCalibration(lens, "self", sig, False, float(m.mean()), rms, None, gain=max(gain, 0.0), note=note),
+        return bare(LensCalibration(lens, "self", sig, False, float(m.mean()), rms, None, gain=gain, note=note),
                     f"{ambiguous}: it was kept as glass and the lens model was not applied - {_LENS_ADVICE}")
-    cal = LensCalibration(lens, "self", sig, True, float(m.mean()), rms, None, gain=max(gain, 0.0), consistency=dict(cons))
+    cal = LensCalibration(lens, "self", sig, True, float(m.mean()), rms, None, gain=gain, consistency=dict(cons))
     src, dst = logical_grid_points(g.U, g.V, g.y, g.x, g.valid, g.spacing)
     err = np.linalg.norm(_lens_reproj(H, lens, src, dst), axis=1)
     inl = err < opts.threshold_px
